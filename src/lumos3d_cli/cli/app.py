@@ -1,0 +1,92 @@
+"""The `lumos3d` Typer application: global options, error handling, subcommand registration."""
+
+from __future__ import annotations
+
+import sys
+
+import typer
+
+from lumos3d_cli import __version__
+from lumos3d_cli.cli import degrade, info
+from lumos3d_cli.cli.console import configure_logging, state, stderr_console
+from lumos3d_cli.errors import InputError
+
+EXAMPLES = """
+[bold]Examples[/bold]
+
+  lumos3d degrade photos/ -o dark/ --mode low-light --seed 0   [dim]# synthesise a low-light set[/dim]
+  lumos3d degrade photos/ -o bright/ --mode over-exposure     [dim]# synthesise over-exposure[/dim]
+  lumos3d info scene.ply                                      [dim]# summarise a Gaussian scene[/dim]
+  lumos3d info photos/ --json                                 [dim]# image folder summary as JSON[/dim]
+"""
+
+app = typer.Typer(
+    name="lumos3d",
+    help="Restore 3D scenes photographed in the dark or over-exposed: unposed photos in, "
+    "cameras, depth and restored 3D Gaussians out.",
+    epilog=EXAMPLES,
+    rich_markup_mode="rich",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"lumos3d {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def global_options(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version and exit."),
+    debug: bool = typer.Option(False, "--debug", help="Show full tracebacks and debug logs."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Only errors; no progress bars."),
+) -> None:
+    state.debug, state.quiet = debug, quiet
+    configure_logging(debug, quiet)
+
+
+app.command("degrade", epilog=degrade.EXAMPLES, rich_help_panel="Data")(degrade.degrade_command)
+app.command("info", epilog=info.EXAMPLES, rich_help_panel="Inspect")(info.info_command)
+
+
+_GLOBAL_FLAGS = ("--debug", "--quiet", "-q")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point; returns the exit code.
+
+    Bad input: one line on stderr and exit code 2 (the traceback only with --debug). Usage
+    errors (unknown option, missing argument) also exit with 2, as click reports them.
+    """
+    args = sys.argv[1:] if argv is None else list(argv)
+    # Global flags are accepted anywhere on the line (`lumos3d degrade ... --debug`).
+    flags = [a for a in args if a in _GLOBAL_FLAGS]
+    args = flags + [a for a in args if a not in _GLOBAL_FLAGS]
+    debug = "--debug" in flags
+    try:
+        app(args=args, prog_name="lumos3d", standalone_mode=True)
+    except SystemExit as done:
+        return done.code if isinstance(done.code, int) else 0 if done.code is None else 1
+    except InputError as error:
+        if debug:
+            raise
+        stderr_console().print(f"[bold red]error:[/bold red] {error}", highlight=False)
+        return 2
+    except Exception as error:  # noqa: BLE001 - the CLI's last line of defence
+        if debug:
+            raise
+        stderr_console().print(
+            f"[bold red]internal error:[/bold red] {type(error).__name__}: {error} "
+            "(run with --debug for the traceback and report it)",
+            highlight=False,
+        )
+        return 1
+    return 0
+
+
+def run() -> None:
+    sys.exit(main())

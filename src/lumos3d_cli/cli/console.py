@@ -1,0 +1,58 @@
+"""Shared CLI state: consoles, logging, progress bars and JSON output."""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+from dataclasses import dataclass
+
+from rich.console import Console
+from rich.logging import RichHandler
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+
+@dataclass
+class CliState:
+    debug: bool = False
+    quiet: bool = False
+
+
+state = CliState()
+
+
+def stderr_console() -> Console:
+    """Messages, logs and progress go to stderr so that stdout carries only results (--json)."""
+    return Console(file=sys.stderr, soft_wrap=True)
+
+
+def stdout_console() -> Console:
+    return Console(file=sys.stdout, soft_wrap=True)
+
+
+def configure_logging(debug: bool, quiet: bool) -> None:
+    level = logging.DEBUG if debug else logging.ERROR if quiet else logging.WARNING
+    handler = RichHandler(console=stderr_console(), show_time=False, show_path=debug, markup=False)
+    logging.basicConfig(level=logging.WARNING, handlers=[handler], format="%(message)s", force=True)
+    logging.getLogger("lumos3d_cli").setLevel(level)
+
+
+def progress_bar() -> Progress:
+    """A rich progress bar on stderr; silent under --quiet."""
+    return Progress(
+        TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+        TimeElapsedColumn(), TimeRemainingColumn(),
+        console=stderr_console(), disable=state.quiet, transient=False,
+    )
+
+
+def print_json(document: dict) -> None:
+    """One JSON document on stdout."""
+    sys.stdout.write(json.dumps(document, indent=2, default=str) + "\n")
+    sys.stdout.flush()
+
+
+def say(message: str) -> None:
+    """A human-readable line on stderr unless --quiet."""
+    if not state.quiet:
+        stderr_console().print(message)

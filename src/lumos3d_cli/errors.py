@@ -1,0 +1,9 @@
+"""Exceptions that the CLI turns into one-line messages and exit code 2."""
+
+
+class InputError(Exception):
+    """Bad user input. The message names the file or value and says what to do."""
+
+
+class NonFiniteError(InputError):
+    """A tensor or file holds NaN or Inf where finite values are required."""

@@ -1,0 +1,1 @@
+"""Input and output: images, colour encoding, Gaussian scenes, cameras."""

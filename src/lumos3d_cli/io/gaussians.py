@@ -1,0 +1,95 @@
+"""The in-memory Gaussian scene: activated parameters, one row per Gaussian."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import torch
+
+from lumos3d_cli.checks import require_finite
+
+SH_C0 = 0.28209479177387814  # Y_0^0; rgb = 0.5 + SH_C0 * f_dc
+MAX_SH_DEGREE = 4
+
+
+def sh_coefficient_count(degree: int) -> int:
+    """K = (degree + 1)^2 coefficients per colour channel."""
+    return (degree + 1) ** 2
+
+
+def sh_degree_from_count(count: int) -> int:
+    """Inverse of `sh_coefficient_count`; ValueError when `count` is not a square."""
+    degree = math.isqrt(count) - 1
+    if degree < 0 or (degree + 1) ** 2 != count:
+        raise ValueError(f"{count} SH coefficients per channel is not (degree + 1)^2")
+    return degree
+
+
+def rgb_to_sh_dc(rgb: torch.Tensor) -> torch.Tensor:
+    """Colour in [0, 1] -> degree-0 SH coefficient (inverse of rgb = 0.5 + C0 * f_dc)."""
+    return (rgb - 0.5) / SH_C0
+
+
+def sh_dc_to_rgb(dc: torch.Tensor) -> torch.Tensor:
+    return 0.5 + SH_C0 * dc
+
+
+@dataclass
+class Gaussians:
+    """A set of 3D Gaussians.
+
+    means [N, 3]; quats [N, 4] wxyz (not necessarily normalised); scales [N, 3] standard
+    deviations along the local axes (linear, > 0); opacities [N] in [0, 1]; sh [N, K, 3] with
+    K = (degree + 1)^2, coefficient-major.
+    """
+
+    means: torch.Tensor
+    quats: torch.Tensor
+    scales: torch.Tensor
+    opacities: torch.Tensor
+    sh: torch.Tensor
+
+    def __post_init__(self) -> None:
+        n = self.means.shape[0]
+        expected = {"means": (n, 3), "quats": (n, 4), "scales": (n, 3), "opacities": (n,)}
+        for name, shape in expected.items():
+            if tuple(getattr(self, name).shape) != shape:
+                raise ValueError(f"Gaussians.{name} has shape {tuple(getattr(self, name).shape)}, expected {shape}")
+        if self.sh.dim() != 3 or self.sh.shape[0] != n or self.sh.shape[2] != 3:
+            raise ValueError(f"Gaussians.sh has shape {tuple(self.sh.shape)}, expected ({n}, K, 3)")
+        sh_degree_from_count(self.sh.shape[1])
+
+    def __len__(self) -> int:
+        return self.means.shape[0]
+
+    @property
+    def sh_degree(self) -> int:
+        return sh_degree_from_count(self.sh.shape[1])
+
+    def tensors(self) -> dict[str, torch.Tensor]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    def map(self, function) -> Gaussians:
+        """Apply `function` to every tensor (e.g. `lambda t: t.to(device)`)."""
+        return Gaussians(**{name: function(t) for name, t in self.tensors().items()})
+
+    def select(self, index: torch.Tensor) -> Gaussians:
+        """Rows picked by a boolean mask or integer index."""
+        return self.map(lambda t: t[index])
+
+    def detach(self) -> Gaussians:
+        return self.map(torch.Tensor.detach)
+
+    def to(self, *args, **kwargs) -> Gaussians:
+        return self.map(lambda t: t.to(*args, **kwargs))
+
+    def require_finite(self, where: str = "Gaussians") -> None:
+        """Raise NonFiniteError naming the first tensor that holds NaN or Inf."""
+        for name, tensor in self.tensors().items():
+            require_finite(f"{where}.{name}", tensor)
+
+    @staticmethod
+    def concatenate(parts: list[Gaussians]) -> Gaussians:
+        first = parts[0]
+        return Gaussians(**{name: torch.cat([getattr(p, name) for p in parts]) for name in first.tensors()})

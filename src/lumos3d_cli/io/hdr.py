@@ -1,0 +1,62 @@
+"""OpenEXR and Radiance HDR through OpenImageIO, as linear RGB."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+from lumos3d_cli.checks import count_non_finite
+from lumos3d_cli.errors import InputError, NonFiniteError
+from lumos3d_cli.io.image_types import DecodedImage, ImageHeader
+from lumos3d_cli.io.photo import read_file_bytes
+
+
+def _open(path: Path) -> oiio.ImageInput:
+    read_file_bytes(path)
+    source = oiio.ImageInput.open(str(path))
+    if source is None:
+        raise InputError(f"{path}: cannot open ({oiio.geterror().strip()}); replace or remove the file")
+    return source
+
+
+def _rgb_channels(spec: oiio.ImageSpec) -> list[int]:
+    """Indices of R, G, B (by name, else the first three; a single channel is repeated)."""
+    names = [name.split(".")[-1].upper() for name in spec.channelnames]
+    if all(letter in names for letter in "RGB"):
+        return [names.index(letter) for letter in "RGB"]
+    if spec.nchannels >= 3:
+        return [0, 1, 2]
+    return [0, 0, 0]
+
+
+def read_hdr(path: Path) -> DecodedImage:
+    """Decode to [H, W, 3] float32 linear RGB; NaN or Inf anywhere is an InputError."""
+    source = _open(path)
+    try:
+        spec = source.spec()
+        pixels = source.read_image(0, 0, 0, spec.nchannels, "float")
+        if pixels is None or source.has_error:
+            raise InputError(f"{path}: cannot decode ({source.geterror().strip()}); replace or remove the file")
+    finally:
+        source.close()
+    pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
+    rgb = np.ascontiguousarray(pixels[..., _rgb_channels(spec)])
+    bad = count_non_finite(rgb)
+    if bad:
+        raise NonFiniteError(
+            f"{path}: {bad} of {rgb.size} samples are NaN or Inf; clamp or repair the file before use"
+        )
+    bits = 16 if spec.format.basetype == oiio.HALF else 32
+    return DecodedImage(path, rgb, "linear", bits, "hdr")
+
+
+def probe_hdr(path: Path) -> ImageHeader:
+    source = _open(path)
+    try:
+        spec = source.spec()
+        bits = 16 if spec.format.basetype == oiio.HALF else 32
+        return ImageHeader(path, spec.width, spec.height, spec.nchannels, bits, "hdr", "linear")
+    finally:
+        source.close()

@@ -1,0 +1,69 @@
+"""Which files are images, in which order: suffix sets, natural sorting, folder listing."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from pathlib import Path
+
+from lumos3d_cli.errors import InputError
+
+PHOTO_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".tif", ".tiff", ".webp", ".bmp"})
+HDR_SUFFIXES = frozenset({".exr", ".hdr"})
+RAW_SUFFIXES = frozenset(
+    {
+        ".dng", ".cr2", ".cr3", ".crw", ".nef", ".nrw", ".arw", ".srf", ".sr2", ".raf", ".orf",
+        ".rw2", ".pef", ".srw", ".x3f", ".3fr", ".iiq", ".erf", ".kdc", ".dcr", ".mrw", ".mos",
+        ".rwl", ".raw",
+    }
+)
+IMAGE_SUFFIXES = PHOTO_SUFFIXES | HDR_SUFFIXES | RAW_SUFFIXES
+
+_DIGITS = re.compile(r"(\d+)")
+
+
+def natural_sort_key(path: Path | str) -> tuple:
+    """Sort key that orders embedded numbers by value: `2.jpg` before `10.jpg`."""
+    name = Path(path).name
+    return tuple((0, int(part), "") if part.isdigit() else (1, 0, part.lower()) for part in _DIGITS.split(name) if part)
+
+
+def image_kind(path: Path) -> str:
+    """'photo', 'hdr' or 'raw' from the file suffix; InputError for anything else."""
+    suffix = path.suffix.lower()
+    if suffix in PHOTO_SUFFIXES:
+        return "photo"
+    if suffix in HDR_SUFFIXES:
+        return "hdr"
+    if suffix in RAW_SUFFIXES:
+        return "raw"
+    supported = " ".join(sorted(IMAGE_SUFFIXES))
+    raise InputError(f"{path}: unsupported file type '{path.suffix}'; use one of: {supported}")
+
+
+def list_images(inputs: Path | str | Sequence[Path | str]) -> list[Path]:
+    """Expand a folder (its image files, naturally sorted) or a list of files and folders.
+
+    Explicitly named files must exist and have a supported suffix; inside folders, files
+    that are not images (and hidden files) are skipped.
+    """
+    items = [inputs] if isinstance(inputs, (str, Path)) else list(inputs)
+    if not items:
+        raise InputError("no input images given; pass a folder or image files")
+    paths: list[Path] = []
+    for item in items:
+        path = Path(item)
+        if path.is_dir():
+            found = [
+                p for p in path.iterdir()
+                if p.is_file() and not p.name.startswith(".") and p.suffix.lower() in IMAGE_SUFFIXES
+            ]
+            if not found:
+                raise InputError(f"{path}: folder holds no images ({', '.join(sorted(IMAGE_SUFFIXES))})")
+            paths.extend(sorted(found, key=natural_sort_key))
+        elif path.is_file():
+            image_kind(path)
+            paths.append(path)
+        else:
+            raise InputError(f"{path}: no such file or folder")
+    return paths

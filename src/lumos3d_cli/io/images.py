@@ -1,0 +1,111 @@
+"""Load photos, RAW and EXR files into one float32 RGB tensor for the model."""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+from lumos3d_cli.io.colour import linear_to_srgb
+from lumos3d_cli.io.hdr import probe_hdr, read_hdr
+from lumos3d_cli.io.image_files import image_kind, list_images
+from lumos3d_cli.io.image_types import DecodedImage, ImageHeader
+from lumos3d_cli.io.photo import probe_photo, read_photo
+from lumos3d_cli.io.raw import probe_raw, read_raw
+
+logger = logging.getLogger(__name__)
+
+_READERS: dict[str, Callable[[Path], DecodedImage]] = {"photo": read_photo, "hdr": read_hdr, "raw": read_raw}
+_PROBES: dict[str, Callable[[Path], ImageHeader]] = {"photo": probe_photo, "hdr": probe_hdr, "raw": probe_raw}
+
+
+def read_image(path: Path | str) -> DecodedImage:
+    """Decode one file of any supported kind (see `image_files`)."""
+    path = Path(path)
+    return _READERS[image_kind(path)](path)
+
+
+def probe_image(path: Path | str) -> ImageHeader:
+    """Read one file's header only."""
+    path = Path(path)
+    return _PROBES[image_kind(path)](path)
+
+
+def to_srgb(image: DecodedImage) -> np.ndarray:
+    """[H, W, 3] float32 sRGB in [0, 1]; linear sources are clipped to [0, 1] and encoded once."""
+    if image.encoding == "srgb":
+        return np.clip(image.pixels, 0.0, 1.0)
+    above = float((image.pixels > 1.0).mean())
+    if above > 0.01:
+        logger.warning("%s: %.1f%% of linear samples exceed 1.0 and were clipped", image.path, 100 * above)
+    return linear_to_srgb(np.clip(image.pixels, 0.0, 1.0))
+
+
+def resize_image(pixels: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Resize [H, W, C] float32: area averaging when shrinking, bilinear when enlarging."""
+    if pixels.shape[1] == width and pixels.shape[0] == height:
+        return pixels
+    shrinking = width * height < pixels.shape[0] * pixels.shape[1]
+    interpolation = cv2.INTER_AREA if shrinking else cv2.INTER_LINEAR
+    return cv2.resize(pixels, (width, height), interpolation=interpolation)
+
+
+@dataclass
+class ImageBatch:
+    """Images of one scene at a common size.
+
+    images: [V, 3, H, W] float32 sRGB in [0, 1].
+    original_sizes: (width, height) of each file before any resize.
+    """
+
+    images: torch.Tensor
+    paths: list[Path]
+    original_sizes: list[tuple[int, int]]
+    kinds: list[str]
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) of the tensor."""
+        return int(self.images.shape[-1]), int(self.images.shape[-2])
+
+
+def common_size(sizes: Sequence[tuple[int, int]]) -> tuple[int, int]:
+    """The most frequent (width, height); ties go to the one seen first."""
+    counts = Counter(sizes)
+    best = max(counts.values())
+    return next(size for size in sizes if counts[size] == best)
+
+
+def load_images(
+    inputs: Path | str | Sequence[Path | str],
+    progress: Callable[[Path], None] | None = None,
+) -> ImageBatch:
+    """Load a folder or list of files into one batch; mixed sizes are resized to the most common
+    size with a warning. `progress` is called after each file."""
+    paths = list_images(inputs)
+    pixels: list[np.ndarray] = []
+    kinds: list[str] = []
+    for path in paths:
+        decoded = read_image(path)
+        pixels.append(to_srgb(decoded))
+        kinds.append(decoded.kind)
+        if progress is not None:
+            progress(path)
+    sizes = [(p.shape[1], p.shape[0]) for p in pixels]
+    width, height = common_size(sizes)
+    mismatched = [path.name for path, size in zip(paths, sizes) if size != (width, height)]
+    if mismatched:
+        shown = ", ".join(mismatched[:5]) + (" ..." if len(mismatched) > 5 else "")
+        logger.warning(
+            "%d of %d images differ in size and were resized to %dx%d: %s",
+            len(mismatched), len(paths), width, height, shown,
+        )
+    stacked = np.stack([resize_image(p, width, height) for p in pixels])
+    images = torch.from_numpy(stacked).permute(0, 3, 1, 2).contiguous()
+    return ImageBatch(images=images, paths=paths, original_sizes=sizes, kinds=kinds)

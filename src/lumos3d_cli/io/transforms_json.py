@@ -1,0 +1,117 @@
+"""nerfstudio / instant-ngp `transforms.json` (also LOM's `transforms_{train,val,test}.json`).
+
+camera->world 4x4 per frame with OpenGL axes; intrinsics fl_x, fl_y, cx, cy, w, h at the top
+level or per frame (per-frame values win); `camera_angle_x` alone is accepted as in NeRF's
+synthetic scenes. Lens distortion (k1, k2, p1, p2 ...) is ignored with a warning.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from pathlib import Path
+
+import torch
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.atomic import write_bytes_atomic
+from lumos3d_cli.io.cameras import Cameras, make_intrinsics, opencv_to_opengl, opengl_to_opencv
+
+logger = logging.getLogger(__name__)
+
+_DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
+
+
+def _image_size(path: Path, frame: dict, merged: dict) -> tuple[int, int]:
+    if "w" in merged and "h" in merged:
+        return int(round(float(merged["w"]))), int(round(float(merged["h"])))
+    from lumos3d_cli.io.images import probe_image  # only needed for files without w/h
+
+    image_path = path.parent / frame.get("file_path", "")
+    candidates = [image_path] + [image_path.with_suffix(s) for s in (".png", ".jpg", ".JPG")]
+    for candidate in candidates:
+        if candidate.is_file():
+            header = probe_image(candidate)
+            return header.width, header.height
+    raise InputError(f"{path}: frame {frame.get('file_path')!r} has no 'w'/'h' and its image was not found")
+
+
+def read_transforms_json(path: Path | str) -> Cameras:
+    """Read all frames in file order."""
+    path = Path(path)
+    try:
+        document = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError) as error:
+        raise InputError(f"{path}: cannot read ({error})") from error
+    except json.JSONDecodeError as error:
+        raise InputError(f"{path}: invalid JSON ({error.msg} at line {error.lineno})") from error
+    frames = document.get("frames") if isinstance(document, dict) else None
+    if not frames:
+        raise InputError(f"{path}: no 'frames' list; not a transforms.json camera file")
+    camera_to_world, fx, fy, cx, cy, sizes, names = [], [], [], [], [], [], []
+    distorted = False
+    for index, frame in enumerate(frames):
+        merged = {**document, **frame}
+        try:
+            matrix = torch.tensor(frame["transform_matrix"], dtype=torch.float64)
+        except (KeyError, TypeError, ValueError) as error:
+            raise InputError(f"{path}: frame {index} has no valid 'transform_matrix'") from error
+        if matrix.shape == (3, 4):
+            matrix = torch.cat([matrix, torch.tensor([[0.0, 0.0, 0.0, 1.0]], dtype=torch.float64)])
+        if matrix.shape != (4, 4):
+            raise InputError(f"{path}: frame {index} 'transform_matrix' is {tuple(matrix.shape)}, expected 4x4")
+        width, height = _image_size(path, frame, merged)
+        if "fl_x" in merged:
+            focal_x = float(merged["fl_x"])
+            focal_y = float(merged.get("fl_y", focal_x))
+        elif "camera_angle_x" in merged:
+            focal_x = 0.5 * width / math.tan(0.5 * float(merged["camera_angle_x"]))
+            focal_y = 0.5 * height / math.tan(0.5 * float(merged["camera_angle_y"])) if "camera_angle_y" in merged else focal_x
+        else:
+            raise InputError(f"{path}: frame {index} has no focal length ('fl_x' or 'camera_angle_x')")
+        distorted |= any(abs(float(merged.get(key, 0.0))) > 0 for key in _DISTORTION_KEYS)
+        camera_to_world.append(opengl_to_opencv(matrix))
+        fx.append(focal_x)
+        fy.append(focal_y)
+        cx.append(float(merged.get("cx", width / 2)))
+        cy.append(float(merged.get("cy", height / 2)))
+        sizes.append((width, height))
+        names.append(str(frame.get("file_path", "")))
+    if distorted:
+        logger.warning("%s: lens distortion coefficients are ignored (pinhole model)", path)
+    cameras = Cameras.from_camera_to_world(torch.stack(camera_to_world), make_intrinsics(fx, fy, cx, cy), sizes, names)
+    cameras.require_valid(str(path))
+    return cameras
+
+
+def cameras_to_transforms_document(cameras: Cameras) -> dict:
+    """The transforms.json document; shared intrinsics go to the top level."""
+    intrinsics = cameras.intrinsics.double()
+    params = torch.stack(
+        [intrinsics[:, 0, 0], intrinsics[:, 1, 1], intrinsics[:, 0, 2], intrinsics[:, 1, 2]], dim=1
+    )
+    shared = bool((params == params[:1]).all()) and len(set(cameras.sizes)) == 1
+    document: dict = {"camera_model": "PINHOLE"}
+
+    def intrinsic_fields(i: int) -> dict:
+        fl_x, fl_y, c_x, c_y = (float(v) for v in params[i])
+        return {"fl_x": fl_x, "fl_y": fl_y, "cx": c_x, "cy": c_y, "w": cameras.sizes[i][0], "h": cameras.sizes[i][1]}
+
+    if shared:
+        document.update(intrinsic_fields(0))
+    camera_to_world = opencv_to_opengl(cameras.camera_to_world().double())
+    frames = []
+    for i in range(len(cameras)):
+        frame = {"file_path": cameras.names[i], "transform_matrix": camera_to_world[i].tolist()}
+        if not shared:
+            frame.update(intrinsic_fields(i))
+        frames.append(frame)
+    document["frames"] = frames
+    return document
+
+
+def write_transforms_json(path: Path | str, cameras: Cameras) -> None:
+    """Write atomically (camera->world, OpenGL axes, as nerfstudio expects)."""
+    cameras.require_valid("cameras to save")
+    write_bytes_atomic(path, (json.dumps(cameras_to_transforms_document(cameras), indent=2) + "\n").encode())
