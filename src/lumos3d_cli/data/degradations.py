@@ -115,7 +115,7 @@ def apply_degradation(
     if mode == "low-light":
         toned = exposed ** per_image(parameters.gamma)
     elif mode == "over-exposure":
-        toned = (1.0 - torch.exp(-exposed)) ** (1.0 / per_image(parameters.gamma))
+        toned = (-torch.expm1(-exposed)) ** (1.0 / per_image(parameters.gamma))
     else:
         raise ValueError(f"unknown degradation mode {mode!r}; use one of {', '.join(MODES)}")
     return linear_to_srgb(toned.clamp(0.0, 1.0))

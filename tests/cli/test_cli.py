@@ -1,0 +1,194 @@
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import cv2
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+import torch
+
+from lumos3d_cli import __version__
+from lumos3d_cli.io.ply import write_ply
+
+from factories import random_gaussians
+
+
+def test_help_lists_only_working_commands_with_examples(run_cli):
+    result = run_cli("--help")
+    assert result.code == 0
+    assert "degrade" in result.out and "info" in result.out and "Examples" in result.out
+    for future in ("restore", "train", "eval", "render"):
+        assert f" {future} " not in result.out
+
+
+def test_version(run_cli):
+    result = run_cli("--version")
+    assert result.code == 0 and result.out.strip() == f"lumos3d {__version__}"
+
+
+def test_usage_errors_exit_with_2(run_cli):
+    assert run_cli("degrade").code == 2
+    assert run_cli("no-such-command").code == 2
+
+
+def _copy_images(source, target, count):
+    target.mkdir()
+    for path in sorted(source.iterdir())[:count]:
+        shutil.copy(path, target / path.name)
+    return target
+
+
+def test_degrade_writes_every_image_and_a_record(run_cli, buu, tmp_path):
+    inputs = _copy_images(buu / "high", tmp_path / "high", 3)
+    result = run_cli("degrade", inputs, "-o", tmp_path / "dark", "--seed", 3, "--json")
+    assert result.code == 0, result.err
+    summary = json.loads(result.out)
+    assert summary["count"] == 3 and summary["mode"] == "low-light" and summary["shared_parameters"]
+    written = sorted(p.name for p in (tmp_path / "dark").iterdir())
+    assert written == sorted([f"{p.stem}.png" for p in inputs.iterdir()] + ["degradation.json"])
+    first = cv2.imread(str(tmp_path / "dark" / "1.png"))
+    original = cv2.imread(str(inputs / "1.JPG"))
+    assert first.shape == original.shape and first.mean() < 0.3 * original.mean()
+    exposures = {record["exposure"] for record in summary["images"]}
+    assert len(exposures) == 1 and 0.05 <= exposures.pop() <= 0.1
+    again = run_cli("degrade", inputs, "-o", tmp_path / "again", "--seed", 3)
+    assert again.code == 0
+    assert (tmp_path / "again" / "1.png").read_bytes() == (tmp_path / "dark" / "1.png").read_bytes()
+
+
+def test_degrade_over_exposure_16_bit_per_image(run_cli, buu, tmp_path):
+    inputs = _copy_images(buu / "high", tmp_path / "high", 2)
+    result = run_cli("degrade", inputs, "-o", tmp_path / "bright", "--mode", "over-exposure",
+                     "--per-image", "--bit-depth", "16", "--noise", "--json")
+    assert result.code == 0, result.err
+    summary = json.loads(result.out)
+    assert len({r["exposure"] for r in summary["images"]}) == 2 and "shot_noise" in summary["images"][0]
+    image = cv2.imread(str(tmp_path / "bright" / "1.png"), cv2.IMREAD_UNCHANGED)
+    assert image.dtype == np.uint16 and image.mean() / 65535 > 0.7
+
+
+def test_degrade_single_file_and_raw(run_cli, shared_data, tmp_path):
+    result = run_cli("degrade", shared_data / "raw" / "Blackmagic.dng", "-o", tmp_path / "dark.png", "--quiet")
+    assert result.code == 0, result.err
+    assert cv2.imread(str(tmp_path / "dark.png")).shape == (2176, 4128, 3)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dark.png"]
+
+
+def _expect_error(result, *fragments):
+    assert result.code == 2, (result.code, result.err)
+    line = result.err.strip().splitlines()[-1]
+    assert line.startswith("error:"), result.err
+    for fragment in fragments:
+        assert fragment in result.err, result.err
+    assert "Traceback" not in result.err
+
+
+def _write_exr_with_nan(path):
+    pixels = np.ones((4, 4, 3), np.float32)
+    pixels[1, 2, 0] = np.nan
+    spec = oiio.ImageSpec(4, 4, 3, "float")
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), spec)
+    out.write_image(pixels)
+    out.close()
+
+
+@pytest.mark.parametrize(
+    "make, fragments",
+    [
+        (lambda d: (d / "empty").mkdir(), ["empty: folder holds no images"]),
+        (lambda d: (d / "zero.jpg").write_bytes(b""), ["zero.jpg: file is empty (0 bytes)"]),
+        (lambda d: (d / "text.jpg").write_text("not an image"), ["text.jpg: cannot decode as JPG"]),
+        (lambda d: (d / "fake.nef").write_bytes(b"II*\x00" + bytes(64)), ["fake.nef: unsupported camera RAW"]),
+        (lambda d: _write_exr_with_nan(d / "nan.exr"), ["nan.exr: 1 of 48 samples are NaN or Inf"]),
+    ],
+    ids=["no-images", "zero-byte", "text-as-jpg", "unsupported-raw", "nan-exr"],
+)
+def test_degrade_bad_inputs(run_cli, tmp_path, make, fragments):
+    bad = tmp_path / "in"
+    bad.mkdir()
+    make(bad)
+    target = next(bad.iterdir())
+    result = run_cli("degrade", target, "-o", tmp_path / "out")
+    _expect_error(result, *fragments)
+    assert not (tmp_path / "out").exists()
+
+
+def test_degrade_corrupt_jpeg_among_good_ones_leaves_no_partial_output(run_cli, buu, tmp_path):
+    inputs = _copy_images(buu / "high", tmp_path / "in", 3)
+    data = (inputs / "1.JPG").read_bytes()
+    (inputs / "99.jpg").write_bytes(data[: len(data) // 3])
+    result = run_cli("degrade", inputs, "-o", tmp_path / "out")
+    _expect_error(result, "99.jpg: cannot decode as JPG (corrupt, truncated")
+    assert not (tmp_path / "out").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
+
+
+def test_degrade_bad_values(run_cli, buu, tmp_path):
+    image = buu / "high" / "1.JPG"
+    _expect_error(run_cli("degrade", image, "-o", tmp_path / "o", "--mode", "sunny"), "--mode 'sunny'", "low-light")
+    _expect_error(run_cli("degrade", image, "-o", tmp_path / "o", "--bit-depth", "12"), "--bit-depth 12")
+    _expect_error(run_cli("degrade", image, "-o", tmp_path / "o.jpg", "--bit-depth", "16"), "JPEG holds 8 bits only")
+    _expect_error(run_cli("degrade", buu / "high", "-o", tmp_path / "one.png"), "names one file but there are 25 inputs")
+
+
+def test_info_on_a_scene_file(run_cli, tmp_path):
+    gaussians = random_gaussians(100, 2)
+    write_ply(tmp_path / "scene.ply", gaussians)
+    result = run_cli("info", tmp_path / "scene.ply", "--json")
+    assert result.code == 0, result.err
+    summary = json.loads(result.out)
+    assert summary["count"] == 100 and summary["sh_degree"] == 2 and summary["non_finite_values"] == 0
+    assert summary["bounds"]["min"] == pytest.approx(gaussians.means.min(dim=0).values.tolist(), rel=1e-6)
+    assert summary["opacity"]["mean"] == pytest.approx(gaussians.opacities.mean().item(), rel=1e-5)
+    table = run_cli("info", tmp_path / "scene.ply")
+    assert table.code == 0 and "sh_degree" in table.out and "100" in table.out
+
+
+def test_info_counts_non_finite_values_in_foreign_files(run_cli, tmp_path):
+    from plyfile import PlyData, PlyElement
+
+    from lumos3d_cli.io.ply import ply_property_names
+
+    records = np.zeros(4, dtype=[(n, "f4") for n in ply_property_names(0)])
+    records["x"][1] = np.nan
+    records["rot_0"] = 1
+    PlyData([PlyElement.describe(records, "vertex")]).write(str(tmp_path / "bad.ply"))
+    summary = json.loads(run_cli("info", tmp_path / "bad.ply", "--json").out)
+    assert summary["non_finite_values"] == 1 and summary["count"] == 4
+
+
+def test_info_on_cameras_images_and_scene_folders(run_cli, shared_data, buu):
+    cameras = json.loads(run_cli("info", buu / "transforms_test.json", "--json").out)
+    assert cameras["count"] == 3 and cameras["image_sizes"] == {"500x375": 3}
+    images = json.loads(run_cli("info", buu / "low", "--json").out)
+    assert images["count"] == 25 and images["raw"] == 0 and images["first"] == "1.JPG" and images["last"] == "25.JPG"
+    raw = json.loads(run_cli("info", shared_data / "raw" / "Blackmagic.dng", "--json").out)
+    assert raw["raw"] == 1 and raw["sizes"] == {"4128x2176": 1} and raw["bit_depths"] == {"16": 1}
+    scene = json.loads(run_cli("info", shared_data / "scenes" / "kitchen", "--json").out)
+    kinds = [s["kind"] for s in scene["summaries"]]
+    assert kinds == ["images", "cameras"] and scene["summaries"][1]["count"] == 17
+
+
+def test_info_bad_inputs(run_cli, tmp_path):
+    _expect_error(run_cli("info", tmp_path / "missing.ply"), "missing.ply: no such file or folder")
+    (tmp_path / "notes.txt").write_text("hi")
+    _expect_error(run_cli("info", tmp_path / "notes.txt"), "cannot summarise '.txt' files")
+    (tmp_path / "empty").mkdir()
+    _expect_error(run_cli("info", tmp_path / "empty"), "nothing to summarise")
+    (tmp_path / "broken.ply").write_text("ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\nend_header\n")
+    _expect_error(run_cli("info", tmp_path / "broken.ply"), "missing vertex properties")
+
+
+def test_console_script_and_debug_traceback(tmp_path):
+    script = shutil.which("lumos3d", path=os.path.dirname(sys.executable))
+    assert script is not None
+    quiet = subprocess.run([script, "info", str(tmp_path / "missing")], capture_output=True, text=True)
+    assert quiet.returncode == 2 and "Traceback" not in quiet.stderr and "missing: no such file" in quiet.stderr
+    debug = subprocess.run([script, "info", str(tmp_path / "missing"), "--debug"], capture_output=True, text=True)
+    assert debug.returncode != 0 and "Traceback" in debug.stderr
+    module = subprocess.run([sys.executable, "-m", "lumos3d_cli", "--version"], capture_output=True, text=True)
+    assert module.returncode == 0 and module.stdout.startswith("lumos3d ")

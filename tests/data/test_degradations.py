@@ -1,0 +1,141 @@
+import math
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from lumos3d_cli.data.degradations import (
+    Degradation,
+    DegradationParameters,
+    apply_degradation,
+    degrade,
+    sample_parameters,
+)
+from lumos3d_cli.errors import NonFiniteError
+from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
+
+
+def _images(*shape, seed=0):
+    return torch.rand(*shape, generator=torch.Generator().manual_seed(seed))
+
+
+def _load_folder(folder, suffix, step=2):
+    paths = sorted(folder.glob(f"*.{suffix}"), key=lambda p: int(p.stem))
+    return torch.stack([torch.from_numpy(cv2.imread(str(p))[::step, ::step, ::-1] / 255.0) for p in paths]).permute(0, 3, 1, 2)
+
+
+def test_low_light_is_the_paper_formula():
+    images = _images(2, 3, 8, 8)
+    parameters = DegradationParameters(torch.tensor([0.05, 0.1], dtype=torch.float64), torch.tensor([1.3, 1.4], dtype=torch.float64))
+    out = apply_degradation(images, "low-light", parameters, torch.Generator())
+    for i, (k, g) in enumerate([(0.05, 1.3), (0.1, 1.4)]):
+        expected = linear_to_srgb((srgb_to_linear(images[i].double()) * k) ** g)
+        torch.testing.assert_close(out[i].double(), expected, atol=1e-6, rtol=0)
+
+
+def test_over_exposure_is_the_documented_formula():
+    images = _images(1, 3, 8, 8)
+    parameters = DegradationParameters(torch.tensor([10.0], dtype=torch.float64), torch.tensor([1.75], dtype=torch.float64))
+    out = apply_degradation(images, "over-exposure", parameters, torch.Generator())
+    expected = linear_to_srgb((1 - torch.exp(-10 * srgb_to_linear(images[0].double()))) ** (1 / 1.75))
+    torch.testing.assert_close(out[0].double(), expected, atol=1e-6, rtol=0)
+
+
+@pytest.mark.parametrize("mode", ["low-light", "over-exposure"])
+def test_deterministic_with_a_seed_and_within_ranges(mode):
+    images = _images(4, 3, 3, 16, 16)
+    degradation = Degradation.for_mode(mode, noise=True)
+    a, pa = degrade(images, degradation, torch.Generator().manual_seed(7))
+    b, pb = degrade(images, degradation, torch.Generator().manual_seed(7))
+    c, _ = degrade(images, degradation, torch.Generator().manual_seed(8))
+    assert torch.equal(a, b) and torch.equal(pa.exposure, pb.exposure)
+    assert not torch.equal(a, c)
+    assert a.shape == images.shape and a.dtype == images.dtype
+    low, high = degradation.exposure_range
+    assert ((pa.exposure >= low) & (pa.exposure <= high)).all()
+    low, high = degradation.gamma_range
+    assert ((pa.gamma >= low) & (pa.gamma <= high)).all()
+    assert pa.exposure.shape == (4, 3)
+
+
+def test_views_of_a_scene_can_share_parameters():
+    images = _images(2, 5, 3, 8, 8)
+    out, parameters = degrade(images, Degradation.for_mode("low-light"), torch.Generator().manual_seed(0), consistent_views=True)
+    assert parameters.exposure.shape == (2, 1)
+    # Same input view content -> same output within a scene.
+    same = images[:, :1].expand(-1, 5, -1, -1, -1)
+    out, _ = degrade(same, Degradation.for_mode("low-light"), torch.Generator().manual_seed(0), consistent_views=True)
+    assert torch.equal(out[0, 0], out[0, 4]) and not torch.equal(out[0, 0], out[1, 0])
+
+
+@pytest.mark.parametrize("mode", ["low-light", "over-exposure"])
+@pytest.mark.parametrize("fill", [0.0, 1.0])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64, torch.bfloat16])
+def test_black_and_saturated_frames_stay_finite(mode, fill, dtype):
+    images = torch.full((2, 3, 8, 8), fill, dtype=dtype)
+    out, _ = degrade(images, Degradation.for_mode(mode, noise=True), torch.Generator().manual_seed(0))
+    assert torch.isfinite(out).all() and out.min() >= 0 and out.max() <= 1
+    if fill == 0.0 and mode == "low-light":
+        assert out.float().mean() < 0.02  # only noise on black
+
+
+def test_non_finite_input_is_refused():
+    images = torch.zeros(1, 3, 4, 4)
+    images[0, 0, 0, 0] = float("nan")
+    with pytest.raises(NonFiniteError, match="images to degrade: 1 of 48"):
+        degrade(images, Degradation.for_mode("low-light"), torch.Generator())
+
+
+def test_sensor_noise_variance_follows_the_model():
+    flat = torch.full((1, 3, 256, 256), 0.5, dtype=torch.float64)
+    parameters = DegradationParameters(
+        torch.tensor([1.0], dtype=torch.float64), torch.tensor([1.0], dtype=torch.float64),
+        torch.tensor([1e-3], dtype=torch.float64), torch.tensor([1e-5], dtype=torch.float64),
+    )
+    out = apply_degradation(flat, "low-light", parameters, torch.Generator().manual_seed(0))
+    linear = srgb_to_linear(out)
+    signal = srgb_to_linear(torch.tensor(0.5, dtype=torch.float64))
+    expected_std = math.sqrt(1e-3 * signal + 1e-5)
+    assert linear.mean().item() == pytest.approx(signal.item(), rel=1e-2)
+    assert linear.std().item() == pytest.approx(expected_std, rel=2e-2)
+
+
+def test_sampled_noise_levels_follow_the_camera_model():
+    parameters = sample_parameters(Degradation.for_mode("low-light", noise=True), (20000,), torch.Generator().manual_seed(0))
+    log_shot, log_read = parameters.shot.log(), parameters.read.log()
+    assert log_shot.min() >= math.log(1e-4) and log_shot.max() <= math.log(1.2e-2)
+    residual = log_read - (2.18 * log_shot + 1.2)
+    assert residual.mean().abs() < 0.01 and residual.std().item() == pytest.approx(0.26, rel=0.03)
+
+
+def test_over_exposure_statistics_resemble_lom(buu):
+    """The synthetic over-exposure of buu's normal-light views should look like LOM's real ones."""
+    high = _load_folder(buu / "high", "JPG")
+    real = _load_folder(buu / "over_exp", "jpg")
+    degradation = Degradation.for_mode("over-exposure")
+    means = []
+    for seed in range(8):
+        synthetic, _ = degrade(high, degradation, torch.Generator().manual_seed(seed), consistent_views=False)
+        means.append(synthetic.mean().item())
+    assert real.mean().item() == pytest.approx(0.914, abs=0.01)
+    assert np.mean(means) == pytest.approx(real.mean().item(), abs=0.04)
+    # At the centre of the ranges the synthesis is close pixel by pixel, not only on average.
+    centre = DegradationParameters(torch.tensor(10.0, dtype=torch.float64), torch.tensor(1.75, dtype=torch.float64))
+    synthetic = apply_degradation(high, "over-exposure", centre, torch.Generator())
+    psnr = -10 * torch.log10(((synthetic - real) ** 2).mean()).item()
+    assert psnr > 27.0
+    # The real set has a bright, compressed distribution: similar spread and highlight share.
+    assert synthetic.std().item() == pytest.approx(real.std().item(), abs=0.03)
+
+
+def test_low_light_synthesis_is_in_the_range_of_lom(buu):
+    high = _load_folder(buu / "high", "JPG")
+    real = _load_folder(buu / "low", "JPG")
+    degradation = Degradation.for_mode("low-light")
+    darkest = apply_degradation(high, "low-light", DegradationParameters(torch.tensor(0.05), torch.tensor(1.4)), torch.Generator())
+    brightest = apply_degradation(high, "low-light", DegradationParameters(torch.tensor(0.1), torch.tensor(1.3)), torch.Generator())
+    assert darkest.mean() < brightest.mean() < real.mean() * 1.2
+    assert real.mean().item() == pytest.approx(0.091, abs=0.005)
+    assert 0.02 < darkest.mean().item() and brightest.mean().item() > 0.06
+    assert degradation.exposure_range == (0.05, 0.1) and degradation.gamma_range == (1.3, 1.4)

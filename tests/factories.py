@@ -1,0 +1,28 @@
+"""Random but reproducible test objects shared by several test modules."""
+
+import torch
+
+from lumos3d_cli.io.cameras import Cameras, make_intrinsics
+from lumos3d_cli.io.gaussians import Gaussians, sh_coefficient_count
+from lumos3d_cli.rotations import quaternion_to_matrix
+
+
+def random_gaussians(n: int, degree: int, seed: int = 0) -> Gaussians:
+    g = torch.Generator().manual_seed(seed)
+    k = sh_coefficient_count(degree)
+    return Gaussians(
+        means=torch.randn(n, 3, generator=g) * 3,
+        quats=torch.randn(n, 4, generator=g),
+        scales=torch.exp(torch.randn(n, 3, generator=g) - 3),
+        opacities=torch.rand(n, generator=g),
+        sh=torch.randn(n, k, 3, generator=g),
+    )
+
+
+def random_cameras(v: int, seed: int = 0) -> Cameras:
+    g = torch.Generator().manual_seed(seed)
+    rotation = quaternion_to_matrix(torch.randn(v, 4, generator=g, dtype=torch.float64))
+    translation = torch.randn(v, 3, 1, generator=g, dtype=torch.float64)
+    fx = 300 + 100 * torch.rand(v, generator=g, dtype=torch.float64)
+    intrinsics = make_intrinsics(fx, fx * 1.01, torch.full((v,), 160.0), torch.full((v,), 120.5))
+    return Cameras(torch.cat([rotation, translation], 2), intrinsics, [(320, 241)] * v, [f"{i}.png" for i in range(v)])

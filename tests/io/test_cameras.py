@@ -1,0 +1,156 @@
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.camera_files import find_camera_source, read_cameras
+from lumos3d_cli.io.cameras import Cameras, make_intrinsics, opengl_to_opencv
+from lumos3d_cli.io.colmap import read_colmap_model, read_colmap_points, write_colmap_model
+from lumos3d_cli.io.transforms_json import read_transforms_json, write_transforms_json
+from lumos3d_cli.rotations import matrix_to_quaternion, quaternion_to_matrix
+
+from factories import random_cameras
+
+
+def _assert_cameras_close(a: Cameras, b: Cameras, atol=1e-12):
+    torch.testing.assert_close(a.extrinsics, b.extrinsics, atol=atol, rtol=0)
+    torch.testing.assert_close(a.intrinsics, b.intrinsics, atol=atol, rtol=0)
+    assert a.sizes == b.sizes and a.names == b.names
+
+
+def test_quaternion_matrix_round_trip_including_half_turns():
+    quats = torch.randn(1000, 4, dtype=torch.float64)
+    quats = quats / quats.norm(dim=1, keepdim=True)
+    quats = torch.where(quats[:, :1] < 0, -quats, quats)
+    half_turns = torch.tensor([[0.0, 1, 0, 0], [0.0, 0, 1, 0], [0.0, 0, 0, 1], [0.0, 0.6, 0.8, 0]], dtype=torch.float64)
+    back = matrix_to_quaternion(quaternion_to_matrix(torch.cat([quats, half_turns])))
+    expected = torch.cat([quats, half_turns])
+    # q and -q are the same rotation; compare up to sign.
+    sign = torch.sign((back * expected).sum(dim=1, keepdim=True))
+    torch.testing.assert_close(back * sign, expected, atol=1e-12, rtol=0)
+    rotation = quaternion_to_matrix(quats)
+    torch.testing.assert_close(rotation @ rotation.transpose(1, 2), torch.eye(3, dtype=torch.float64).expand(1000, 3, 3))
+
+
+def test_transforms_json_round_trip(tmp_path):
+    cameras = random_cameras(5)
+    write_transforms_json(tmp_path / "transforms.json", cameras)
+    _assert_cameras_close(read_transforms_json(tmp_path / "transforms.json"), cameras)
+    document = json.loads((tmp_path / "transforms.json").read_text())
+    assert "fl_x" not in document and "fl_x" in document["frames"][0]  # per-frame when they differ
+
+
+def test_shared_intrinsics_go_to_the_top_level(tmp_path):
+    cameras = random_cameras(3)
+    cameras.intrinsics[:] = cameras.intrinsics[0]
+    write_transforms_json(tmp_path / "t.json", cameras)
+    document = json.loads((tmp_path / "t.json").read_text())
+    assert document["w"] == 320 and document["h"] == 241 and "fl_x" not in document["frames"][0]
+    _assert_cameras_close(read_transforms_json(tmp_path / "t.json"), cameras)
+
+
+def test_colmap_text_round_trip(tmp_path):
+    cameras = random_cameras(4, seed=3)
+    write_colmap_model(tmp_path, cameras)
+    assert (tmp_path / "points3D.txt").is_file()
+    _assert_cameras_close(read_colmap_model(tmp_path), cameras, atol=1e-12)
+
+
+def test_opengl_and_opencv_conventions_agree_on_a_pixel():
+    # An OpenGL camera at (1, 2, 3) looking down -z (its identity rotation) sees a world point
+    # straight ahead with x to the right and y *up*; project by hand with those axes.
+    camera_to_world_gl = torch.eye(4, dtype=torch.float64)
+    camera_to_world_gl[:3, 3] = torch.tensor([1.0, 2.0, 3.0])
+    point = torch.tensor([[1.5, 2.25, -1.0]], dtype=torch.float64)  # 4 units in front
+    fx, fy, cx, cy = 500.0, 400.0, 320.0, 240.0
+    x_gl, y_gl, z_gl = (point[0] - camera_to_world_gl[:3, 3]).tolist()
+    expected_u = cx + fx * x_gl / -z_gl
+    expected_v = cy - fy * y_gl / -z_gl  # image rows grow downwards, GL y grows upwards
+    cameras = Cameras.from_camera_to_world(
+        opengl_to_opencv(camera_to_world_gl)[None], make_intrinsics(fx, fy, cx, cy), [(640, 480)]
+    )
+    pixels, depth = cameras.project(point)
+    assert pixels[0, 0].tolist() == pytest.approx([expected_u, expected_v], abs=1e-12)
+    assert expected_u > cx and expected_v < cy  # right of and above the centre
+    assert depth.item() == pytest.approx(4.0)
+
+
+def test_lom_transforms_agree_with_its_colmap_model(buu):
+    """LOM ships the same cameras twice: transforms.json (OpenGL, rescaled world) and COLMAP
+    text (OpenCV). Relative rotations must match exactly; relative translations up to one scale."""
+    nerf = read_transforms_json(buu / "transforms_train.json")
+    colmap = read_colmap_model(buu / "colmap_text")
+    by_name = {name.lower(): i for i, name in enumerate(colmap.names)}
+    colmap = colmap[[by_name[name.split("/")[-1].lower()] for name in nerf.names]]
+    a, b = nerf.relative_to(0), colmap.relative_to(0)
+    torch.testing.assert_close(a.extrinsics[:, :, :3], b.extrinsics[:, :, :3], atol=1e-9, rtol=0)
+    ratio = a.extrinsics[1:, :, 3].norm(dim=1) / b.extrinsics[1:, :, 3].norm(dim=1)
+    assert ratio.std() / ratio.mean() < 1e-6
+    torch.testing.assert_close(a.extrinsics[1:, :, 3] / ratio.mean(), b.extrinsics[1:, :, 3], atol=1e-6, rtol=0)
+    torch.testing.assert_close(nerf.intrinsics, colmap.intrinsics)
+    assert nerf.sizes[0] == (500, 375)
+
+
+def test_scene_sparse_model_reprojects_its_points(shared_data):
+    """Our reading of a COLMAP model must put each 3D point onto the 2D observation it came from."""
+    folder = shared_data / "scenes" / "kitchen" / "sparse" / "0"
+    cameras = read_cameras(shared_data / "scenes" / "kitchen")
+    assert len(cameras) == 17 and cameras.sizes[0] == (512, 342)
+    points = read_colmap_points(folder / "points3D.txt")
+    lines = [l for l in (folder / "images.txt").read_text().splitlines() if not l.startswith("#")]
+    header = lines[0].split()
+    observations = np.asarray(lines[1].split(), dtype=np.float64).reshape(-1, 3)
+    observed = observations[observations[:, 2] >= 0]
+    index = cameras.names.index(header[9])
+    lookup = {pid: i for i, pid in enumerate(points.ids)}
+    xyz = torch.from_numpy(points.xyz[[lookup[int(pid)] for pid in observed[:, 2]]])
+    pixels, depth = cameras[index].project(xyz)
+    assert (depth > 0).all()
+    error = (pixels[0].numpy() - observed[:, :2])
+    assert np.median(np.linalg.norm(error, axis=1)) < 2.0
+
+
+def test_rescale_and_relative_frame():
+    cameras = random_cameras(3)
+    half = cameras.rescaled(160, 120)
+    assert half.sizes == [(160, 120)] * 3
+    assert half.intrinsics[0, 0, 0] == pytest.approx(cameras.intrinsics[0, 0, 0].item() * 0.5)
+    assert half.intrinsics[0, 1, 2] == pytest.approx(cameras.intrinsics[0, 1, 2].item() * 120 / 241)
+    relative = cameras.relative_to(0)
+    torch.testing.assert_close(relative.extrinsics[0], torch.eye(4, dtype=torch.float64)[:3])
+    point = torch.randn(1, 3, dtype=torch.float64)
+    original_pixels, _ = cameras.project(point)
+    point_in_first = (cameras.extrinsics[0, :, :3] @ point[0] + cameras.extrinsics[0, :, 3])[None]
+    relative_pixels, _ = relative.project(point_in_first)
+    torch.testing.assert_close(relative_pixels, original_pixels)
+
+
+def test_camera_angle_only_and_missing_size(tmp_path):
+    import cv2
+
+    cv2.imwrite(str(tmp_path / "r_0.png"), np.zeros((60, 80, 3), np.uint8))
+    document = {"camera_angle_x": 2 * math.atan(0.5), "frames": [{"file_path": "./r_0", "transform_matrix": np.eye(4).tolist()}]}
+    (tmp_path / "transforms.json").write_text(json.dumps(document))
+    cameras = read_transforms_json(tmp_path / "transforms.json")
+    assert cameras.sizes == [(80, 60)]
+    assert cameras.intrinsics[0, 0, 0].item() == pytest.approx(80.0)
+    assert cameras.intrinsics[0, 0, 2].item() == 40.0
+
+
+def test_bad_camera_files(tmp_path):
+    (tmp_path / "bad.json").write_text("{not json")
+    with pytest.raises(InputError, match=r"bad\.json: invalid JSON"):
+        read_cameras(tmp_path / "bad.json")
+    (tmp_path / "empty.json").write_text("{}")
+    with pytest.raises(InputError, match="no 'frames' list"):
+        read_cameras(tmp_path / "empty.json")
+    (tmp_path / "f.json").write_text(json.dumps({"frames": [{"transform_matrix": np.eye(4).tolist(), "w": 4, "h": 4}]}))
+    with pytest.raises(InputError, match="no focal length"):
+        read_cameras(tmp_path / "f.json")
+    (tmp_path / "empty_dir").mkdir()
+    with pytest.raises(InputError, match="no cameras found"):
+        read_cameras(tmp_path / "empty_dir")
+    assert find_camera_source(tmp_path / "missing") is None

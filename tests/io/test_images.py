@@ -1,0 +1,197 @@
+import logging
+
+import cv2
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+import rawpy
+import torch
+
+from lumos3d_cli.errors import InputError, NonFiniteError
+from lumos3d_cli.io.colour import linear_to_srgb
+from lumos3d_cli.io.image_files import list_images, natural_sort_key
+from lumos3d_cli.io.images import load_images, probe_image, read_image
+
+
+def _write_oiio(path, pixels, fmt, **attributes):
+    height, width, channels = pixels.shape
+    spec = oiio.ImageSpec(width, height, channels, fmt)
+    for key, value in attributes.items():
+        spec.attribute(key, value)
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), spec)
+    assert out.write_image(pixels)
+    out.close()
+
+
+def test_natural_sort_orders_numbers_by_value(tmp_path):
+    for name in ["10.jpg", "2.jpg", "1.jpg", "img_11.png", "img_9.png"]:
+        cv2.imwrite(str(tmp_path / name), np.zeros((4, 4, 3), np.uint8))
+    (tmp_path / "notes.txt").write_text("not an image")
+    (tmp_path / ".hidden.jpg").write_bytes(b"")
+    names = [p.name for p in list_images(tmp_path)]
+    assert names == ["1.jpg", "2.jpg", "10.jpg", "img_9.png", "img_11.png"]
+    assert sorted(["b10", "b2", "a"], key=natural_sort_key) == ["a", "b2", "b10"]
+
+
+def test_8_bit_png_values_are_exact(tmp_path):
+    pixels = np.random.default_rng(0).integers(0, 256, (5, 7, 3), dtype=np.uint8)
+    cv2.imwrite(str(tmp_path / "a.png"), pixels[..., ::-1])
+    image = read_image(tmp_path / "a.png")
+    assert image.encoding == "srgb" and image.bit_depth == 8 and image.pixels.dtype == np.float32
+    np.testing.assert_array_equal(image.pixels, pixels.astype(np.float32) / 255)
+
+
+def test_16_bit_png_keeps_all_bits(tmp_path):
+    pixels = np.random.default_rng(1).integers(0, 65536, (6, 5, 3), dtype=np.uint16)
+    cv2.imwrite(str(tmp_path / "a.png"), pixels[..., ::-1])
+    image = read_image(tmp_path / "a.png")
+    assert image.bit_depth == 16
+    np.testing.assert_array_equal(np.round(image.pixels * 65535).astype(np.uint16), pixels)
+    assert probe_image(tmp_path / "a.png").bit_depth == 16
+
+
+def test_16_bit_tiff_and_webp(tmp_path):
+    pixels16 = np.random.default_rng(2).integers(0, 65536, (4, 4, 3), dtype=np.uint16)
+    cv2.imwrite(str(tmp_path / "a.tif"), pixels16[..., ::-1])
+    np.testing.assert_array_equal(np.round(read_image(tmp_path / "a.tif").pixels * 65535), pixels16)
+    cv2.imwrite(str(tmp_path / "b.webp"), np.full((8, 8, 3), 128, np.uint8), [cv2.IMWRITE_WEBP_QUALITY, 101])
+    np.testing.assert_allclose(read_image(tmp_path / "b.webp").pixels, 128 / 255)
+
+
+def test_grayscale_becomes_rgb_and_alpha_is_dropped(tmp_path):
+    cv2.imwrite(str(tmp_path / "grey.png"), np.full((3, 4), 200, np.uint8))
+    grey = read_image(tmp_path / "grey.png")
+    assert grey.pixels.shape == (3, 4, 3)
+    np.testing.assert_allclose(grey.pixels, 200 / 255)
+    rgba = np.zeros((3, 4, 4), np.uint8)
+    rgba[..., :3] = (10, 20, 30)  # BGR
+    rgba[..., 3] = 0
+    cv2.imwrite(str(tmp_path / "rgba.png"), rgba)
+    image = read_image(tmp_path / "rgba.png")
+    assert image.pixels.shape == (3, 4, 3)
+    np.testing.assert_allclose(image.pixels[0, 0], np.array([30, 20, 10]) / 255)
+
+
+def test_exif_orientation_is_applied(tmp_path):
+    pixels = np.zeros((20, 40, 3), np.uint8)
+    pixels[:, :20] = 255  # left half white in the stored (unrotated) image
+    _write_oiio(tmp_path / "rotated.jpg", pixels, "uint8", Orientation=6)
+    image = read_image(tmp_path / "rotated.jpg")
+    # Orientation 6: the stored image must be rotated 90 degrees clockwise for display,
+    # so its left half becomes the top half.
+    assert image.pixels.shape == (40, 20, 3)
+    assert image.pixels[:20].mean() > 0.95 and image.pixels[20:].mean() < 0.05
+    header = probe_image(tmp_path / "rotated.jpg")
+    assert (header.width, header.height) == (20, 40)
+
+
+def test_exr_is_read_as_linear_float(tmp_path):
+    pixels = np.random.default_rng(3).uniform(0, 4, (6, 5, 4)).astype(np.float32)
+    _write_oiio(tmp_path / "a.exr", pixels, "float")
+    image = read_image(tmp_path / "a.exr")
+    assert image.encoding == "linear" and image.kind == "hdr"
+    np.testing.assert_array_equal(image.pixels, pixels[..., :3])
+
+
+def test_exr_with_nan_is_refused_with_the_count(tmp_path):
+    pixels = np.ones((4, 4, 3), np.float32)
+    pixels[0, 0, 0] = np.nan
+    pixels[1, 1, 2] = np.inf
+    _write_oiio(tmp_path / "bad.exr", pixels, "float")
+    with pytest.raises(NonFiniteError, match=r"bad\.exr: 2 of 48 samples are NaN or Inf"):
+        read_image(tmp_path / "bad.exr")
+
+
+def test_radiance_hdr(tmp_path):
+    pixels = np.full((4, 4, 3), 2.5, np.float32)
+    _write_oiio(tmp_path / "a.hdr", pixels, "float")
+    image = read_image(tmp_path / "a.hdr")
+    np.testing.assert_allclose(image.pixels, 2.5, rtol=1e-2)
+
+
+def test_camera_raw_is_linear_and_white_balanced(shared_data):
+    path = shared_data / "raw" / "Blackmagic.dng"
+    image = read_image(path)
+    assert image.kind == "raw" and image.encoding == "linear" and image.bit_depth == 16
+    assert image.pixels.shape == (2176, 4128, 3) and image.pixels.dtype == np.float32
+    assert image.pixels.min() >= 0 and image.pixels.max() <= 1
+    # Oracle: LibRaw's own sRGB-curve rendering of the same file must equal our linear output
+    # encoded with the sRGB curve (up to LibRaw's 16-bit rounding and its toe approximation).
+    with rawpy.imread(str(path)) as raw:
+        reference = raw.postprocess(gamma=(2.4, 12.92), no_auto_bright=True, output_bps=16, use_camera_wb=True)
+    reference = reference.astype(np.float32) / 65535
+    assert np.abs(linear_to_srgb(image.pixels) - reference).mean() < 0.01
+    # Linear data of a normally exposed photo sits far below its sRGB encoding.
+    assert image.pixels.mean() < 0.5 * reference.mean()
+    header = probe_image(path)
+    assert (header.width, header.height, header.kind) == (4128, 2176, "raw")
+
+
+def test_unsupported_raw_is_named(tmp_path):
+    fake = tmp_path / "photo.cr2"
+    fake.write_bytes(b"II*\x00" + bytes(200))
+    with pytest.raises(InputError, match=r"photo\.cr2: unsupported camera RAW .*DNG"):
+        read_image(fake)
+
+
+@pytest.mark.parametrize(
+    "name, content, message",
+    [
+        ("empty.jpg", b"", r"empty\.jpg: file is empty \(0 bytes\)"),
+        ("text.jpg", b"this is not a jpeg", r"text\.jpg: cannot decode as JPG"),
+        ("text.png", b"hello", r"text\.png: cannot decode as PNG"),
+    ],
+)
+def test_bad_files_are_named(tmp_path, name, content, message):
+    (tmp_path / name).write_bytes(content)
+    with pytest.raises(InputError, match=message):
+        read_image(tmp_path / name)
+
+
+def test_truncated_jpeg_is_refused(tmp_path, buu):
+    data = (buu / "low" / "1.JPG").read_bytes()
+    (tmp_path / "cut.jpg").write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match=r"cut\.jpg: cannot decode as JPG \(corrupt, truncated"):
+        read_image(tmp_path / "cut.jpg")
+
+
+def test_no_images_and_unsupported_types(tmp_path):
+    with pytest.raises(InputError, match="folder holds no images"):
+        list_images(tmp_path)
+    with pytest.raises(InputError, match="no such file or folder"):
+        list_images(tmp_path / "missing")
+    (tmp_path / "a.gif").write_bytes(b"GIF89a")
+    with pytest.raises(InputError, match=r"a\.gif: unsupported file type '\.gif'"):
+        list_images([tmp_path / "a.gif"])
+    with pytest.raises(InputError, match="no input images given"):
+        list_images([])
+
+
+def test_load_images_of_a_real_scene(shared_data):
+    batch = load_images(shared_data / "scenes" / "llff_fern" / "images")
+    assert batch.images.shape == (20, 3, 384, 512) and batch.images.dtype == torch.float32
+    assert 0 <= batch.images.min() and batch.images.max() <= 1
+    assert [p.name for p in batch.paths][:3] == ["000.jpg", "001.jpg", "002.jpg"]
+    reference = cv2.imread(str(batch.paths[5]))[..., ::-1].astype(np.float32) / 255
+    np.testing.assert_array_equal(batch.images[5].permute(1, 2, 0).numpy(), reference)
+
+
+def test_mixed_sizes_are_resized_with_a_warning(tmp_path, caplog):
+    cv2.imwrite(str(tmp_path / "1.png"), np.full((20, 30, 3), 100, np.uint8))
+    cv2.imwrite(str(tmp_path / "2.png"), np.full((20, 30, 3), 100, np.uint8))
+    cv2.imwrite(str(tmp_path / "3.png"), np.full((40, 60, 3), 100, np.uint8))
+    with caplog.at_level(logging.WARNING):
+        batch = load_images(tmp_path)
+    assert batch.images.shape == (3, 3, 20, 30)
+    assert batch.original_sizes == [(30, 20), (30, 20), (60, 40)]
+    assert "resized to 30x20: 3.png" in caplog.text
+    np.testing.assert_allclose(batch.images[2].numpy(), 100 / 255, atol=1e-6)
+
+
+def test_linear_sources_are_encoded_once_and_clipped(tmp_path):
+    _write_oiio(tmp_path / "a.exr", np.full((4, 4, 3), 0.18, np.float32), "float")
+    _write_oiio(tmp_path / "b.exr", np.full((4, 4, 3), 3.0, np.float32), "float")
+    batch = load_images(tmp_path)
+    np.testing.assert_allclose(batch.images[0].numpy(), linear_to_srgb(np.float32(0.18)), atol=1e-6)
+    np.testing.assert_allclose(batch.images[1].numpy(), 1.0)

@@ -1,0 +1,134 @@
+import numpy as np
+import pytest
+import torch
+from plyfile import PlyData, PlyElement
+
+from lumos3d_cli.errors import InputError, NonFiniteError
+from lumos3d_cli.io.gaussians import Gaussians, sh_coefficient_count
+from lumos3d_cli.io.ply import ply_property_names, read_ply, read_ply_fields, write_ply
+
+from factories import random_gaussians
+
+
+def _assert_same(a: Gaussians, b: Gaussians) -> None:
+    for name, tensor in a.tensors().items():
+        assert torch.equal(tensor, getattr(b, name)), name
+
+
+@pytest.mark.parametrize("degree", [0, 1, 2, 3, 4])
+def test_plyfile_reads_every_property_as_written(tmp_path, degree):
+    gaussians = random_gaussians(50, degree, seed=degree)
+    write_ply(tmp_path / "scene.ply", gaussians)
+    ply = PlyData.read(str(tmp_path / "scene.ply"))
+    assert ply.text is False and ply.byte_order == "<"
+    vertex = ply["vertex"]
+    names = [p.name for p in vertex.properties]
+    assert names == ply_property_names(degree)
+    assert all(vertex[name].dtype == np.float32 for name in names)
+    g = gaussians.to(torch.float64)
+    k = sh_coefficient_count(degree)
+    np.testing.assert_array_equal(vertex["x"], gaussians.means[:, 0].numpy())
+    np.testing.assert_array_equal(vertex["z"], gaussians.means[:, 2].numpy())
+    np.testing.assert_array_equal(vertex["nx"], 0)
+    for c in range(3):
+        np.testing.assert_array_equal(vertex[f"f_dc_{c}"], gaussians.sh[:, 0, c].numpy())
+        for j in range(1, k):  # channel-major: f_rest_{c*(K-1) + j-1} is coefficient j of channel c
+            np.testing.assert_array_equal(vertex[f"f_rest_{c * (k - 1) + j - 1}"], gaussians.sh[:, j, c].numpy())
+        np.testing.assert_allclose(vertex[f"scale_{c}"], torch.log(g.scales[:, c]).numpy(), rtol=1e-6)
+    np.testing.assert_allclose(vertex["opacity"], torch.logit(g.opacities).numpy(), rtol=1e-5, atol=1e-6)
+    for c in range(4):
+        np.testing.assert_array_equal(vertex[f"rot_{c}"], gaussians.quats[:, c].numpy())
+
+
+def test_round_trip_is_bit_exact(tmp_path):
+    original = random_gaussians(2000, 3)
+    write_ply(tmp_path / "a.ply", original)
+    once = read_ply(tmp_path / "a.ply")
+    # means, rotations and SH are stored as they are: exact after one trip.
+    for name in ("means", "quats", "sh"):
+        assert torch.equal(getattr(once, name), getattr(original, name))
+    # Opacity and scale go through logit/log on disk: within float32 rounding after one trip ...
+    torch.testing.assert_close(once.opacities, original.opacities, rtol=2e-6, atol=0)
+    torch.testing.assert_close(once.scales, original.scales, rtol=2e-6, atol=0)
+    # ... and bit-exact from then on: memory -> file -> memory leaves a saved scene unchanged.
+    write_ply(tmp_path / "b.ply", once)
+    _assert_same(read_ply(tmp_path / "b.ply"), once)
+    assert (tmp_path / "a.ply").read_bytes() == (tmp_path / "b.ply").read_bytes()
+
+
+def test_extreme_values_stay_finite_on_disk(tmp_path):
+    gaussians = random_gaussians(4, 1)
+    gaussians.opacities = torch.tensor([0.0, 1.0, 1e-30, 0.5])
+    gaussians.scales = torch.tensor([[0.0, 1e-30, 1e4]] * 4)
+    write_ply(tmp_path / "a.ply", gaussians)
+    fields, _ = read_ply_fields(tmp_path / "a.ply")
+    assert np.isfinite(fields).all()
+    back = read_ply(tmp_path / "a.ply")
+    assert back.opacities[0] < 1e-6 and back.opacities[1] > 1 - 1e-6
+    assert back.scales[0, 2] == pytest.approx(1e4, rel=1e-6)
+
+
+def test_empty_scene(tmp_path):
+    write_ply(tmp_path / "a.ply", random_gaussians(0, 2))
+    back = read_ply(tmp_path / "a.ply")
+    assert len(back) == 0 and back.sh_degree == 2
+
+
+def test_non_finite_gaussians_are_refused(tmp_path):
+    gaussians = random_gaussians(5, 0)
+    gaussians.means[2, 1] = float("nan")
+    with pytest.raises(NonFiniteError, match=r"scene to save\.means: 1 of 15"):
+        write_ply(tmp_path / "a.ply", gaussians)
+    assert not (tmp_path / "a.ply").exists()
+
+
+def _plyfile_scene(names, n=3, text=False, byte_order="<", dtype="f4"):
+    records = np.zeros(n, dtype=[(name, dtype) for name in names])
+    for i, name in enumerate(names):
+        records[name] = np.arange(n) + i * 0.25
+    return PlyData([PlyElement.describe(records, "vertex")], text=text, byte_order=byte_order)
+
+
+def test_reads_files_from_other_writers(tmp_path):
+    names = ply_property_names(1)
+    shuffled = names[::-1] + ["extra_property"]
+    _plyfile_scene(shuffled).write(str(tmp_path / "reordered.ply"))
+    _plyfile_scene(names, text=True).write(str(tmp_path / "ascii.ply"))
+    _plyfile_scene(names, byte_order=">", dtype="f8").write(str(tmp_path / "big.ply"))
+    expected = np.stack([np.arange(3) + names.index(n) * 0.25 for n in names], axis=1)
+    expected_shuffled = np.stack([np.arange(3) + shuffled.index(n) * 0.25 for n in names], axis=1)
+    fields, degree = read_ply_fields(tmp_path / "reordered.ply")
+    assert degree == 1
+    np.testing.assert_array_equal(fields, expected_shuffled.astype(np.float32))
+    for name in ("ascii.ply", "big.ply"):
+        fields, degree = read_ply_fields(tmp_path / name)
+        np.testing.assert_array_equal(fields, expected.astype(np.float32))
+
+
+def test_missing_normals_are_allowed(tmp_path):
+    names = [n for n in ply_property_names(0) if n not in ("nx", "ny", "nz")]
+    _plyfile_scene(names).write(str(tmp_path / "a.ply"))
+    assert len(read_ply(tmp_path / "a.ply")) == 3
+
+
+def test_missing_properties_are_listed(tmp_path):
+    names = [n for n in ply_property_names(0) if n not in ("opacity", "rot_2")]
+    _plyfile_scene(names).write(str(tmp_path / "a.ply"))
+    with pytest.raises(InputError, match=r"a\.ply: not a 3D Gaussian scene; missing vertex properties: opacity, rot_2"):
+        read_ply(tmp_path / "a.ply")
+
+
+def test_bad_files(tmp_path):
+    (tmp_path / "text.ply").write_text("hello")
+    with pytest.raises(InputError, match="not a PLY file"):
+        read_ply(tmp_path / "text.ply")
+    write_ply(tmp_path / "cut.ply", random_gaussians(10, 0))
+    data = (tmp_path / "cut.ply").read_bytes()
+    (tmp_path / "cut.ply").write_bytes(data[:-20])
+    with pytest.raises(InputError, match="PLY data is truncated"):
+        read_ply(tmp_path / "cut.ply")
+    _plyfile_scene(ply_property_names(0) + ["f_rest_0"]).write(str(tmp_path / "odd.ply"))
+    with pytest.raises(InputError, match="1 f_rest_\\* properties do not match any SH degree"):
+        read_ply(tmp_path / "odd.ply")
+    with pytest.raises(InputError, match="no such file"):
+        read_ply(tmp_path / "missing.ply")
