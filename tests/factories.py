@@ -26,3 +26,22 @@ def random_cameras(v: int, seed: int = 0) -> Cameras:
     fx = 300 + 100 * torch.rand(v, generator=g, dtype=torch.float64)
     intrinsics = make_intrinsics(fx, fx * 1.01, torch.full((v,), 160.0), torch.full((v,), 120.5))
     return Cameras(torch.cat([rotation, translation], 2), intrinsics, [(320, 241)] * v, [f"{i}.png" for i in range(v)])
+
+def camera_at_origin(width: int, height: int, focal: float | None = None) -> Cameras:
+    focal = focal or 0.9 * width
+    return Cameras(
+        torch.eye(4, dtype=torch.float64)[:3][None], make_intrinsics(focal, focal, width / 2, height / 2), [(width, height)]
+    )
+
+
+def random_scene(n: int, seed: int, degree: int = 3, dtype=torch.float64, spread: float = 0.7, depth: float = 3.0) -> Gaussians:
+    g = torch.Generator().manual_seed(seed)
+    means = torch.randn(n, 3, generator=g, dtype=dtype) * spread
+    means[:, 2] += depth
+    return Gaussians(
+        means=means,
+        quats=torch.randn(n, 4, generator=g, dtype=dtype),
+        scales=torch.rand(n, 3, generator=g, dtype=dtype) * 0.25 + 0.03,
+        opacities=torch.rand(n, generator=g, dtype=dtype) * 0.9 + 0.05,
+        sh=torch.randn(n, (degree + 1) ** 2, 3, generator=g, dtype=dtype) * 0.5,
+    )

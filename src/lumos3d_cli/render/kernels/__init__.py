@@ -1,0 +1,1 @@
+"""numba kernels of the CPU rasterizer. Arrays in, arrays out; no torch here."""

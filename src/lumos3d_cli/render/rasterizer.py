@@ -1,0 +1,121 @@
+"""The CPU rasterizer as a torch.autograd.Function: projection, binning and compositing run in
+numba kernels; the backward pass is hand-written (see kernels/)."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import torch
+
+from lumos3d_cli.render.kernels.binning import bin_and_sort
+from lumos3d_cli.render.kernels.projection import project_backward, project_forward
+from lumos3d_cli.render.kernels.rasterize import (
+    GRADIENT_COLUMNS,
+    gather_entry_gradients,
+    rasterize_backward,
+    rasterize_forward,
+)
+from lumos3d_cli.render.settings import RasterSettings
+
+_CHUNKS_PER_THREAD = 8
+
+
+def _use_torch_thread_count() -> None:
+    """Run numba with torch's thread count (capped by NUMBA_NUM_THREADS)."""
+    numba.set_num_threads(max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS)))
+
+
+def _array(tensor: torch.Tensor) -> np.ndarray:
+    return tensor.detach().contiguous().numpy()
+
+
+class RasterizeGaussians(torch.autograd.Function):
+    """One camera. Inputs: means [N,3], quats [N,4] wxyz, scales [N,3], opacities [N],
+    sh [N,K,3]; viewmat [3,4] world->camera (float64), intrinsics (fx, fy, cx, cy).
+    Outputs: colour [H,W,3] (sum of w c, no background), alpha [H,W], depth [H,W]
+    (sum of w z, not normalised) and radii [N,2] int32 (0: culled, not differentiable)."""
+
+    @staticmethod
+    def forward(ctx, means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
+        _use_torch_thread_count()
+        dtype = means.dtype
+        numpy_dtype = np.float64 if dtype == torch.float64 else np.float32
+        n = means.shape[0]
+        width, height = settings.width, settings.height
+        fx, fy, cx, cy = (float(v) for v in intrinsics)
+        arrays = [_array(t) for t in (means, quats, scales, opacities, sh)]
+        view = np.ascontiguousarray(_array(viewmat), dtype=np.float64)
+        means2d = np.zeros((n, 2), numpy_dtype)
+        conics = np.zeros((n, 3), numpy_dtype)
+        depths = np.zeros(n, numpy_dtype)
+        opacities_eff = np.zeros(n, numpy_dtype)
+        colours = np.zeros((n, 3), numpy_dtype)
+        radii = np.zeros((n, 2), np.int32)
+        project_forward(
+            *arrays, view, fx, fy, cx, cy, float(width), float(height), settings.sh_degree,
+            settings.near, settings.far, settings.eps2d, settings.antialiased,
+            means2d, conics, depths, opacities_eff, colours, radii,
+        )
+        tile_offsets, entries, tiles_x, _ = bin_and_sort(
+            means2d, radii, depths, width, height, numba.get_num_threads() * _CHUNKS_PER_THREAD
+        )
+        colour = np.zeros((height, width, 3), numpy_dtype)
+        depth = np.zeros((height, width), numpy_dtype)
+        transmittance = np.ones((height, width), numpy_dtype)
+        last = np.full((height, width), -1, np.int64)
+        rasterize_forward(
+            tile_offsets, entries, tiles_x, width, height, means2d, conics, opacities_eff, colours, depths, radii,
+            colour, depth, transmittance, last,
+        )
+        ctx.settings = settings
+        ctx.intrinsics = (fx, fy, cx, cy)
+        ctx.view = view
+        ctx.projected = (means2d, conics, depths, opacities_eff, colours, radii)
+        ctx.tiles = (tile_offsets, entries, tiles_x)
+        ctx.pixels = (transmittance, last)
+        ctx.save_for_backward(means, quats, scales, opacities, sh)
+        radii_tensor = torch.from_numpy(radii)
+        ctx.mark_non_differentiable(radii_tensor)
+        alpha = torch.from_numpy(1.0 - transmittance)
+        return torch.from_numpy(colour), alpha, torch.from_numpy(depth), radii_tensor
+
+    @staticmethod
+    def backward(ctx, v_colour, v_alpha, v_depth, _v_radii):
+        _use_torch_thread_count()
+        means, quats, scales, opacities, sh = ctx.saved_tensors
+        settings: RasterSettings = ctx.settings
+        means2d, conics, depths, opacities_eff, colours, radii = ctx.projected
+        tile_offsets, entries, tiles_x = ctx.tiles
+        transmittance, last = ctx.pixels
+        numpy_dtype = means2d.dtype
+        entry_gradients = np.zeros((entries.shape[0], GRADIENT_COLUMNS), np.float64)
+        rasterize_backward(
+            tile_offsets, entries, tiles_x, settings.width, settings.height, means2d, conics, opacities_eff, colours,
+            depths, radii, transmittance, last,
+            np.ascontiguousarray(_array(v_colour), dtype=np.float64),
+            np.ascontiguousarray(_array(v_alpha), dtype=np.float64),
+            np.ascontiguousarray(_array(v_depth), dtype=np.float64),
+            entry_gradients,
+        )
+        per_gaussian = np.zeros((means.shape[0], GRADIENT_COLUMNS), np.float64)
+        gather_entry_gradients(entries, entry_gradients, per_gaussian)
+        n = means.shape[0]
+        v_means = np.zeros((n, 3), numpy_dtype)
+        v_quats = np.zeros((n, 4), numpy_dtype)
+        v_scales = np.zeros((n, 3), numpy_dtype)
+        v_opacities = np.zeros(n, numpy_dtype)
+        v_sh = np.zeros(sh.shape, numpy_dtype)
+        fx, fy, cx, cy = ctx.intrinsics
+        project_backward(
+            _array(means), _array(quats), _array(scales), _array(opacities), _array(sh), ctx.view,
+            fx, fy, cx, cy, float(settings.width), float(settings.height), settings.sh_degree,
+            settings.eps2d, settings.antialiased, radii,
+            np.ascontiguousarray(per_gaussian[:, 0:2]), np.ascontiguousarray(per_gaussian[:, 2:5]),
+            np.ascontiguousarray(per_gaussian[:, 9]), np.ascontiguousarray(per_gaussian[:, 5]),
+            np.ascontiguousarray(per_gaussian[:, 6:9]),
+            v_means, v_quats, v_scales, v_opacities, v_sh,
+        )
+        return (
+            torch.from_numpy(v_means), torch.from_numpy(v_quats), torch.from_numpy(v_scales),
+            torch.from_numpy(v_opacities), torch.from_numpy(v_sh), None, None, None,
+        )

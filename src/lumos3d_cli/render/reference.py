@@ -1,0 +1,143 @@
+"""The slow twin of the rasterizer: the same forward in dense pure PyTorch, differentiated by
+autograd. Kept for tests (gradient and parity checks) and for tiny inputs; it holds
+[pixels x Gaussians] tensors, so keep both small."""
+
+from __future__ import annotations
+
+import torch
+
+from lumos3d_cli.render.constants import (
+    ALPHA_THRESHOLD,
+    DEGENERATE_QUATERNION_NORM,
+    FOV_MARGIN,
+    GAUSSIAN_EXTEND,
+    MAX_ALPHA,
+    MIN_COMPENSATION,
+    SH_C0,
+    SH_C1,
+    SH_C2,
+    SH_C3,
+    SH_C4,
+    TRANSMITTANCE_THRESHOLD,
+)
+from lumos3d_cli.render.settings import RasterSettings
+from lumos3d_cli.rotations import quaternion_to_matrix
+
+
+def sh_basis_reference(degree: int, directions: torch.Tensor) -> torch.Tensor:
+    """[N, 3] unit directions -> [N, (degree+1)^2] basis values (3DGS order)."""
+    x, y, z = directions.unbind(-1)
+    values = [torch.full_like(x, SH_C0)]
+    if degree >= 1:
+        values += [-SH_C1 * y, SH_C1 * z, -SH_C1 * x]
+    if degree >= 2:
+        xx, yy, zz = x * x, y * y, z * z
+        values += [
+            SH_C2[0] * x * y, SH_C2[1] * y * z, SH_C2[2] * (2 * zz - xx - yy), SH_C2[3] * x * z, SH_C2[4] * (xx - yy),
+        ]
+    if degree >= 3:
+        values += [
+            SH_C3[0] * y * (3 * xx - yy), SH_C3[1] * x * y * z, SH_C3[2] * y * (4 * zz - xx - yy),
+            SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy), SH_C3[4] * x * (4 * zz - xx - yy),
+            SH_C3[5] * z * (xx - yy), SH_C3[6] * x * (xx - 3 * yy),
+        ]
+    if degree >= 4:
+        values += [
+            SH_C4[0] * x * y * (xx - yy), SH_C4[1] * y * z * (3 * xx - yy), SH_C4[2] * x * y * (7 * zz - 1),
+            SH_C4[3] * y * z * (7 * zz - 3), SH_C4[4] * (zz * (35 * zz - 30) + 3), SH_C4[5] * x * z * (7 * zz - 3),
+            SH_C4[6] * (xx - yy) * (7 * zz - 1), SH_C4[7] * x * z * (xx - 3 * yy),
+            SH_C4[8] * (xx * (xx - 3 * yy) - yy * (3 * xx - yy)),
+        ]
+    return torch.stack(values, dim=-1)
+
+
+def project_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
+    """Per-Gaussian projection. Returns means2d [N,2], conics [N,3], depths [N], opacities [N]
+    (with compensation), colours [N,3] and radii [N,2] (int32, 0 = culled)."""
+    dtype = means.dtype
+    fx, fy, cx, cy = (float(v) for v in intrinsics)
+    width, height = float(settings.width), float(settings.height)
+    rotation, translation = viewmat[:, :3].to(dtype), viewmat[:, 3].to(dtype)
+    camera = means @ rotation.T + translation
+    x, y, z_true = camera.unbind(-1)
+    in_depth_range = (z_true >= settings.near) & (z_true <= settings.far)
+    z = torch.where(in_depth_range, z_true, torch.ones_like(z_true))  # culled ones stay finite
+
+    norms = quats.norm(dim=-1, keepdim=True)
+    degenerate = norms < DEGENERATE_QUATERNION_NORM
+    identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=dtype).expand_as(quats)
+    unit = torch.where(degenerate, identity, quats / norms.clamp_min(DEGENERATE_QUATERNION_NORM))
+    m = quaternion_to_matrix(unit) * scales[:, None, :]
+    cov_camera = rotation @ (m @ m.transpose(1, 2)) @ rotation.T
+
+    tan_x, tan_y = 0.5 * width / fx, 0.5 * height / fy
+    tx = z * torch.clamp(x / z, -(cx / fx + FOV_MARGIN * tan_x), (width - cx) / fx + FOV_MARGIN * tan_x)
+    ty = z * torch.clamp(y / z, -(cy / fy + FOV_MARGIN * tan_y), (height - cy) / fy + FOV_MARGIN * tan_y)
+    zero = torch.zeros_like(z)
+    jacobian = torch.stack(
+        [torch.stack([fx / z, zero, -fx * tx / z**2], -1), torch.stack([zero, fy / z, -fy * ty / z**2], -1)], dim=-2
+    )
+    cov2d = jacobian @ cov_camera @ jacobian.transpose(1, 2)
+    a0, b, c0 = cov2d[:, 0, 0], cov2d[:, 0, 1], cov2d[:, 1, 1]
+    a, c = a0 + settings.eps2d, c0 + settings.eps2d
+    det = a * c - b * b
+    if settings.antialiased:
+        compensation = torch.sqrt(torch.clamp_min((a0 * c0 - b * b) / det, MIN_COMPENSATION**2))
+        opacity = opacities * compensation
+    else:
+        opacity = opacities
+    conics = torch.stack([c / det, -b / det, a / det], dim=-1)
+    means2d = torch.stack([fx * x / z + cx, fy * y / z + cy], dim=-1)
+
+    with torch.no_grad():
+        extend = torch.sqrt(2 * torch.log(opacity.clamp_min(ALPHA_THRESHOLD) / ALPHA_THRESHOLD)).clamp_max(GAUSSIAN_EXTEND)
+        rx = torch.ceil(extend * torch.sqrt(a.clamp_min(0)))
+        ry = torch.ceil(extend * torch.sqrt(c.clamp_min(0)))
+        u, v = means2d.unbind(-1)
+        valid = (
+            in_depth_range & (det > 0) & (opacity >= ALPHA_THRESHOLD) & ~((rx <= 0) & (ry <= 0))
+            & (u + rx > 0) & (u - rx < width) & (v + ry > 0) & (v - ry < height)
+        )
+        radii = torch.where(valid[:, None], torch.stack([rx, ry], -1), torch.zeros_like(means2d)).to(torch.int32)
+
+    campos = -rotation.T @ translation
+    directions = means - campos
+    directions = directions / directions.norm(dim=-1, keepdim=True).clamp_min(1e-30)
+    basis = sh_basis_reference(settings.sh_degree, directions)
+    k = basis.shape[1]
+    colours = torch.clamp_min((basis[:, :, None] * sh[:, :k, :]).sum(dim=1) + 0.5, 0.0)
+    return means2d, conics, z, opacity, colours, radii
+
+
+def rasterize_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
+    """Same outputs as RasterizeGaussians: colour [H,W,3], alpha [H,W], depth [H,W] (sum of w z),
+    radii [N,2]."""
+    means2d, conics, depths, opacity, colours, radii = project_reference(
+        means, quats, scales, opacities, sh, viewmat, intrinsics, settings
+    )
+    dtype = means.dtype
+    height, width = settings.height, settings.width
+    keep = (radii > 0).any(dim=-1)
+    index = torch.nonzero(keep).squeeze(1)
+    order = index[torch.argsort(depths.detach()[index], stable=True)]
+    rows = torch.arange(height, dtype=dtype) + 0.5
+    cols = torch.arange(width, dtype=dtype) + 0.5
+    py, px = torch.meshgrid(rows, cols, indexing="ij")
+    px, py = px.reshape(-1, 1), py.reshape(-1, 1)
+    dx = means2d[order, 0][None, :] - px
+    dy = means2d[order, 1][None, :] - py
+    ca, cb, cc = conics[order].unbind(-1)
+    sigma = 0.5 * (ca * dx * dx + cc * dy * dy) + cb * dx * dy
+    alpha = torch.clamp_max(opacity[order] * torch.exp(-sigma), MAX_ALPHA)
+    skipped = (sigma < 0) | (alpha < ALPHA_THRESHOLD)
+    alpha = torch.where(skipped, torch.zeros_like(alpha), alpha)
+    with torch.no_grad():
+        contributes = torch.cumprod(1 - alpha, dim=1) > TRANSMITTANCE_THRESHOLD
+    alpha = alpha * contributes
+    transmittance = torch.cumprod(1 - alpha, dim=1)
+    before = torch.cat([torch.ones_like(transmittance[:, :1]), transmittance[:, :-1]], dim=1)
+    weights = alpha * before
+    colour = (weights @ colours[order]).reshape(height, width, 3)
+    depth = (weights @ depths[order]).reshape(height, width)
+    final = transmittance[:, -1] if order.numel() else torch.ones(height * width, dtype=dtype)
+    return colour, (1 - final).reshape(height, width), depth, radii

@@ -1,0 +1,110 @@
+"""Degenerate and extreme inputs: no NaN, sensible output, finite gradients."""
+
+import pytest
+import torch
+
+from lumos3d_cli.errors import NonFiniteError
+from lumos3d_cli.io.gaussians import Gaussians
+from lumos3d_cli.render.render import render
+
+from factories import camera_at_origin, random_scene
+
+
+def _render_with_grad(gaussians, cameras, **options):
+    leaves = {name: t.clone().requires_grad_(True) for name, t in gaussians.tensors().items()}
+    output = render(Gaussians(**leaves), cameras, **options)
+    (output.images.sum() + output.alphas.sum() + output.depths.sum()).backward()
+    for name, leaf in leaves.items():
+        assert torch.isfinite(leaf.grad).all(), name
+    for tensor in (output.images, output.alphas, output.depths):
+        assert torch.isfinite(tensor).all()
+    return output, {name: leaf.grad for name, leaf in leaves.items()}
+
+
+def test_no_gaussians():
+    empty = random_scene(0, 0, degree=1, dtype=torch.float32)
+    output, _ = _render_with_grad(empty, camera_at_origin(16, 12), background=(0.1, 0.2, 0.3))
+    assert output.images.shape == (1, 3, 12, 16) and output.radii.shape == (1, 0, 2)
+    torch.testing.assert_close(output.images[0, :, 5, 5], torch.tensor([0.1, 0.2, 0.3]))
+
+
+def test_everything_outside_or_behind():
+    gaussians = random_scene(20, 1, dtype=torch.float32)
+    gaussians.means[:10, 2] = -gaussians.means[:10, 2]  # behind the camera
+    gaussians.means[10:, 0] += 100.0  # far to the right
+    output, grads = _render_with_grad(gaussians, camera_at_origin(16, 12))
+    assert not output.visible.any() and output.alphas.abs().max() == 0
+    assert all(g.abs().max() == 0 for g in grads.values())
+
+
+def test_gaussian_at_the_near_plane():
+    gaussians = random_scene(3, 2, dtype=torch.float32)
+    gaussians.means[:] = torch.tensor([[0.0, 0.0, 0.0101], [0.0, 0.0, 0.0099], [0.0, 0.0, 0.011]])  # near = 0.01
+    gaussians.scales[:] = 0.001
+    output, _ = _render_with_grad(gaussians, camera_at_origin(16, 12))
+    assert output.visible[0].tolist() == [True, False, True]
+
+
+@pytest.mark.parametrize("scale", [0.0, 1e4])
+def test_zero_and_huge_scales(scale):
+    gaussians = random_scene(8, 3, dtype=torch.float32)
+    gaussians.scales[:4] = scale
+    output, _ = _render_with_grad(gaussians, camera_at_origin(32, 24))
+    assert output.visible[0, :4].all()  # a zero scale still draws a dilated dot; a huge one covers the image
+    if scale > 1:
+        assert output.alphas.min() > 0.9
+
+
+def test_zero_and_unnormalised_quaternions():
+    gaussians = random_scene(6, 4, dtype=torch.float32)
+    reference = render(gaussians, camera_at_origin(32, 24))
+    scaled = Gaussians(gaussians.means, gaussians.quats * 37.0, gaussians.scales, gaussians.opacities, gaussians.sh)
+    torch.testing.assert_close(render(scaled, camera_at_origin(32, 24)).images, reference.images, atol=1e-6, rtol=0)
+    gaussians.quats[0] = 0.0  # treated as identity
+    _, grads = _render_with_grad(gaussians, camera_at_origin(32, 24))
+    assert grads["quats"][0].abs().max() == 0
+
+
+def test_opacity_zero_and_one():
+    gaussians = random_scene(6, 5, dtype=torch.float32)
+    gaussians.opacities[:3] = 0.0
+    gaussians.opacities[3:] = 1.0
+    output, _ = _render_with_grad(gaussians, camera_at_origin(32, 24))
+    assert not output.visible[0, :3].any() and output.visible[0, 3:].all()
+    assert output.alphas.max() <= 1.0
+
+
+@pytest.mark.parametrize("size", [(1, 1), (2048, 2048)])
+def test_tiny_and_large_images(size):
+    width, height = size
+    gaussians = random_scene(50, 6, dtype=torch.float32, spread=0.2)
+    output, _ = _render_with_grad(gaussians, camera_at_origin(width, height))
+    assert output.images.shape == (1, 3, height, width)
+    assert output.alphas.max() > 0
+
+
+def test_scene_far_away_renders_like_a_small_near_scene():
+    """Perspective is scale-invariant: scaling the scene about the camera by 1e5 (and its
+    Gaussians with it) must give the same image."""
+    near = random_scene(40, 7, dtype=torch.float32)
+    far = Gaussians(near.means * 1e5, near.quats, near.scales * 1e5, near.opacities, near.sh)
+    cameras = camera_at_origin(48, 32)
+    output_near = render(near, cameras)
+    output_far, _ = _render_with_grad(far, cameras)
+    torch.testing.assert_close(output_far.images, output_near.images, atol=1e-4, rtol=0)
+    torch.testing.assert_close(output_far.depths, output_near.depths * 1e5, rtol=1e-4, atol=0)
+
+
+@pytest.mark.parametrize("name", ["means", "quats", "scales", "opacities", "sh"])
+def test_nan_inputs_are_named(name):
+    gaussians = random_scene(5, 8, dtype=torch.float32)
+    getattr(gaussians, name).view(-1)[[0, 2]] = float("nan")
+    with pytest.raises(NonFiniteError, match=rf"gaussians\.{name}: 2 of \d+ values are NaN or Inf"):
+        render(gaussians, camera_at_origin(16, 12))
+
+
+def test_nan_camera_is_named():
+    cameras = camera_at_origin(16, 12)
+    cameras.extrinsics[0, 0, 3] = float("inf")
+    with pytest.raises(NonFiniteError, match=r"cameras\.extrinsics: 1 of 12"):
+        render(random_scene(3, 9, dtype=torch.float32), cameras)
