@@ -7,7 +7,7 @@ import sys
 import typer
 
 from lumos3d_cli import __version__
-from lumos3d_cli.cli import degrade, info
+from lumos3d_cli.cli import degrade, info, render
 from lumos3d_cli.cli.console import configure_logging, state, stderr_console
 from lumos3d_cli.errors import InputError
 
@@ -16,6 +16,7 @@ EXAMPLES = """
 
   lumos3d degrade photos/ -o dark/ --mode low-light --seed 0   [dim]# synthesise a low-light set[/dim]
   lumos3d degrade photos/ -o bright/ --mode over-exposure     [dim]# synthesise over-exposure[/dim]
+  lumos3d render scene.ply --orbit 60 -o frames/ --video a.mp4 [dim]# fly around a scene[/dim]
   lumos3d info scene.ply                                      [dim]# summarise a Gaussian scene[/dim]
   lumos3d info photos/ --json                                 [dim]# image folder summary as JSON[/dim]
 """
@@ -50,6 +51,7 @@ def global_options(
 
 
 app.command("degrade", epilog=degrade.EXAMPLES, rich_help_panel="Data")(degrade.degrade_command)
+app.command("render", epilog=render.EXAMPLES, rich_help_panel="Scenes")(render.render_command)
 app.command("info", epilog=info.EXAMPLES, rich_help_panel="Inspect")(info.info_command)
 
 

@@ -10,6 +10,12 @@ from collections.abc import Iterator
 from pathlib import Path
 
 
+def _current_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def atomic_path(final: Path | str) -> Iterator[Path]:
     """Yield a temporary path beside `final` (same suffix); rename it onto `final` when the block
@@ -19,6 +25,7 @@ def atomic_path(final: Path | str) -> Iterator[Path]:
     handle, name = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=f".tmp{final.suffix}", dir=final.parent)
     os.close(handle)
     temporary = Path(name)
+    os.chmod(temporary, 0o666 & ~_current_umask())  # mkstemp creates 0600; outputs follow the umask
     try:
         yield temporary
         os.replace(temporary, final)

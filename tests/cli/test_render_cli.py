@@ -1,0 +1,79 @@
+import json
+
+import cv2
+import numpy as np
+import torch
+
+from lumos3d_cli.io.ply import write_ply
+from lumos3d_cli.io.transforms_json import write_transforms_json
+from lumos3d_cli.render.camera_paths import orbit_from_gaussians
+from lumos3d_cli.render.render import render
+
+from factories import random_scene
+
+
+def _scene(tmp_path):
+    gaussians = random_scene(400, 0, degree=1, dtype=torch.float32, spread=0.4)
+    folder = tmp_path / "scene"
+    folder.mkdir()
+    write_ply(folder / "scene.ply", gaussians)
+    return folder / "scene.ply", gaussians
+
+
+def test_render_from_poses_matches_the_library(run_cli, tmp_path):
+    path, gaussians = _scene(tmp_path)
+    cameras = orbit_from_gaussians(gaussians, 3, 48, 32)
+    write_transforms_json(tmp_path / "cameras.json", cameras)
+    result = run_cli("render", path, "--poses", tmp_path / "cameras.json", "-o", tmp_path / "views", "--json",
+                     "--background", "0.2,0.4,0.6")
+    assert result.code == 0, result.err
+    summary = json.loads(result.out)
+    assert summary["frames"] == 3 and (summary["width"], summary["height"]) == (48, 32)
+    assert sorted(p.name for p in (tmp_path / "views").iterdir()) == ["00000.png", "00001.png", "00002.png"]
+    written = cv2.imread(str(tmp_path / "views" / "00001.png"))[..., ::-1] / 255.0
+    from lumos3d_cli.io.ply import read_ply
+
+    expected = render(read_ply(path), cameras[1], background=(0.2, 0.4, 0.6)).images[0].permute(1, 2, 0).numpy()
+    assert np.abs(written - expected).max() <= 0.5 / 255 + 1e-6
+
+
+def test_render_orbit_around_cameras_beside_the_scene_with_video(run_cli, tmp_path):
+    path, gaussians = _scene(tmp_path)
+    write_transforms_json(path.parent / "cameras.json", orbit_from_gaussians(gaussians, 4, 64, 48))
+    result = run_cli("render", path, "--orbit", 6, "-o", tmp_path / "frames", "--video", tmp_path / "orbit.mp4",
+                     "--width", 32, "--json")
+    assert result.code == 0, result.err
+    summary = json.loads(result.out)
+    assert summary["cameras"].startswith("orbit around the cameras") and (summary["width"], summary["height"]) == (32, 24)
+    capture = cv2.VideoCapture(str(tmp_path / "orbit.mp4"))
+    frames = 0
+    while capture.read()[0]:
+        frames += 1
+    assert frames == 6
+
+
+def test_render_orbit_without_cameras(run_cli, tmp_path):
+    path, _ = _scene(tmp_path)
+    result = run_cli("render", path, "--orbit", 2, "-o", tmp_path / "frames", "--quiet")
+    assert result.code == 0, result.err
+    image = cv2.imread(str(tmp_path / "frames" / "00000.png"))
+    assert image.shape == (512, 512, 3) and image.mean() > 1
+
+
+def _expect_error(result, fragment):
+    assert result.code == 2, (result.code, result.err)
+    assert fragment in result.err and "Traceback" not in result.err
+
+
+def test_render_bad_inputs_leave_nothing(run_cli, tmp_path):
+    path, _ = _scene(tmp_path)
+    out = tmp_path / "out"
+    _expect_error(run_cli("render", path, "-o", out), "give exactly one of --poses CAMERAS or --orbit N")
+    _expect_error(run_cli("render", path, "-o", out, "--orbit", 3, "--background", "red"), "--background 'red'")
+    _expect_error(run_cli("render", path, "-o", out, "--orbit", 0), "--orbit 0")
+    _expect_error(run_cli("render", path, "-o", out, "--orbit", 3, "--width", 0), "--width 0")
+    _expect_error(run_cli("render", path, "-o", out, "--orbit", 3, "--video", tmp_path / "a.avi"), "must end in .mp4")
+    _expect_error(run_cli("render", path, "-o", out, "--poses", tmp_path / "missing.json"), "missing.json: no such file")
+    (tmp_path / "bad.ply").write_text("not a ply")
+    _expect_error(run_cli("render", tmp_path / "bad.ply", "-o", out, "--orbit", 2), "not a PLY file")
+    assert not out.exists()
