@@ -83,15 +83,19 @@ def read_colmap_cameras(path: Path) -> dict[int, ColmapCamera]:
     return cameras
 
 
-def read_colmap_model(folder: Path | str) -> Cameras:
-    """Read cameras.txt and images.txt from a sparse model folder; views sorted by image name."""
-    folder = Path(folder)
-    for name in ("cameras.txt", "images.txt"):
-        if not (folder / name).is_file():
-            raise InputError(f"{folder}: no {name}; expected a COLMAP text model (use `colmap model_converter` for .bin)")
-    cameras = read_colmap_cameras(folder / "cameras.txt")
-    lines = _data_lines(folder / "images.txt")
-    views = []
+@dataclass(frozen=True)
+class ColmapImage:
+    image_id: int
+    name: str
+    qvec: tuple[float, float, float, float]
+    tvec: tuple[float, float, float]
+    camera_id: int
+
+
+def read_colmap_images(path: Path) -> list[ColmapImage]:
+    """Image lines of images.txt (each is followed by a POINTS2D line, possibly empty)."""
+    lines = _data_lines(path)
+    images = []
     index = 0
     while index < len(lines):
         words = lines[index].split()
@@ -99,26 +103,39 @@ def read_colmap_model(folder: Path | str) -> Cameras:
             index += 1
             continue
         try:
-            qvec = [float(v) for v in words[1:5]]
-            tvec = [float(v) for v in words[5:8]]
-            camera_id = int(words[8])
+            images.append(ColmapImage(
+                int(words[0]), " ".join(words[9:]), tuple(float(v) for v in words[1:5]),
+                tuple(float(v) for v in words[5:8]), int(words[8]),
+            ))
         except ValueError as error:
-            raise InputError(f"{folder / 'images.txt'}: cannot parse image line {lines[index]!r}") from error
-        if camera_id not in cameras:
-            raise InputError(f"{folder / 'images.txt'}: image {words[9]} refers to unknown camera {camera_id}")
-        views.append((" ".join(words[9:]), qvec, tvec, cameras[camera_id]))
-        index += 2  # the POINTS2D line follows every image line, even when empty
+            raise InputError(f"{path}: cannot parse image line {lines[index]!r}") from error
+        index += 2
+    return images
+
+
+def read_colmap_model(folder: Path | str) -> Cameras:
+    """Read cameras.txt and images.txt from a sparse model folder; views sorted by image name."""
+    folder = Path(folder)
+    for name in ("cameras.txt", "images.txt"):
+        if not (folder / name).is_file():
+            raise InputError(f"{folder}: no {name}; expected a COLMAP text model (use `colmap model_converter` for .bin)")
+    cameras = read_colmap_cameras(folder / "cameras.txt")
+    views = sorted(read_colmap_images(folder / "images.txt"), key=lambda view: natural_sort_key(view.name))
     if not views:
         raise InputError(f"{folder / 'images.txt'}: no registered images")
-    views.sort(key=lambda view: natural_sort_key(view[0]))
-    quats = torch.tensor([v[1] for v in views], dtype=torch.float64)
-    rotation = quaternion_to_matrix(quats)
-    translation = torch.tensor([v[2] for v in views], dtype=torch.float64)
+    for view in views:
+        if view.camera_id not in cameras:
+            raise InputError(f"{folder / 'images.txt'}: image {view.name} refers to unknown camera {view.camera_id}")
+    rotation = quaternion_to_matrix(torch.tensor([v.qvec for v in views], dtype=torch.float64))
+    translation = torch.tensor([v.tvec for v in views], dtype=torch.float64)
     extrinsics = torch.cat([rotation, translation[:, :, None]], dim=2)
     intrinsics = torch.zeros(len(views), 3, 3, dtype=torch.float64)
-    for i, (_, _, _, cam) in enumerate(views):
+    sizes = []
+    for i, view in enumerate(views):
+        cam = cameras[view.camera_id]
         intrinsics[i] = torch.tensor([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1]], dtype=torch.float64)
-    result = Cameras(extrinsics, intrinsics, [(v[3].width, v[3].height) for v in views], [v[0] for v in views])
+        sizes.append((cam.width, cam.height))
+    result = Cameras(extrinsics, intrinsics, sizes, [v.name for v in views])
     result.require_valid(str(folder))
     return result
 
