@@ -7,3 +7,7 @@ class InputError(Exception):
 
 class NonFiniteError(InputError):
     """A tensor or file holds NaN or Inf where finite values are required."""
+
+
+class RunError(Exception):
+    """A long run stopped for a reason its message explains (e.g. training diverged)."""

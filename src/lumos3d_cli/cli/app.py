@@ -9,7 +9,7 @@ import typer
 from lumos3d_cli import __version__
 from lumos3d_cli.cli import degrade, info, render
 from lumos3d_cli.cli.console import configure_logging, state, stderr_console
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import InputError, RunError
 
 EXAMPLES = """
 [bold]Examples[/bold]
@@ -78,6 +78,11 @@ def main(argv: list[str] | None = None) -> int:
             raise
         stderr_console().print(f"[bold red]error:[/bold red] {error}", highlight=False)
         return 2
+    except RunError as error:
+        if debug:
+            raise
+        stderr_console().print(f"[bold red]error:[/bold red] {error}", highlight=False)
+        return 1
     except Exception as error:  # noqa: BLE001 - the CLI's last line of defence
         if debug:
             raise

@@ -139,3 +139,16 @@ def degrade(
     draw_shape = batch_shape[:1] + (1,) if consistent_views else batch_shape
     parameters = sample_parameters(degradation, draw_shape, generator)
     return apply_degradation(images, degradation.mode, parameters, generator), parameters
+
+
+def white_balance_shift(images: torch.Tensor, gain_range: tuple[float, float], generator: torch.Generator) -> torch.Tensor:
+    """Augmentation: multiply the linear red and blue channels of each scene [B, V, 3, H, W] by
+    gains drawn from `gain_range` (green fixed), like a different colour temperature; re-encode.
+    Applied to the normal-light images before degradation, so targets and inputs agree."""
+    low, high = gain_range
+    if low == high == 1.0:
+        return images
+    gains = _uniform((images.shape[0], 3), low, high, generator)
+    gains[:, 1] = 1.0
+    linear = srgb_to_linear(images.clamp(0.0, 1.0)) * gains.to(images)[:, None, :, None, None]
+    return linear_to_srgb(linear.clamp(0.0, 1.0))

@@ -1,0 +1,70 @@
+"""`lumos3d train`: train the teacher or the student from a YAML config (one process, or many
+under torchrun)."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import typer
+
+from lumos3d_cli.cli.console import print_json, progress_bar, say, state
+from lumos3d_cli.train.config import load_config
+from lumos3d_cli.train.distributed import setup_distributed, shutdown_distributed
+from lumos3d_cli.train.trainer import StepReport, Trainer
+
+EXAMPLES = """
+  lumos3d train configs/tiny-cpu.yaml
+  lumos3d train configs/low-light.yaml optim.steps=2000 output=runs/ll
+  lumos3d train configs/low-light.yaml --resume
+  torchrun --nproc_per_node 8 -m lumos3d_cli train configs/vggt-1b-gpu.yaml
+"""
+
+_SHOWN_TERMS = ("total", "mse", "pose", "depth", "distill_pose", "distill_depth", "image", "content", "voxel", "lpips")
+
+
+def _describe(report: StepReport) -> str:
+    shown = [f"{name} {report.terms[name]:.4g}" for name in _SHOWN_TERMS if name in report.terms]
+    return "  ".join(shown) + ("  [skipped]" if report.skipped else "")
+
+
+def train_command(
+    config: Path = typer.Argument(..., help="Training config (YAML)."),
+    overrides: list[str] = typer.Argument(None, help="key=value overrides, e.g. optim.lr=1e-4 data.views=6."),
+    resume: bool = typer.Option(False, "--resume", help="Continue from the output folder's latest checkpoint."),
+    max_steps: int | None = typer.Option(None, "--max-steps", help="Stop (with a checkpoint) after this many steps in total."),
+    json_output: bool = typer.Option(False, "--json", help="Print a JSON summary on stdout (rank 0)."),
+) -> None:
+    """Train a model: the normal-light teacher or the low-light/over-exposure student."""
+    settings = load_config(config, overrides or [])
+    context = setup_distributed(settings.device)
+    if not context.is_main:
+        logging.getLogger("lumos3d_cli").setLevel(logging.ERROR)
+    try:
+        with progress_bar() as progress:
+            task = progress.add_task(f"train ({settings.stage})", total=settings.optim.steps)
+
+            def on_step(report: StepReport) -> None:
+                if context.is_main:
+                    progress.update(task, completed=report.step + 1, description=f"train {_describe(report)}")
+
+            trainer = Trainer(settings, context, on_step if not state.quiet else None)
+            if resume:
+                progress.update(task, completed=0)
+            result = trainer.run(resume=resume, max_steps=max_steps)
+    finally:
+        shutdown_distributed()
+    if not context.is_main:
+        return
+    last = result.history[-1] if result.history else None
+    summary = {
+        "stage": settings.stage, "output": settings.output, "steps_done": result.steps_done,
+        "stopped_early": result.stopped_early, "final_checkpoint": str(result.final_checkpoint) if result.final_checkpoint else None,
+        "last_terms": last.terms if last else {}, "world_size": context.world_size,
+        "seconds_per_step": round(sum(r.seconds for r in result.history) / max(1, len(result.history)), 4),
+    }
+    if json_output:
+        print_json(summary)
+    else:
+        say(f"{settings.stage}: {result.steps_done} steps done; checkpoints in {settings.output}/checkpoints"
+            + (f"; final weights {result.final_checkpoint}" if result.final_checkpoint else ""))

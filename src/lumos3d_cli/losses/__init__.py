@@ -1,0 +1,1 @@
+"""Training losses: reconstruction, distillation, the Lumos loss, ground-truth supervision."""

@@ -1,0 +1,137 @@
+"""VGG-16/19 and AlexNet feature trunks in torchvision's layout (`features.<i>.weight`), so the
+weight files users already have (e.g. `vgg19-dcbb9e9d.pth`) load directly. No weights are
+bundled or downloaded: without a file these networks do not exist."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import torch
+from torch import nn
+
+from lumos3d_cli.errors import InputError
+
+logger = logging.getLogger(__name__)
+
+# Convolution widths per block ('M' = 2x2 max-pool), torchvision's configurations D and E.
+_VGG_BLOCKS = {
+    "vgg16": [[64, 64], [128, 128], [256, 256, 256], [512, 512, 512], [512, 512, 512]],
+    "vgg19": [[64, 64], [128, 128], [256, 256, 256, 256], [512, 512, 512, 512], [512, 512, 512, 512]],
+}
+IMAGENET_MEAN = (0.485, 0.456, 0.406)
+IMAGENET_STD = (0.229, 0.224, 0.225)
+
+
+class FeatureTrunk(nn.Module):
+    """`features` is an nn.Sequential with torchvision's indices; `taps` maps a layer name
+    (e.g. 'relu4_1') to the index of the module whose output it is."""
+
+    def __init__(self, name: str, features: nn.Sequential, taps: dict[str, int]):
+        super().__init__()
+        self.name = name
+        self.features = features
+        self.taps = taps
+
+    def forward(self, images: torch.Tensor, layers: list[str]) -> dict[str, torch.Tensor]:
+        """images [N, 3, H, W] (already normalised as the trunk expects) -> {layer: [N, C, h, w]}."""
+        unknown = [layer for layer in layers if layer not in self.taps]
+        if unknown:
+            raise ValueError(f"{self.name} has no layer(s) {unknown}; choose from {list(self.taps)}")
+        wanted = {self.taps[layer]: layer for layer in layers}
+        outputs = {}
+        x = images
+        for index, module in enumerate(self.features):
+            x = module(x)
+            if index in wanted:
+                outputs[wanted[index]] = x
+                if len(outputs) == len(wanted):
+                    break
+        return outputs
+
+
+def _vgg(name: str) -> FeatureTrunk:
+    modules: list[nn.Module] = []
+    taps: dict[str, int] = {}
+    channels = 3
+    for block, widths in enumerate(_VGG_BLOCKS[name], start=1):
+        for position, width in enumerate(widths, start=1):
+            modules += [nn.Conv2d(channels, width, 3, padding=1), nn.ReLU()]
+            taps[f"relu{block}_{position}"] = len(modules) - 1
+            channels = width
+        modules.append(nn.MaxPool2d(2, 2))
+    return FeatureTrunk(name, nn.Sequential(*modules), taps)
+
+
+def _alexnet() -> FeatureTrunk:
+    features = nn.Sequential(
+        nn.Conv2d(3, 64, 11, stride=4, padding=2), nn.ReLU(), nn.MaxPool2d(3, 2),
+        nn.Conv2d(64, 192, 5, padding=2), nn.ReLU(), nn.MaxPool2d(3, 2),
+        nn.Conv2d(192, 384, 3, padding=1), nn.ReLU(),
+        nn.Conv2d(384, 256, 3, padding=1), nn.ReLU(),
+        nn.Conv2d(256, 256, 3, padding=1), nn.ReLU(), nn.MaxPool2d(3, 2),
+    )
+    return FeatureTrunk("alexnet", features, {"relu1": 1, "relu2": 4, "relu3": 7, "relu4": 9, "relu5": 11})
+
+
+def build_trunk(name: str) -> FeatureTrunk:
+    """An uninitialised trunk of the given architecture ('vgg16', 'vgg19', 'alexnet')."""
+    if name in _VGG_BLOCKS:
+        return _vgg(name)
+    if name == "alexnet":
+        return _alexnet()
+    raise ValueError(f"unknown feature network {name!r}; use vgg16, vgg19 or alexnet")
+
+
+def read_state_dict(path: Path | str) -> dict[str, torch.Tensor]:
+    """A state dict from .safetensors or a torch file (loaded with weights_only=True: no code runs)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: weight file not found")
+    try:
+        if path.suffix == ".safetensors":
+            from safetensors.torch import load_file
+
+            return load_file(str(path))
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as error:  # noqa: BLE001 - any unreadable file is the user's input problem
+        raise InputError(f"{path}: cannot read weights ({type(error).__name__}: {error})") from error
+    if isinstance(state, dict) and "state_dict" in state and isinstance(state["state_dict"], dict):
+        state = state["state_dict"]
+    if not isinstance(state, dict):
+        raise InputError(f"{path}: not a state dict")
+    return state
+
+
+def load_trunk(name: str, path: Path | str) -> FeatureTrunk:
+    """Build the trunk and load `features.*` from a torchvision-layout file (classifier weights,
+    if present, are ignored). Missing, unexpected or mis-shaped keys are an InputError."""
+    trunk = build_trunk(name)
+    state = read_state_dict(path)
+    features = {k: v for k, v in state.items() if k.startswith("features.")}
+    expected = {k: v.shape for k, v in trunk.state_dict().items()}
+    missing = sorted(set(expected) - set(features))
+    unexpected = sorted(set(features) - set(expected))
+    wrong = sorted(k for k in set(expected) & set(features) if tuple(features[k].shape) != tuple(expected[k]))
+    if missing or unexpected or wrong:
+        details = []
+        if missing:
+            details.append(f"missing {missing[:6]}{' ...' if len(missing) > 6 else ''}")
+        if unexpected:
+            details.append(f"unexpected {unexpected[:6]}{' ...' if len(unexpected) > 6 else ''}")
+        if wrong:
+            details.append(f"wrong shape {wrong[:6]}")
+        raise InputError(f"{path}: not a torchvision {name} weight file ({'; '.join(details)})")
+    trunk.load_state_dict({k: v.float() for k, v in features.items()})
+    ignored = len(state) - len(features)
+    if ignored:
+        logger.info("%s: ignored %d non-feature tensors (classifier)", path, ignored)
+    trunk.eval().requires_grad_(False)
+    return trunk
+
+
+def imagenet_normalise(images: torch.Tensor) -> torch.Tensor:
+    """[N, 3, H, W] in [0, 1] -> ImageNet-normalised input of torchvision trunks."""
+    mean = torch.tensor(IMAGENET_MEAN, device=images.device, dtype=images.dtype)[:, None, None]
+    std = torch.tensor(IMAGENET_STD, device=images.device, dtype=images.dtype)[:, None, None]
+    return (images - mean) / std

@@ -1,0 +1,137 @@
+"""Training configuration: YAML files validated into these dataclasses (typed_config), with
+`key=value` overrides; the resolved config is saved next to every checkpoint.
+
+Two stages share one schema: `teacher` trains on normal-light images supervised by the
+dataset's cameras and sparse depth plus rendering; `student` trains on degraded images with
+reconstruction + cross-illumination distillation from a frozen teacher + the Lumos loss.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import yaml
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.train.typed_config import apply_override, from_dict, to_dict
+
+
+@dataclass
+class DataConfig:
+    """Where the scenes are and how samples are drawn (see data/)."""
+
+    root: str = "../shared/data/scenes"
+    layout: Literal["scenes", "dl3dv"] = "scenes"
+    scenes: list[str] = field(default_factory=list)  # empty: every scene found
+    exclude: list[str] = field(default_factory=list)
+    dl3dv_downsample: int = 4
+    views: int = 4  # context views per sample
+    width: int = 224  # network image size (multiples of the patch size)
+    height: int = 168
+    crop_scale: tuple[float, float] = (0.6, 1.0)
+    flip: bool = True
+    samples_per_scene: int = 4  # per epoch
+
+    def __post_init__(self) -> None:
+        if self.views < 1:
+            raise ValueError(f"data.views={self.views} must be at least 1")
+        if not 0 < self.crop_scale[0] <= self.crop_scale[1] <= 1:
+            raise ValueError(f"data.crop_scale={self.crop_scale} must satisfy 0 < low <= high <= 1")
+
+
+@dataclass
+class DegradeConfig:
+    """On-the-fly degradation of the normal-light images (student stage)."""
+
+    mode: Literal["low-light", "over-exposure", "mixed"] = "low-light"
+    exposure: tuple[float, float] | None = None  # None: the mode's documented range
+    gamma: tuple[float, float] | None = None
+    noise: bool = False
+    consistent_views: bool = True
+    white_balance: tuple[float, float] = (1.0, 1.0)  # per-channel linear gain range (colour temperature)
+
+
+@dataclass
+class LossConfig:
+    """Weights of every term (0 turns a term off). Paper defaults."""
+
+    reconstruction: float = 1.0  # MSE of renders vs normal-light images
+    lpips: float = 0.0
+    lpips_network: Literal["vgg", "alex"] = "vgg"
+    lpips_weights: str | None = None  # torchvision-layout trunk weights
+    distill: float = 1.0  # omega_distill
+    distill_pose: float = 1.0
+    distill_depth: float = 1.0
+    lumos: float = 1.0  # omega_lumos
+    content: float = 0.1
+    image: float = 1.0
+    voxel: float = 0.01
+    vgg_weights: str | None = None  # torchvision vgg19 file for the content (and voxel) features
+    voxel_scale_weights: tuple[float, float, float, float, float] = (1.0, 1.0, 1.0, 1.0, 1.0)
+    voxel_size: float = 0.002  # relative to the scene scale, at full resolution
+    supervised_pose: float = 1.0  # teacher stage
+    supervised_depth: float = 1.0  # teacher stage, sparse COLMAP depth
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass
+class OptimConfig:
+    lr: float = 2e-4
+    weight_decay: float = 0.05
+    betas: tuple[float, float] = (0.9, 0.95)
+    warmup_steps: int = 1000
+    steps: int = 30000
+    min_lr_ratio: float = 0.1  # cosine decays to lr * min_lr_ratio
+    grad_clip: float = 1.0
+    backbone_lr_multiplier: float = 1.0  # the aggregator's lr = lr * this
+
+
+@dataclass
+class TrainConfig:
+    stage: Literal["teacher", "student"]
+    output: str
+    model: str = "tiny"  # preset name (random init) or checkpoint to start from
+    teacher: str | None = None  # frozen teacher checkpoint (student stage)
+    data: DataConfig = field(default_factory=DataConfig)
+    degrade: DegradeConfig = field(default_factory=DegradeConfig)
+    loss: LossConfig = field(default_factory=LossConfig)
+    optim: OptimConfig = field(default_factory=OptimConfig)
+    batch_size: int = 1  # scenes per step per process
+    seed: int = 0
+    device: Literal["auto", "cpu", "cuda"] = "auto"
+    precision: Literal["fp32", "bf16"] = "fp32"
+    gradient_checkpointing: bool = False
+    log_every: int = 10
+    checkpoint_every: int = 500
+    validate_every: int = 0  # 0: no validation renders
+    validation_views: int = 2
+    max_nonfinite_steps: int = 5
+    tensorboard: bool = False
+
+    def __post_init__(self) -> None:
+        if self.stage == "student" and not self.teacher:
+            raise ValueError("stage 'student' needs `teacher`: a checkpoint of the normal-light model")
+        if self.batch_size < 1 or self.optim.steps < 1:
+            raise ValueError("batch_size and optim.steps must be at least 1")
+
+
+def load_config(path: Path | str, overrides: list[str] = ()) -> TrainConfig:
+    """Read a YAML config, apply `key=value` overrides, validate."""
+    path = Path(path)
+    try:
+        values = yaml.safe_load(path.read_text()) or {}
+    except OSError as error:
+        raise InputError(f"{path}: cannot read config ({error.strerror})") from error
+    except yaml.YAMLError as error:
+        raise InputError(f"{path}: invalid YAML ({error})") from error
+    if not isinstance(values, dict):
+        raise InputError(f"{path}: a config must be a YAML mapping")
+    for assignment in overrides:
+        apply_override(values, assignment, yaml.safe_load)
+    return from_dict(TrainConfig, values)
+
+
+def config_to_yaml(config: TrainConfig) -> str:
+    return yaml.safe_dump(to_dict(config), sort_keys=False)

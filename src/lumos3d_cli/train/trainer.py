@@ -1,0 +1,378 @@
+"""The training loop shared by both stages, one process or many (DistributedDataParallel).
+
+Everything a step draws at random depends only on (seed, step, rank): the samples, the crop and
+mirror, the degradation. Together with exact checkpoints (weights, optimizer, scheduler) a
+resumed run reproduces the losses of an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import signal
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.nn.parallel import DistributedDataParallel
+
+from lumos3d_cli.data.degradations import Degradation, degrade, white_balance_shift
+from lumos3d_cli.data.multiview_dataset import MultiViewDataset
+from lumos3d_cli.data.scene_records import scan_dl3dv, scan_scene_folders
+from lumos3d_cli.errors import InputError, NonFiniteError, RunError
+from lumos3d_cli.io.atomic import write_bytes_atomic
+from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.checkpoints import save_checkpoint
+from lumos3d_cli.io.image_write import write_image
+from lumos3d_cli.losses.objective import StageBatch, TrainingObjective
+from lumos3d_cli.model.loading import load_model
+from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DOutput, build_model
+from lumos3d_cli.model.presets import PRESETS
+from lumos3d_cli.render.render import render
+from lumos3d_cli.train.checkpointing import (
+    TrainingState,
+    latest_checkpoint,
+    load_training_checkpoint,
+    save_training_checkpoint,
+)
+from lumos3d_cli.train.config import TrainConfig, config_to_yaml
+from lumos3d_cli.train.distributed import DistributedContext, all_reduce_mean, any_rank
+from lumos3d_cli.train.schedule import learning_rate_factor
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class StepReport:
+    """What one optimisation step produced (averaged over ranks)."""
+
+    step: int
+    learning_rate: float
+    terms: dict[str, float]
+    skipped: bool
+    seconds: float
+
+
+@dataclass
+class TrainResult:
+    steps_done: int
+    history: list[StepReport] = field(default_factory=list)
+    final_checkpoint: Path | None = None
+    stopped_early: bool = False
+
+
+def render_views(output: Lumos3DOutput, background: tuple[float, float, float]) -> tuple[torch.Tensor, torch.Tensor]:
+    """Render every scene's fused Gaussians at its predicted cameras, at the network size:
+    images [B, V, 3, H, W], expected depth [B, V, H, W]."""
+    width, height = output.image_size
+    images, depths = [], []
+    for scene, gaussians in enumerate(output.gaussians):
+        views = output.extrinsics.shape[1]
+        cameras = Cameras(output.extrinsics[scene].detach(), output.intrinsics[scene].detach(), [(width, height)] * views)
+        rendered = render(gaussians, cameras, background=background)
+        images.append(rendered.images)
+        depths.append(rendered.depths)
+    return torch.stack(images), torch.stack(depths)
+
+
+class Trainer:
+    def __init__(self, config: TrainConfig, context: DistributedContext, on_step: Callable[[StepReport], None] | None = None):
+        self.config = config
+        self.context = context
+        self.on_step = on_step
+        self.output = Path(config.output)
+        self.device = context.device
+        torch.manual_seed(config.seed)
+        self.dataset = self._dataset()
+        self.model = self._student().to(self.device)
+        self.model.set_gradient_checkpointing(config.gradient_checkpointing)
+        self.teacher = self._teacher()
+        self.objective = TrainingObjective(config.loss, config.stage).to(self.device)
+        self.optimizer = torch.optim.AdamW(
+            self._parameter_groups(), lr=config.optim.lr, betas=config.optim.betas, weight_decay=config.optim.weight_decay
+        )
+        optim = config.optim
+        self.scheduler = torch.optim.lr_scheduler.LambdaLR(
+            self.optimizer, lambda step: learning_rate_factor(step, optim.warmup_steps, optim.steps, optim.min_lr_ratio)
+        )
+        self.network = (
+            DistributedDataParallel(self.model, device_ids=[self.device.index] if self.device.type == "cuda" else None)
+            if context.enabled else self.model
+        )
+        self._stop_requested = False
+        self._tensorboard = self._tensorboard_writer()
+
+    # -- set-up ---------------------------------------------------------------------------------
+
+    def _dataset(self) -> MultiViewDataset:
+        data = self.config.data
+        if data.layout == "dl3dv":
+            records = scan_dl3dv(data.root, data.dl3dv_downsample, data.scenes or None)
+        else:
+            records = scan_scene_folders(data.root, data.scenes or None)
+        records = [r for r in records if r.name not in set(data.exclude)]
+        if not records:
+            raise InputError(f"{data.root}: no training scenes left after data.scenes/data.exclude")
+        try:
+            return MultiViewDataset(
+                records, data.views, (data.width, data.height), data.crop_scale, data.flip,
+                require_poses=self.config.stage == "teacher", seed=self.config.seed, samples_per_scene=data.samples_per_scene,
+            )
+        except ValueError as error:
+            raise InputError(f"{data.root}: {error}") from error
+
+    def _student(self) -> Lumos3D:
+        source = self.config.model
+        if source in PRESETS:
+            model = build_model(source, seed=self.config.seed)
+        else:
+            model = load_model(source)
+        patch = model.preset.patch_size
+        data = self.config.data
+        if data.width % patch or data.height % patch:
+            raise InputError(f"data.width x data.height = {data.width}x{data.height} must be multiples of the patch size {patch}")
+        return model.train()
+
+    def _teacher(self) -> Lumos3D | None:
+        if self.config.stage != "student":
+            return None
+        teacher = load_model(self.config.teacher, device=self.device)
+        return teacher.eval().requires_grad_(False)
+
+    def _parameter_groups(self) -> list[dict]:
+        backbone = [p for n, p in self.model.named_parameters() if n.startswith("aggregator.") and p.requires_grad]
+        heads = [p for n, p in self.model.named_parameters() if not n.startswith("aggregator.") and p.requires_grad]
+        multiplier = self.config.optim.backbone_lr_multiplier
+        return [{"params": backbone, "lr": self.config.optim.lr * multiplier}, {"params": heads, "lr": self.config.optim.lr}]
+
+    def _tensorboard_writer(self):
+        if not (self.config.tensorboard and self.context.is_main):
+            return None
+        try:
+            from torch.utils.tensorboard import SummaryWriter
+        except ImportError as error:
+            raise InputError("tensorboard: true needs the tensorboard package (pip install tensorboard)") from error
+        return SummaryWriter(str(self.output / "tensorboard"))
+
+    # -- data -----------------------------------------------------------------------------------
+
+    def _sample_indices(self, step: int) -> list[int]:
+        """Global sample ids of this rank's share of `step`."""
+        size = self.config.batch_size
+        first = (step * self.context.world_size + self.context.rank) * size
+        return list(range(first, first + size))
+
+    def _load_batch(self, step: int) -> dict[str, torch.Tensor]:
+        samples = []
+        for sample_id in self._sample_indices(step):
+            self.dataset.set_epoch(sample_id // len(self.dataset))
+            samples.append(self.dataset[sample_id % len(self.dataset)])
+        keys = ("images", "intrinsics", "extrinsics", "sparse_depth", "has_poses")
+        return {key: torch.stack([s[key] for s in samples]).to(self.device) for key in keys}
+
+    def _generator(self, step: int) -> torch.Generator:
+        seed = int(np.random.SeedSequence([self.config.seed, step, self.context.rank]).generate_state(1)[0])
+        return torch.Generator().manual_seed(seed)
+
+    def _degradation(self, generator: torch.Generator) -> Degradation:
+        settings = self.config.degrade
+        mode = settings.mode
+        if mode == "mixed":
+            mode = "low-light" if torch.rand((), generator=generator).item() < 0.5 else "over-exposure"
+        base = Degradation.for_mode(mode, noise=settings.noise)
+        return Degradation(mode, settings.exposure or base.exposure_range, settings.gamma or base.gamma_range, base.noise)
+
+    def inputs_and_targets(self, batch: dict[str, torch.Tensor], step: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """(network input, normal-light targets), both [B, V, 3, H, W]."""
+        generator = self._generator(step)
+        targets = white_balance_shift(batch["images"].cpu(), self.config.degrade.white_balance, generator)
+        if self.config.stage == "teacher":
+            return targets.to(self.device), targets.to(self.device)
+        degraded, _ = degrade(targets, self._degradation(generator), generator, self.config.degrade.consistent_views)
+        return degraded.to(self.device), targets.to(self.device)
+
+    # -- one step -------------------------------------------------------------------------------
+
+    def _autocast(self):
+        enabled = self.config.precision == "bf16"
+        return torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=enabled)
+
+    def _losses(self, step: int) -> dict[str, torch.Tensor]:
+        batch = self._load_batch(step)
+        inputs, targets = self.inputs_and_targets(batch, step)
+        with self._autocast():
+            output = self.network(inputs)
+            teacher = None
+            if self.teacher is not None:
+                with torch.no_grad():
+                    teacher = self.teacher(targets)
+        renders, rendered_depth = render_views(output, self.config.loss.background)
+        stage_batch = StageBatch(targets, batch["extrinsics"], batch["intrinsics"], batch["sparse_depth"], batch["has_poses"])
+        return self.objective(output, renders, rendered_depth, stage_batch, teacher)
+
+    def step(self, step: int) -> StepReport:
+        started = time.perf_counter()
+        self.optimizer.zero_grad(set_to_none=True)
+        try:
+            terms = self._losses(step)
+            finite = bool(torch.isfinite(terms["total"]))
+        except NonFiniteError as error:
+            logger.warning("step %d: %s", step, error)
+            terms, finite = {}, False
+        if any_rank(not finite, self.context):
+            finite = False
+        if finite:
+            terms["total"].backward()
+            norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), self.config.optim.grad_clip)
+            finite = not any_rank(not bool(torch.isfinite(norm)), self.context)
+        learning_rate = self.optimizer.param_groups[-1]["lr"]
+        if finite:
+            self.optimizer.step()
+            self.nonfinite_in_a_row = 0
+        else:
+            self.optimizer.zero_grad(set_to_none=True)
+            self.nonfinite_in_a_row += 1
+            self.nonfinite_total += 1
+            if self.nonfinite_in_a_row >= self.config.max_nonfinite_steps:
+                raise RunError(
+                    f"training stopped at step {step}: {self.nonfinite_in_a_row} steps in a row had a non-finite loss "
+                    f"or gradient; lower optim.lr, check the data, or resume from the last checkpoint"
+                )
+        self.scheduler.step()
+        values = {name: float(all_reduce_mean(value.detach().float(), self.context)) for name, value in terms.items()}
+        return StepReport(step, learning_rate, values, not finite, time.perf_counter() - started)
+
+    # -- outputs --------------------------------------------------------------------------------
+
+    def _state(self, step: int) -> TrainingState:
+        return TrainingState(
+            step, self.optimizer.state_dict(), self.scheduler.state_dict(), torch.get_rng_state(),
+            self.nonfinite_in_a_row, self.nonfinite_total,
+        )
+
+    def _provenance(self, step: int) -> dict:
+        return {
+            "stage": self.config.stage, "steps": step, "data": self.config.data.root,
+            "degradation": self.config.degrade.mode if self.config.stage == "student" else "none",
+            "teacher": self.config.teacher, "seed": self.config.seed, "world_size": self.context.world_size,
+        }
+
+    def save(self, step: int) -> Path | None:
+        """Checkpoint after `step` steps (rank 0 writes; every rank waits for it)."""
+        folder = None
+        if self.context.is_main:
+            folder = save_training_checkpoint(
+                self.output, step, self.model, self._state(step), config_to_yaml(self.config), self._provenance(step)
+            )
+            logger.info("saved checkpoint %s", folder)
+        if self.context.enabled:
+            torch.distributed.barrier()
+        return folder
+
+    def resume(self) -> int:
+        """Load the latest checkpoint of this output folder; returns the step to continue at."""
+        folder = latest_checkpoint(self.output)
+        if folder is None:
+            raise InputError(f"{self.output}: no checkpoint to resume from (checkpoints/latest is missing)")
+        state = load_training_checkpoint(folder, self.model)
+        self.optimizer.load_state_dict(state.optimizer)
+        self.scheduler.load_state_dict(state.scheduler)
+        torch.set_rng_state(state.torch_rng)
+        self.nonfinite_in_a_row, self.nonfinite_total = state.nonfinite_in_a_row, state.nonfinite_total
+        logger.info("resumed from %s at step %d", folder, state.step)
+        return state.step
+
+    def _log(self, report: StepReport) -> None:
+        if not self.context.is_main:
+            return
+        line = {"step": report.step, "lr": report.learning_rate, "skipped": report.skipped,
+                "seconds": round(report.seconds, 4), "nonfinite_total": self.nonfinite_total, **report.terms}
+        with open(self.output / "metrics.jsonl", "a") as handle:
+            handle.write(json.dumps(line) + "\n")
+        if self._tensorboard is not None:
+            for name, value in report.terms.items():
+                self._tensorboard.add_scalar(f"loss/{name}", value, report.step)
+            self._tensorboard.add_scalar("lr", report.learning_rate, report.step)
+
+    def _truncate_log(self, step: int) -> None:
+        """Drop log lines of steps at or after `step` (they are about to be redone)."""
+        path = self.output / "metrics.jsonl"
+        if self.context.is_main and path.is_file():
+            kept = [line for line in path.read_text().splitlines() if line and json.loads(line)["step"] < step]
+            write_bytes_atomic(path, ("\n".join(kept) + "\n" if kept else "").encode())
+
+    def validate(self, step: int) -> Path | None:
+        """Render the first validation sample's views: rows of input | render | target."""
+        if not self.context.is_main:
+            return None
+        batch = self._load_batch(0)
+        inputs, targets = self.inputs_and_targets(batch, 0)
+        views = min(self.config.validation_views, inputs.shape[1])
+        self.model.eval()
+        with torch.no_grad(), self._autocast():
+            output = self.model(inputs[:1, :views])
+        renders, _ = render_views(output, self.config.loss.background)
+        self.model.train()
+        rows = [torch.cat([inputs[0, v], renders[0, v].to(inputs), targets[0, v]], dim=-1) for v in range(views)]
+        grid = torch.cat(rows, dim=-2).permute(1, 2, 0).float().cpu().numpy()
+        path = self.output / "validation" / f"step_{step:08d}.png"
+        write_image(path, grid)
+        return path
+
+    # -- the loop -------------------------------------------------------------------------------
+
+    def _request_stop(self, signum, frame) -> None:
+        logger.warning("signal %d: saving a checkpoint and stopping after this step", signum)
+        self._stop_requested = True
+
+    def request_stop(self) -> None:
+        """Ask the loop to checkpoint and stop after the current step (what SIGINT/SIGTERM do)."""
+        self._stop_requested = True
+
+    def run(self, resume: bool = False, max_steps: int | None = None, stop_after: int | None = None) -> TrainResult:
+        """Train to optim.steps (or `max_steps`). `stop_after` behaves like a signal arriving
+        during that step (used to test interruption)."""
+        self.output.mkdir(parents=True, exist_ok=True)
+        self.nonfinite_in_a_row = self.nonfinite_total = 0
+        start = self.resume() if resume else 0
+        self._truncate_log(start)
+        if self.context.is_main:
+            (self.output / "config.yaml").write_text(config_to_yaml(self.config))
+        end = min(self.config.optim.steps, max_steps) if max_steps else self.config.optim.steps
+        previous = {s: signal.signal(s, self._request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+        result = TrainResult(start)
+        try:
+            for step in range(start, end):
+                report = self.step(step)
+                result.history.append(report)
+                result.steps_done = step + 1
+                if report.skipped:
+                    logger.warning("step %d skipped: non-finite loss or gradient (%d in a row)", step, self.nonfinite_in_a_row)
+                if step % self.config.log_every == 0 or step == end - 1:
+                    self._log(report)
+                if self.on_step is not None:
+                    self.on_step(report)
+                if stop_after is not None and step + 1 == stop_after:
+                    self._stop_requested = True
+                if any_rank(self._stop_requested, self.context):
+                    self.save(step + 1)
+                    result.stopped_early = True
+                    return result
+                if self.config.checkpoint_every and (step + 1) % self.config.checkpoint_every == 0:
+                    self.save(step + 1)
+                if self.config.validate_every and (step + 1) % self.config.validate_every == 0:
+                    self.validate(step + 1)
+            if result.steps_done > start:
+                self.save(result.steps_done)
+            if self.context.is_main and result.steps_done >= self.config.optim.steps:
+                result.final_checkpoint = save_checkpoint(self.model, self.output / "final.safetensors", self._provenance(result.steps_done))
+            return result
+        finally:
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
+            if self._tensorboard is not None:
+                self._tensorboard.close()
+
