@@ -1,0 +1,1 @@
+"""The Lumos3D network: VGGT-style backbone, camera/depth/Gaussian heads and voxel fusion."""
