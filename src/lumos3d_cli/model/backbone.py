@@ -90,8 +90,9 @@ class Aggregator(nn.Module):
             dim=1,
         )
         tokens_per_frame, channels = tokens.shape[1], tokens.shape[2]
-        positions = patch_positions(height // self.patch_size, width // self.patch_size, self.patch_start_index, images.device)
-        frame_rope = RotaryTables.build(positions, channels // self.num_heads, self.rope_frequency)
+        grid_h, grid_w = height // self.patch_size, width // self.patch_size
+        positions = patch_positions(grid_h, grid_w, self.patch_start_index, images.device)
+        frame_rope = RotaryTables.build(positions, channels // self.num_heads, self.rope_frequency, max(grid_h, grid_w) + 1)
         global_rope = frame_rope.repeat(frames)
 
         outputs: dict[int, torch.Tensor] = {}

@@ -42,10 +42,11 @@ class RotaryTables:
     sin: torch.Tensor
 
     @staticmethod
-    def build(positions: torch.Tensor, head_dim: int, frequency: float) -> RotaryTables:
-        """Tables for `positions` [N, 2] (row, column) and head dimension `head_dim` (divisible by 4)."""
+    def build(positions: torch.Tensor, head_dim: int, frequency: float, max_position: int) -> RotaryTables:
+        """Tables for `positions` [N, 2] (row, column), all below `max_position` (passed in, not
+        read from the tensor, so that shape-only devices work), and `head_dim` divisible by 4."""
         half = head_dim // 2
-        table = _angle_table(half, int(positions.max()) + 1, frequency, positions.device)
+        table = _angle_table(half, max_position, frequency, positions.device)
         angles = torch.cat((table[positions[:, 0]], table[positions[:, 1]]), dim=-1)  # [N, D]
         return RotaryTables(angles.cos(), angles.sin())
 
