@@ -1,0 +1,238 @@
+"""Speed and memory of the Lumos3D network (random weights): forward time, peak resident memory and
+achieved FLOP rate over 1-32 views at each preset's resolution, in float32 and under bf16
+autocast, against a matrix multiply measured in the same run; plus a training step of `tiny`.
+Writes the "model" section of docs/performance.md.
+
+    python benchmarks/model.py                                  # tiny and vggt-1b, 10-minute budget
+    python benchmarks/model.py --presets tiny --budget-minutes 3
+    python benchmarks/model.py --max-views 4 --cell-limit-seconds 120
+
+Every cell runs in its own process, so its peak RSS is its own. A cell whose estimated time
+(FLOPs / the rate achieved by the previous cell) exceeds the per-cell limit or the remaining
+budget is not run; the table then shows the FLOP-based estimate instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import torch
+from torch.utils.flop_counter import FlopCounterMode
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from report import machine_description, markdown_table, median_seconds, peak_rss_mib, write_section  # noqa: E402
+
+from lumos3d_cli.model.lumos3d import Lumos3D, build_model  # noqa: E402
+from lumos3d_cli.model.presets import get_preset  # noqa: E402
+
+VIEWS = (1, 2, 4, 8, 16, 32)
+PRECISIONS = ("fp32", "bf16")
+MATMUL_SIZE = 2048
+# Rate assumed for the first cell of a series, as a fraction of the matmul rate.
+FIRST_CELL_EFFICIENCY = 0.5
+
+
+def network_flops(preset_name: str, views: int) -> int:
+    """FLOPs of one forward pass of the aggregator and heads for `views` square images at the
+    preset's size, counted on the meta device (shapes only; the voxelizer is not included)."""
+    preset = get_preset(preset_name)
+    size = preset.image_size
+    with torch.device("meta"):
+        model = Lumos3D(preset).requires_grad_(False)
+        images = torch.rand(1, views, 3, size, size)
+    with FlopCounterMode(display=False) as counter:
+        tokens = model.aggregator(images, model.token_layers)
+        model.camera_head(tokens[preset.depth - 1])
+        model.depth_head(tokens, images)
+        model.gaussian_head(tokens, images)
+    return counter.get_total_flops()
+
+
+def matmul_gflops(dtype: torch.dtype) -> float:
+    """GFLOP/s of a square matrix multiply of MATMUL_SIZE in `dtype`."""
+    a, b = torch.randn(MATMUL_SIZE, MATMUL_SIZE, dtype=dtype), torch.randn(MATMUL_SIZE, MATMUL_SIZE, dtype=dtype)
+    return 2 * MATMUL_SIZE**3 / median_seconds(lambda: a @ b, repeats=5, warmup=2) / 1e9
+
+
+def run_cell(preset_name: str, views: int, precision: str, repeats: int) -> dict:
+    """(In a child process.) Time the full forward pass, voxelizer included."""
+    start = time.perf_counter()
+    model = build_model(preset_name, seed=0).eval()
+    build_seconds = time.perf_counter() - start
+    size = model.preset.image_size
+    images = torch.rand(1, views, 3, size, size, generator=torch.Generator().manual_seed(0))
+
+    def forward() -> None:
+        with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16, enabled=precision == "bf16"):
+            model(images)
+
+    seconds = median_seconds(forward, repeats=repeats, warmup=1 if repeats > 1 else 0)
+    return {"seconds": seconds, "peak_rss_mib": peak_rss_mib(), "build_seconds": build_seconds}
+
+
+def training_step(views: int, repeats: int) -> dict:
+    """(In a child process.) One optimisation step of `tiny` at its resolution: forward, a loss
+    on every output (a stand-in for the rendering losses; rendering is not timed here),
+    backward and AdamW."""
+    model = build_model("tiny", seed=0).train()
+    optimizer = torch.optim.AdamW(model.parameters(), lr=2e-4)
+    size = model.preset.image_size
+    images = torch.rand(1, views, 3, size, size, generator=torch.Generator().manual_seed(0))
+
+    def step() -> None:
+        output = model(images)
+        loss = sum(e.square().mean() for e in output.pose_enc_list) + output.depth.mean()
+        loss = loss + sum(t.square().mean() for t in output.gaussians[0].tensors().values())
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+
+    return {"seconds": median_seconds(step, repeats=repeats, warmup=1), "peak_rss_mib": peak_rss_mib()}
+
+
+def _child(arguments: list[str], timeout: float) -> dict:
+    command = [sys.executable, __file__, *arguments]
+    try:
+        done = subprocess.run(command, capture_output=True, text=True, timeout=timeout, check=False)
+    except subprocess.TimeoutExpired:
+        return {"skipped": f"timed out after {timeout:.0f} s"}
+    if done.returncode != 0:
+        last = (done.stderr.strip().splitlines() or ["no output"])[-1]
+        return {"skipped": f"failed: {last}"}
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _fmt_seconds(value: float) -> str:
+    return f"{value:.3g}"
+
+
+def measure(args: argparse.Namespace) -> dict:
+    deadline = time.monotonic() + 60 * args.budget_minutes
+    rates = {precision: matmul_gflops(torch.float32 if precision == "fp32" else torch.bfloat16) for precision in PRECISIONS}
+    results: dict = {"matmul_gflops": rates, "presets": {}, "training": {}}
+    for preset_name in args.presets:
+        preset = get_preset(preset_name)
+        flops = {views: network_flops(preset_name, views) for views in VIEWS}
+        with torch.device("meta"):
+            parameters = sum(p.numel() for p in Lumos3D(preset).parameters())
+        cells = {}
+        for precision in PRECISIONS:
+            rate = FIRST_CELL_EFFICIENCY * rates[precision]  # GFLOP/s expected for the next cell
+            for views in VIEWS:
+                estimate = flops[views] / (rate * 1e9)
+                allowed = min(args.cell_limit_seconds, deadline - time.monotonic())
+                if views > args.max_views:
+                    cell = {"skipped": f"above --max-views {args.max_views}"}
+                elif estimate > allowed:
+                    cell = {"skipped": f"estimate above the {'per-cell limit' if allowed == args.cell_limit_seconds else 'remaining budget'}"}
+                else:
+                    # the warm-up and repeated runs only where they fit; else a single cold run
+                    repeats = args.repeats if estimate * (1 + args.repeats) <= allowed else 1
+                    cell = _child(
+                        ["--cell", preset_name, str(views), precision, str(repeats)],
+                        timeout=max(120.0, 3 * estimate * (1 + repeats) + 120),
+                    )
+                    cell["runs"] = repeats
+                if "seconds" in cell:
+                    rate = flops[views] / cell["seconds"] / 1e9
+                    cell["gflops_per_s"] = rate
+                cell["estimated_seconds"] = estimate
+                cell["flops"] = flops[views]
+                cells[f"{precision}/{views}"] = cell
+                print(f"{preset_name} {precision} {views} views: {cell}", file=sys.stderr, flush=True)
+        results["presets"][preset_name] = {"parameters": parameters, "image_size": preset.image_size, "cells": cells}
+    if "tiny" in args.presets:
+        for views in (2, 4):
+            results["training"][views] = _child(["--train", str(views), str(args.repeats)], timeout=600)
+    return results
+
+
+def render(results: dict, args: argparse.Namespace) -> str:
+    rates = results["matmul_gflops"]
+    lines = [
+        "## Model forward pass (`benchmarks/model.py`)",
+        "",
+        f"Machine: {machine_description()}.",
+        "",
+        f"Reference in the same run: {MATMUL_SIZE}x{MATMUL_SIZE} matmul at {rates['fp32']:.1f} GFLOP/s (fp32) and "
+        f"{rates['bf16']:.1f} GFLOP/s (bf16). Random weights, square images at each preset's resolution, batch 1, "
+        f"median of {args.repeats} timed runs after one warm-up, or a single cold run where only one fits the limits. "
+        "Time covers the whole forward pass (backbone, heads, unprojection, voxel fusion, pruning); GFLOP/s counts the "
+        "FLOPs of the backbone and heads (counted on the meta device; the voxelizer's few FLOPs are left out) over that "
+        "time, and the percentage compares it with the matmul. Peak RSS is that of a fresh process per cell (weights "
+        "included). Cells marked *not measured* show the estimate FLOPs / rate of the previous cell, and why.",
+    ]
+    for preset_name, entry in results["presets"].items():
+        lines += ["", f"### `{preset_name}` ({entry['parameters'] / 1e6:.1f} M parameters, {entry['image_size']} px)", ""]
+        header = ["views", "TFLOP"]
+        for precision in PRECISIONS:
+            header += [f"{precision} time (s)", f"{precision} peak RSS (MiB)", f"{precision} GFLOP/s (% matmul)"]
+        rows = []
+        for views in VIEWS:
+            row: list[object] = [views, f"{entry['cells'][f'fp32/{views}']['flops'] / 1e12:.3g}"]
+            for precision in PRECISIONS:
+                cell = entry["cells"][f"{precision}/{views}"]
+                if "seconds" in cell:
+                    single = " (1 cold run)" if cell["runs"] == 1 and args.repeats > 1 else ""
+                    row += [
+                        _fmt_seconds(cell["seconds"]) + single, f"{cell['peak_rss_mib']:.0f}",
+                        f"{cell['gflops_per_s']:.1f} ({100 * cell['gflops_per_s'] / rates[precision]:.0f} %)",
+                    ]
+                else:
+                    row += [f"not measured ({cell['skipped']}); est. {_fmt_seconds(cell['estimated_seconds'])}", "-", "-"]
+            rows.append(row)
+        lines.append(markdown_table(header, rows))
+    if results["training"]:
+        lines += [
+            "",
+            f"### `tiny` training step ({get_preset('tiny').image_size} px)",
+            "",
+            "Forward, a loss on every output (stand-in for the rendering losses, whose rasterizer time is not "
+            "included), backward and AdamW, fp32.",
+            "",
+        ]
+        rows = []
+        for views, cell in results["training"].items():
+            if "seconds" in cell:
+                rows.append([views, _fmt_seconds(cell["seconds"]), f"{cell['peak_rss_mib']:.0f}"])
+            else:
+                rows.append([views, cell["skipped"], "-"])
+        lines.append(markdown_table(["views", "step time (s)", "peak RSS (MiB)"], rows))
+    return "\n".join(lines)
+
+
+def main() -> int:
+    if len(sys.argv) > 1 and sys.argv[1] == "--cell":
+        preset_name, views, precision, repeats = sys.argv[2], int(sys.argv[3]), sys.argv[4], int(sys.argv[5])
+        print(json.dumps(run_cell(preset_name, views, precision, repeats)))
+        return 0
+    if len(sys.argv) > 1 and sys.argv[1] == "--train":
+        print(json.dumps(training_step(int(sys.argv[2]), int(sys.argv[3]))))
+        return 0
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--presets", nargs="+", default=["tiny", "vggt-1b"])
+    parser.add_argument("--budget-minutes", type=float, default=10.0, help="total time for the forward cells")
+    parser.add_argument("--cell-limit-seconds", type=float, default=300.0, help="skip cells estimated to take longer")
+    parser.add_argument("--max-views", type=int, default=32)
+    parser.add_argument("--repeats", type=int, default=3, help="timed runs per cell (after one warm-up)")
+    parser.add_argument("--json", type=Path, help="also write the raw results here")
+    parser.add_argument("--no-write", action="store_true", help="print the section instead of writing docs/performance.md")
+    args = parser.parse_args()
+    results = measure(args)
+    section = render(results, args)
+    if args.json:
+        args.json.write_text(json.dumps(results, indent=2) + "\n")
+    if args.no_write:
+        print(section)
+    else:
+        write_section("model", section)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,286 @@
+"""Model checkpoints: our format, and the official VGGT-1B and AnySplat layouts.
+
+Our format is one `.safetensors` file whose header metadata holds a JSON config under the key
+"lumos3d": {"format_version", "preset": {...every ModelPreset field...}, "provenance": {...}}.
+The tensors use the module names of `model.lumos3d.Lumos3D`.
+
+Foreign layouts are recognised by their key names:
+  VGGT     (`model.pt` state dict or `model.safetensors`): aggregator.*, camera_head.*,
+           depth_head.*; point_head.* and track_head.* are ignored; there is no Gaussian head.
+  AnySplat (`model.safetensors`): encoder.aggregator.*, encoder.camera_head.*,
+           encoder.depth_head.*, encoder.gaussian_param_head.* (-> gaussian_head.*).
+Nothing is ever unpickled beyond plain tensors (`torch.load(weights_only=True)`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import pickle
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import torch
+from safetensors import SafetensorError, safe_open
+from safetensors.torch import load_file, save_file
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.atomic import atomic_path
+from lumos3d_cli.model.presets import ModelPreset, get_preset
+
+if TYPE_CHECKING:
+    from lumos3d_cli.model.lumos3d import Lumos3D
+
+logger = logging.getLogger(__name__)
+
+FORMAT_LUMOS3D = "lumos3d"
+FORMAT_VGGT = "vggt"
+FORMAT_ANYSPLAT = "anysplat"
+METADATA_KEY = "lumos3d"
+FORMAT_VERSION = 1
+OFFICIAL_PRESET = "vggt-1b"
+TORCH_SUFFIXES = (".pt", ".pth", ".bin")
+# Files looked for, in order, when a folder (e.g. a Hugging Face snapshot) is given.
+FOLDER_FILES = ("model.safetensors", "model.pt", "pytorch_model.bin")
+_SHOWN_KEYS = 10
+_GAUSSIAN_OUTPUT = "gaussian_head.scratch.output_conv2.2.weight"
+
+
+@dataclass
+class Checkpoint:
+    """A checkpoint read into memory, renamed to our module names.
+
+    tensors: float32 tensors keyed by our parameter names; ignored: file keys dropped on purpose
+    (VGGT's point and track heads); fresh_modules: our top-level modules the file does not
+    provide (VGGT has no Gaussian head), to be initialised randomly.
+    """
+
+    path: Path
+    format: str
+    preset: ModelPreset
+    tensors: dict[str, torch.Tensor]
+    provenance: dict = field(default_factory=dict)
+    ignored: list[str] = field(default_factory=list)
+    fresh_modules: list[str] = field(default_factory=list)
+
+
+def bundled_weights_path(preset_name: str) -> Path:
+    """Where the packaged weights of a preset live: lumos3d_cli/weights/<preset>.safetensors."""
+    return Path(__file__).resolve().parents[1] / "weights" / f"{preset_name}.safetensors"
+
+
+def _listing(names: list[str]) -> str:
+    shown = ", ".join(names[:_SHOWN_KEYS])
+    return shown + (f" ... and {len(names) - _SHOWN_KEYS} more" if len(names) > _SHOWN_KEYS else "")
+
+
+def check_tensors(expected: dict[str, tuple[int, ...]], tensors: dict[str, torch.Tensor], source: str) -> None:
+    """Strict check: the same key set and every shape equal; else InputError listing the
+    missing, unexpected and mis-shaped keys (at most 10 of each)."""
+    missing = sorted(set(expected) - set(tensors))
+    unexpected = sorted(set(tensors) - set(expected))
+    mismatched = sorted(
+        f"{key} (file {tuple(tensors[key].shape)}, model {tuple(expected[key])})"
+        for key in set(expected) & set(tensors)
+        if tuple(tensors[key].shape) != tuple(expected[key])
+    )
+    problems = []
+    if missing:
+        problems.append(f"{len(missing)} missing keys: {_listing(missing)}")
+    if unexpected:
+        problems.append(f"{len(unexpected)} unexpected keys: {_listing(unexpected)}")
+    if mismatched:
+        problems.append(f"{len(mismatched)} keys of the wrong shape: {_listing(mismatched)}")
+    if problems:
+        raise InputError(f"{source}: does not fit the model; " + "; ".join(problems))
+
+
+def save_checkpoint(model: Lumos3D, path: Path | str, provenance: dict | None = None) -> Path:
+    """Write `model` in our format (atomically). `provenance` (JSON-serialisable) records how the
+    weights were made, e.g. training data, steps, git commit."""
+    path = Path(path)
+    if path.suffix != ".safetensors":
+        raise InputError(f"{path}: checkpoints are written as .safetensors files")
+    config = {"format_version": FORMAT_VERSION, "preset": model.preset.to_dict(), "provenance": provenance or {}}
+    tensors = {name: t.detach().to("cpu", torch.float32).contiguous() for name, t in model.state_dict().items()}
+    with atomic_path(path) as temporary:
+        save_file(tensors, str(temporary), metadata={METADATA_KEY: json.dumps(config)})
+    return path
+
+
+def _resolve_file(path: Path) -> Path:
+    if not path.exists():
+        raise InputError(f"{path}: checkpoint not found")
+    if path.is_dir():
+        for name in FOLDER_FILES:
+            if (path / name).is_file():
+                return path / name
+        raise InputError(f"{path}: folder holds none of {', '.join(FOLDER_FILES)}")
+    if path.suffix != ".safetensors" and path.suffix not in TORCH_SUFFIXES:
+        raise InputError(f"{path}: not a checkpoint; expected .safetensors or a torch state dict ({', '.join(TORCH_SUFFIXES)})")
+    return path
+
+
+def _load_torch_state_dict(path: Path) -> dict[str, torch.Tensor]:
+    try:
+        try:
+            loaded = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
+        except RuntimeError:
+            # Files saved with the legacy (non-zip) serialisation cannot be memory-mapped.
+            loaded = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as error:
+        raise InputError(f"{path}: holds objects other than tensors; refusing to unpickle them ({error})") from None
+    except (RuntimeError, EOFError, OSError) as error:
+        raise InputError(f"{path}: cannot read as a torch checkpoint ({error})") from None
+    if isinstance(loaded, dict) and isinstance(loaded.get("model"), dict):
+        loaded = loaded["model"]  # training checkpoints wrap the state dict
+    if not isinstance(loaded, dict) or not all(isinstance(v, torch.Tensor) for v in loaded.values()):
+        raise InputError(f"{path}: is not a state dict (a mapping of names to tensors)")
+    return loaded
+
+
+def _read_metadata(path: Path) -> dict[str, str]:
+    try:
+        with safe_open(str(path), framework="pt") as handle:
+            return handle.metadata() or {}
+    except (SafetensorError, OSError) as error:
+        raise InputError(f"{path}: cannot read as safetensors ({error})") from None
+
+
+def _detect_format(path: Path, keys: list[str], metadata: dict[str, str]) -> str:
+    if METADATA_KEY in metadata:
+        return FORMAT_LUMOS3D
+    if any(k.startswith("encoder.aggregator.") for k in keys):
+        return FORMAT_ANYSPLAT
+    if any(k.startswith("aggregator.") for k in keys) and any(k.startswith(("camera_head.", "depth_head.")) for k in keys):
+        return FORMAT_VGGT
+    raise InputError(
+        f"{path}: not a Lumos3D, VGGT or AnySplat checkpoint (no lumos3d metadata, no aggregator.* keys; "
+        f"first keys: {_listing(sorted(keys))})"
+    )
+
+
+def _our_name(file_format: str, key: str) -> str | None:
+    """Our parameter name for a file key; None for keys dropped on purpose."""
+    if file_format == FORMAT_VGGT and key.startswith(("point_head.", "track_head.")):
+        return None
+    if file_format == FORMAT_ANYSPLAT:
+        if key.startswith("encoder.distill_"):
+            return None  # AnySplat's frozen teacher copy, if a training checkpoint holds it
+        if key.startswith("encoder.gaussian_param_head."):
+            return "gaussian_head." + key.removeprefix("encoder.gaussian_param_head.")
+        return key.removeprefix("encoder.")
+    return key
+
+
+def _our_config(path: Path, metadata: dict[str, str]) -> tuple[ModelPreset, dict]:
+    try:
+        config = json.loads(metadata[METADATA_KEY])
+        if config.get("format_version") != FORMAT_VERSION:
+            raise InputError(f"{path}: checkpoint format version {config.get('format_version')} is not supported (expected {FORMAT_VERSION})")
+        return ModelPreset.from_dict(config["preset"]), config.get("provenance", {})
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as error:
+        raise InputError(f"{path}: the checkpoint's lumos3d config is damaged ({error})") from None
+
+
+def _anysplat_preset(path: Path, base: ModelPreset, shapes: dict[str, tuple[int, ...]]) -> ModelPreset:
+    """`base` with the SH degree and head width read off the Gaussian head's output conv."""
+    if _GAUSSIAN_OUTPUT not in shapes:
+        raise InputError(f"{path}: AnySplat checkpoint without encoder.gaussian_param_head.scratch.output_conv2.2.weight")
+    channels, hidden = shapes[_GAUSSIAN_OUTPUT][:2]
+    coefficients = (channels - 9) / 3
+    degree = round(coefficients**0.5) - 1 if coefficients > 0 else -1
+    if degree < 0 or degree > 4 or (degree + 1) ** 2 != coefficients:
+        raise InputError(f"{path}: Gaussian head has {channels} output channels, which fits no SH degree 0..4")
+    return dataclasses.replace(base, sh_degree=degree, gaussian_head_hidden=hidden)
+
+
+def _interpret(path: Path, keys_shapes: dict[str, tuple[int, ...]], metadata: dict[str, str], preset: ModelPreset | None):
+    """-> (format, preset, provenance, {file key: our name}, ignored keys, fresh modules)."""
+    file_format = _detect_format(path, list(keys_shapes), metadata)
+    names = {key: _our_name(file_format, key) for key in keys_shapes}
+    ignored = sorted(key for key, name in names.items() if name is None)
+    names = {key: name for key, name in names.items() if name is not None}
+    fresh: list[str] = []
+    if file_format == FORMAT_LUMOS3D:
+        if preset is not None:
+            raise InputError(f"{path}: is a Lumos3D checkpoint and carries its own preset; do not pass one")
+        preset, provenance = _our_config(path, metadata)
+        return file_format, preset, provenance, names, ignored, fresh
+    preset = preset or get_preset(OFFICIAL_PRESET)
+    provenance = {"source": f"{'VGGT' if file_format == FORMAT_VGGT else 'AnySplat'} checkpoint", "file": path.name}
+    if file_format == FORMAT_ANYSPLAT:
+        preset = _anysplat_preset(path, preset, {names[k]: s for k, s in keys_shapes.items() if k in names})
+    else:
+        fresh = ["gaussian_head"]
+    return file_format, preset, provenance, names, ignored, fresh
+
+
+def read_checkpoint(path: Path | str, preset: ModelPreset | None = None) -> Checkpoint:
+    """Read any supported checkpoint (file, or folder holding one). `preset` gives the network
+    size for foreign layouts (default vggt-1b); our files carry their own."""
+    path = _resolve_file(Path(path))
+    if path.suffix == ".safetensors":
+        metadata = _read_metadata(path)
+        try:
+            raw = load_file(str(path))
+        except (SafetensorError, OSError) as error:
+            raise InputError(f"{path}: cannot read as safetensors ({error})") from None
+    else:
+        metadata, raw = {}, _load_torch_state_dict(path)
+    file_format, preset, provenance, names, ignored, fresh = _interpret(
+        path, {k: tuple(v.shape) for k, v in raw.items()}, metadata, preset
+    )
+    tensors = {}
+    for key, name in names.items():
+        tensor = raw[key]
+        tensors[name] = tensor.float() if tensor.is_floating_point() and tensor.dtype != torch.float32 else tensor
+    if ignored:
+        logger.info("%s: ignored %d tensors not used by Lumos3D (%s)", path.name, len(ignored), ", ".join(sorted({k.split(".")[0] for k in ignored})))
+    return Checkpoint(path, file_format, preset, tensors, provenance, ignored, fresh)
+
+
+def _header(path: Path) -> tuple[dict[str, tuple[int, ...]], Counter, dict[str, str]]:
+    """(shapes, dtype counts, metadata) without loading tensor data where the format allows."""
+    if path.suffix == ".safetensors":
+        metadata = _read_metadata(path)
+        shapes, dtypes = {}, Counter()
+        with safe_open(str(path), framework="pt") as handle:
+            for key in handle.keys():
+                piece = handle.get_slice(key)
+                shapes[key] = tuple(piece.get_shape())
+                dtypes[piece.get_dtype()] += 1
+        return shapes, dtypes, metadata
+    state = _load_torch_state_dict(path)
+    return {k: tuple(v.shape) for k, v in state.items()}, Counter(str(v.dtype).removeprefix("torch.") for v in state.values()), {}
+
+
+def summarize_checkpoint(path: Path | str) -> dict:
+    """Format, preset, parameter count, tensor names by module, dtypes and provenance (for
+    `lumos3d info`); reads only the header of safetensors files."""
+    path = _resolve_file(Path(path))
+    shapes, dtypes, metadata = _header(path)
+    file_format, preset, provenance, names, ignored, fresh = _interpret(path, shapes, metadata, None)
+    used = {name: shapes[key] for key, name in names.items()}
+    modules = Counter(name.split(".")[0] for name in used)
+    parameters = sum(int(torch.Size(shape).numel()) for shape in used.values())
+    return {
+        "kind": "checkpoint",
+        "path": str(path),
+        "file_bytes": path.stat().st_size,
+        "format": file_format,
+        "preset": preset.name,
+        "sh_degree": preset.sh_degree,
+        "voxel_size": preset.voxel_size,
+        "image_size": preset.image_size,
+        "parameters": parameters,
+        "tensors": len(used),
+        "modules": dict(sorted(modules.items())),
+        "dtypes": dict(sorted(dtypes.items())),
+        "ignored_tensors": len(ignored),
+        "fresh_modules": fresh,
+        "provenance": provenance,
+    }

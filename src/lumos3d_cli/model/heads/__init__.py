@@ -1,0 +1,1 @@
+"""Prediction heads on the aggregator tokens: cameras, depth and per-pixel Gaussians."""

@@ -1,0 +1,1 @@
+"""Transformer building blocks: attention, RoPE, MLP, LayerScale, blocks, patch embeddings."""

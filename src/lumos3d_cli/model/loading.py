@@ -1,0 +1,68 @@
+"""`load_model`: a trained network from a checkpoint file or a preset's bundled weights.
+
+Inference never silently runs on random weights: a preset name without bundled weights is an
+error naming the missing file. Random weights come only from `build_model`, which says so.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import torch
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.checkpoints import FORMAT_VGGT, Checkpoint, bundled_weights_path, check_tensors, read_checkpoint
+from lumos3d_cli.model.heads.gaussian import GaussianHead
+from lumos3d_cli.model.lumos3d import Lumos3D
+from lumos3d_cli.model.presets import PRESETS, ModelPreset
+
+logger = logging.getLogger(__name__)
+
+
+def _checkpoint_for(source: str | Path, preset: ModelPreset | None) -> Checkpoint:
+    path = Path(source)
+    if path.exists():
+        return read_checkpoint(path, preset)
+    if isinstance(source, str) and source in PRESETS:
+        bundled = bundled_weights_path(source)
+        if not bundled.is_file():
+            raise InputError(
+                f"preset '{source}' has no trained weights: {bundled} is missing. Pass a checkpoint file "
+                "(ours, VGGT's model.pt/model.safetensors or AnySplat's model.safetensors), or train one; "
+                "build_model() gives random weights for experiments"
+            )
+        return read_checkpoint(bundled)
+    raise InputError(f"'{source}' is neither a checkpoint file nor a preset name ({', '.join(PRESETS)})")
+
+
+def model_from_checkpoint(checkpoint: Checkpoint) -> Lumos3D:
+    """Build the checkpoint's network and load its tensors (strict key and shape check).
+
+    The network is first built on the meta device, so no memory or time goes into a random
+    initialisation the checkpoint would overwrite; modules the file lacks are built for real.
+    """
+    with torch.device("meta"):
+        model = Lumos3D(checkpoint.preset)
+    for name in checkpoint.fresh_modules:
+        setattr(model, name, GaussianHead(checkpoint.preset))
+    fresh = tuple(f"{name}." for name in checkpoint.fresh_modules)
+    expected = {key: tuple(t.shape) for key, t in model.state_dict().items() if not key.startswith(fresh)}
+    check_tensors(expected, checkpoint.tensors, str(checkpoint.path))
+    model.load_state_dict(checkpoint.tensors, strict=False, assign=True)
+    model.provenance = {**checkpoint.provenance, "format": checkpoint.format, "path": str(checkpoint.path)}
+    if checkpoint.fresh_modules:
+        logger.warning(
+            "%s: %s checkpoint has no %s; it is freshly initialised (random) and needs training before its output means anything",
+            checkpoint.path.name, "VGGT" if checkpoint.format == FORMAT_VGGT else checkpoint.format, ", ".join(checkpoint.fresh_modules),
+        )
+    return model
+
+
+def load_model(source: str | Path, device: str | torch.device = "cpu", preset: ModelPreset | None = None) -> Lumos3D:
+    """A network in eval mode on `device`, from a checkpoint path (file or folder) or a preset name
+    (its bundled weights). `preset` sets the size of a foreign (VGGT/AnySplat) checkpoint; it
+    defaults to vggt-1b and must not be given for our own files, which carry theirs."""
+    model = model_from_checkpoint(_checkpoint_for(source, preset))
+    logger.info("loaded preset '%s' from %s", model.preset.name, model.provenance.get("path"))
+    return model.to(device).eval()

@@ -1,0 +1,180 @@
+"""The assembled network: images -> cameras, depth, per-pixel Gaussians -> fused scene Gaussians."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import torch
+from torch import nn
+
+from lumos3d_cli.checks import require_finite
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.gaussians import Gaussians
+from lumos3d_cli.model.backbone import Aggregator
+from lumos3d_cli.model.gaussian_adapter import activate_gaussians, split_confidence
+from lumos3d_cli.model.geometry import scene_scale, unproject_depth
+from lumos3d_cli.model.heads.camera import CameraHead
+from lumos3d_cli.model.heads.dpt import DepthHead
+from lumos3d_cli.model.heads.gaussian import GaussianHead
+from lumos3d_cli.model.pose_encoding import decode_pose
+from lumos3d_cli.model.preprocess import PreparedImages, prepare_images
+from lumos3d_cli.model.presets import ModelPreset, get_preset
+from lumos3d_cli.model.voxelize import voxelize
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class GaussianCounts:
+    """pixels: per-pixel Gaussians (V*H*W); voxels: after fusion; pruned: voxels dropped for
+    opacity below the threshold; kept = voxels - pruned."""
+
+    pixels: int
+    voxels: int
+    pruned: int
+
+    @property
+    def kept(self) -> int:
+        return self.voxels - self.pruned
+
+
+@dataclass
+class Lumos3DOutput:
+    """Everything one forward pass predicts for B scenes of V views of H x W pixels.
+
+    pose_enc [B, V, 9] (last refinement) and pose_enc_list (every refinement);
+    extrinsics [B, V, 3, 4] world->camera (the first view is approximately the world frame);
+    intrinsics [B, V, 3, 3] in pixels of the H x W network image; depth, depth_conf [B, V, H, W];
+    world_points [B, V, H, W, 3] (depth unprojected at pixel centres); pixel_confidence
+    [B, V, H, W] fusion logits; pixel_gaussians and gaussians (fused, pruned): one Gaussians per
+    scene, pixel rows in (view, row, column) order; scene_scale [B] median depth, the unit of
+    voxel and Gaussian sizes; counts per scene.
+    """
+
+    pose_enc: torch.Tensor
+    pose_enc_list: list[torch.Tensor]
+    extrinsics: torch.Tensor
+    intrinsics: torch.Tensor
+    depth: torch.Tensor
+    depth_conf: torch.Tensor
+    world_points: torch.Tensor
+    pixel_confidence: torch.Tensor
+    pixel_gaussians: list[Gaussians]
+    gaussians: list[Gaussians]
+    scene_scale: torch.Tensor
+    counts: list[GaussianCounts] = field(default_factory=list)
+
+    @property
+    def image_size(self) -> tuple[int, int]:
+        """(width, height) of the network images."""
+        return int(self.depth.shape[-1]), int(self.depth.shape[-2])
+
+    def cameras(self, scene: int = 0) -> Cameras:
+        """The predicted cameras of one scene as the project's camera type (network pixels)."""
+        views = self.extrinsics.shape[1]
+        return Cameras(self.extrinsics[scene].detach(), self.intrinsics[scene].detach(), [self.image_size] * views)
+
+
+class Lumos3D(nn.Module):
+    """The network of the paper. Submodule names equal VGGT's (`aggregator`, `camera_head`,
+    `depth_head`) plus `gaussian_head` (AnySplat's `gaussian_param_head`)."""
+
+    def __init__(self, preset: ModelPreset):
+        super().__init__()
+        self.preset = preset
+        self.aggregator = Aggregator(preset)
+        self.camera_head = CameraHead(preset)
+        self.depth_head = DepthHead(preset)
+        self.gaussian_head = GaussianHead(preset)
+        # Where the weights came from (set by `load_model`; `build_model` marks them random).
+        self.provenance: dict = {}
+
+    @property
+    def token_layers(self) -> list[int]:
+        """Aggregator layers the heads read: the DPT layers and the last (camera head)."""
+        return sorted(set(self.preset.intermediate_layers) | {self.preset.depth - 1})
+
+    def set_gradient_checkpointing(self, enabled: bool) -> None:
+        """Recompute aggregator blocks in the backward pass instead of storing activations."""
+        self.aggregator.set_gradient_checkpointing(enabled)
+
+    def prepare(self, images: torch.Tensor, mode: str = "resize") -> PreparedImages:
+        """Any-size images [..., 3, H, W] in [0, 1] -> this preset's network size (`prepare_images`)."""
+        return prepare_images(images, self.preset.image_size, self.preset.patch_size, mode)
+
+    def _check_images(self, images: torch.Tensor) -> None:
+        patch = self.preset.patch_size
+        if images.dim() != 5 or images.shape[2] != 3:
+            raise InputError(f"model input must be [B, V, 3, H, W] images, got shape {tuple(images.shape)}")
+        height, width = images.shape[-2:]
+        if height < patch or width < patch or height % patch or width % patch:
+            raise InputError(
+                f"image size {width}x{height} is not a positive multiple of the patch size {patch}; "
+                "pass the images through Lumos3D.prepare / prepare_images first"
+            )
+        require_finite("model input images", images)
+
+    def forward(self, images: torch.Tensor) -> Lumos3DOutput:
+        """images [B, V, 3, H, W] in [0, 1], H and W multiples of the patch size -> Lumos3DOutput.
+
+        The aggregator follows any enclosing autocast (e.g. bf16); the heads and all geometry run
+        in float32, as in VGGT.
+        """
+        self._check_images(images)
+        batch, views, _, height, width = images.shape
+        tokens = self.aggregator(images, self.token_layers)
+        with torch.autocast(images.device.type, enabled=False):
+            tokens = {layer: t.float() for layer, t in tokens.items()}
+            images = images.float()
+            pose_enc_list = self.camera_head(tokens[self.preset.depth - 1])
+            depth, depth_conf = self.depth_head(tokens, images)
+            raw = self.gaussian_head(tokens, images)  # [B, V, K, H, W]
+            del tokens
+            extrinsics, intrinsics = decode_pose(pose_enc_list[-1], (height, width))
+            world_points = unproject_depth(depth, extrinsics, intrinsics)
+            scales = scene_scale(depth)
+            params, confidence = split_confidence(raw.permute(0, 1, 3, 4, 2))  # [B, V, H, W, K-1], [B, V, H, W]
+            pixel_gaussians, gaussians, counts = [], [], []
+            for scene in range(batch):
+                points = world_points[scene].reshape(-1, 3)
+                scene_params = params[scene].reshape(points.shape[0], -1)
+                pixel_gaussians.append(activate_gaussians(points, scene_params, scales[scene], self.preset))
+                fused = voxelize(points, scene_params, confidence[scene].reshape(-1), self.preset.voxel_size * scales[scene])
+                voxel_gaussians = activate_gaussians(fused.points, fused.features, scales[scene], self.preset)
+                keep = voxel_gaussians.opacities >= self.preset.opacity_threshold
+                gaussians.append(voxel_gaussians.select(keep))
+                counts.append(GaussianCounts(points.shape[0], len(fused), int((~keep).sum())))
+        output = Lumos3DOutput(
+            pose_enc=pose_enc_list[-1], pose_enc_list=pose_enc_list, extrinsics=extrinsics, intrinsics=intrinsics,
+            depth=depth, depth_conf=depth_conf, world_points=world_points, pixel_confidence=confidence,
+            pixel_gaussians=pixel_gaussians, gaussians=gaussians, scene_scale=scales, counts=counts,
+        )
+        _require_finite_output(output)
+        return output
+
+
+def _require_finite_output(output: Lumos3DOutput) -> None:
+    hint = "the network produced NaN/Inf (corrupt weights or an unstable input?)"
+    for name in ("pose_enc", "extrinsics", "intrinsics", "depth", "depth_conf", "pixel_confidence"):
+        require_finite(f"model output {name}", getattr(output, name), hint)
+    for scene, gaussians in enumerate(output.gaussians):
+        gaussians.require_finite(f"model output gaussians[{scene}]")
+    for scene, gaussians in enumerate(output.pixel_gaussians):
+        gaussians.require_finite(f"model output pixel_gaussians[{scene}]")
+
+
+def build_model(preset: str | ModelPreset = "tiny", seed: int | None = None) -> Lumos3D:
+    """A network with **random** weights (for training, tests and benchmarks — not inference;
+    use `load_model` for trained weights). `seed` makes the initialisation reproducible."""
+    preset = get_preset(preset) if isinstance(preset, str) else preset
+    if seed is None:
+        model = Lumos3D(preset)
+    else:
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seed)
+            model = Lumos3D(preset)
+    model.provenance = {"weights": "random", "seed": seed}
+    logger.info("built preset '%s' with random weights (untrained: not for inference)", preset.name)
+    return model

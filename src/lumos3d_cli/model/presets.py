@@ -1,0 +1,207 @@
+"""Model presets: every size and setting of the network as plain data.
+
+A preset fully determines the module tree (and so the checkpoint key names and shapes). The
+`vggt-1b` preset has exactly the dimensions of VGGT-1B, so its official checkpoint loads into it;
+the smaller presets keep the same key structure at reduced widths and depths.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+
+from lumos3d_cli.errors import InputError
+
+
+@dataclass(frozen=True)
+class PatchEmbedConfig:
+    """How images become patch tokens.
+
+    kind "dinov2": a DINOv2 ViT with `num_register_tokens` registers (cls + registers + learned,
+    interpolated position embedding), as in VGGT; kind "conv": a single strided convolution (no
+    position embedding: the aggregator's RoPE alone encodes position).
+    """
+
+    kind: str = "conv"
+    depth: int = 0
+    num_heads: int = 0
+    mlp_ratio: float = 4.0
+
+
+@dataclass(frozen=True)
+class ModelPreset:
+    """All hyper-parameters of one network size.
+
+    Lengths (`voxel_size`, `gaussian_scale_*`) are relative to the scene scale, the median
+    predicted depth (see `model.geometry.scene_scale`), so one setting fits a tabletop and a street.
+    """
+
+    name: str
+    # input
+    image_size: int  # longer image side fed to the network (pixels); also the pos-embed grid
+    patch_size: int
+    # aggregator (alternating frame / global attention)
+    embed_dim: int
+    depth: int  # number of frame blocks (= number of global blocks)
+    num_heads: int
+    mlp_ratio: float
+    num_register_tokens: int
+    patch_embed: PatchEmbedConfig
+    intermediate_layers: tuple[int, int, int, int]  # aggregator layers the DPT heads read
+    rope_frequency: float = 100.0
+    layer_scale_init: float = 0.01
+    # camera head
+    camera_trunk_depth: int = 4
+    camera_num_heads: int = 16
+    camera_iterations: int = 4
+    # DPT heads (depth and Gaussian)
+    dpt_features: int = 256
+    dpt_out_channels: tuple[int, int, int, int] = (256, 512, 1024, 1024)
+    depth_head_hidden: int = 32  # channels of the last 3x3 conv of the depth head
+    gaussian_head_hidden: int = 128  # channels of the last 3x3 conv of the Gaussian head
+    # Gaussians
+    sh_degree: int = 4
+    voxel_size: float = 0.002
+    opacity_threshold: float = 0.001
+    gaussian_scale_base: float = 0.001
+    gaussian_scale_max: float = 0.3
+    gaussian_scale_min: float = 1e-7
+
+    def __post_init__(self) -> None:
+        head_dim = self.embed_dim // max(self.num_heads, 1)
+        checks = {
+            "embed_dim must be divisible by num_heads": self.embed_dim % self.num_heads == 0,
+            "RoPE needs a head dimension divisible by 4": head_dim % 4 == 0,
+            "camera head: 2*embed_dim must be divisible by camera_num_heads": (2 * self.embed_dim) % self.camera_num_heads == 0,
+            "intermediate_layers must be increasing layer indices below depth": (
+                list(self.intermediate_layers) == sorted(set(self.intermediate_layers))
+                and 0 <= self.intermediate_layers[0]
+                and self.intermediate_layers[-1] < self.depth
+            ),
+            "image_size must be a multiple of patch_size": self.image_size % self.patch_size == 0,
+            "patch_embed.kind must be 'conv' or 'dinov2'": self.patch_embed.kind in ("conv", "dinov2"),
+            "dpt_features must be even": self.dpt_features % 2 == 0,
+            "sh_degree must be 0..4": 0 <= self.sh_degree <= 4,
+            "voxel_size must be positive": self.voxel_size > 0,
+            "0 < gaussian_scale_min <= gaussian_scale_max": 0 < self.gaussian_scale_min <= self.gaussian_scale_max,
+        }
+        failed = [message for message, ok in checks.items() if not ok]
+        if failed:
+            raise ValueError(f"preset '{self.name}': " + "; ".join(failed))
+
+    @property
+    def patch_start_index(self) -> int:
+        """Tokens before the patches in every frame: 1 camera token + the register tokens."""
+        return 1 + self.num_register_tokens
+
+    @property
+    def gaussian_channels(self) -> int:
+        """Raw Gaussian-head channels: opacity 1, scale 3, quaternion 4, SH 3*(d+1)^2, confidence 1."""
+        return 1 + 3 + 4 + 3 * (self.sh_degree + 1) ** 2 + 1
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), sort_keys=True)
+
+    @staticmethod
+    def from_dict(values: dict) -> ModelPreset:
+        """Inverse of `to_dict`; ValueError on unknown or missing fields."""
+        values = dict(values)
+        patch_embed = PatchEmbedConfig(**values.pop("patch_embed"))
+        for name in ("intermediate_layers", "dpt_out_channels"):
+            if name in values:
+                values[name] = tuple(values[name])
+        known = {f.name for f in dataclasses.fields(ModelPreset)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"unknown preset fields: {', '.join(unknown)}")
+        return ModelPreset(patch_embed=patch_embed, **values)
+
+
+PRESETS: dict[str, ModelPreset] = {
+    # Small enough to train on two CPU cores: convolutional patch embed, 4+4 narrow blocks.
+    "tiny": ModelPreset(
+        name="tiny",
+        image_size=224,
+        patch_size=14,
+        embed_dim=128,
+        depth=4,
+        num_heads=4,
+        mlp_ratio=4.0,
+        num_register_tokens=4,
+        patch_embed=PatchEmbedConfig(kind="conv"),
+        intermediate_layers=(0, 1, 2, 3),
+        camera_trunk_depth=2,
+        camera_num_heads=4,
+        dpt_features=64,
+        dpt_out_channels=(32, 64, 128, 128),
+        gaussian_head_hidden=32,
+        sh_degree=1,
+    ),
+    # DINOv2 ViT-S/14-reg patch embed, 12+12 blocks at width 384.
+    "small": ModelPreset(
+        name="small",
+        image_size=518,
+        patch_size=14,
+        embed_dim=384,
+        depth=12,
+        num_heads=6,
+        mlp_ratio=4.0,
+        num_register_tokens=4,
+        patch_embed=PatchEmbedConfig(kind="dinov2", depth=12, num_heads=6),
+        intermediate_layers=(2, 5, 8, 11),
+        camera_num_heads=8,
+        dpt_features=128,
+        dpt_out_channels=(48, 96, 192, 384),
+        gaussian_head_hidden=64,
+        sh_degree=2,
+    ),
+    # DINOv2 ViT-B/14-reg patch embed, 12+12 blocks at width 768.
+    "base": ModelPreset(
+        name="base",
+        image_size=518,
+        patch_size=14,
+        embed_dim=768,
+        depth=12,
+        num_heads=12,
+        mlp_ratio=4.0,
+        num_register_tokens=4,
+        patch_embed=PatchEmbedConfig(kind="dinov2", depth=12, num_heads=12),
+        intermediate_layers=(2, 5, 8, 11),
+        camera_num_heads=12,
+        dpt_features=256,
+        dpt_out_channels=(96, 192, 384, 768),
+        sh_degree=3,
+    ),
+    # VGGT-1B exactly (DINOv2 ViT-L/14 with 4 registers, 24+24 blocks at 1024, 16 heads) with
+    # AnySplat's Gaussian head (SH degree 4, 84 channels).
+    "vggt-1b": ModelPreset(
+        name="vggt-1b",
+        image_size=518,
+        patch_size=14,
+        embed_dim=1024,
+        depth=24,
+        num_heads=16,
+        mlp_ratio=4.0,
+        num_register_tokens=4,
+        patch_embed=PatchEmbedConfig(kind="dinov2", depth=24, num_heads=16),
+        intermediate_layers=(4, 11, 17, 23),
+        camera_num_heads=16,
+        dpt_features=256,
+        dpt_out_channels=(256, 512, 1024, 1024),
+        sh_degree=4,
+    ),
+}
+
+DEFAULT_PRESET = "tiny"
+
+
+def get_preset(name: str) -> ModelPreset:
+    """The preset called `name`; InputError listing the known names otherwise."""
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise InputError(f"unknown model preset '{name}'; choose one of: {', '.join(PRESETS)}") from None

@@ -1,0 +1,205 @@
+import dataclasses
+import json
+import logging
+import pathlib
+
+import pytest
+import torch
+from safetensors.torch import save_file
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.checkpoints import read_checkpoint, save_checkpoint, summarize_checkpoint
+from lumos3d_cli.model.lumos3d import build_model
+from lumos3d_cli.model.loading import load_model
+from lumos3d_cli.model.presets import PRESETS, PatchEmbedConfig
+
+# VGGT's key structure (DINOv2 patch embed with registers, QK-norm blocks, camera and DPT heads)
+# at a size that builds and runs in a fraction of a second.
+REDUCED = dataclasses.replace(
+    PRESETS["tiny"], name="reduced-vggt", image_size=56, sh_degree=2, gaussian_head_hidden=24,
+    patch_embed=PatchEmbedConfig(kind="dinov2", depth=2, num_heads=4),
+)
+IMAGES = torch.rand(1, 2, 3, 28, 42, generator=torch.Generator().manual_seed(0))
+
+
+@pytest.fixture(scope="module")
+def source():
+    return build_model(REDUCED, seed=0).eval()
+
+
+@pytest.fixture(scope="module")
+def expected(source):
+    with torch.no_grad():
+        return source(IMAGES)
+
+
+def _vggt_state(model) -> dict[str, torch.Tensor]:
+    """The model's weights as VGGT lays them out: no Gaussian head, plus point and track heads."""
+    state = {k: v.clone() for k, v in model.state_dict().items() if not k.startswith("gaussian_head.")}
+    state["point_head.scratch.output_conv2.2.weight"] = torch.randn(4, 32, 1, 1)
+    state["track_head.tracker.query_ref_token"] = torch.randn(1, 2, 388)
+    return state
+
+
+def _anysplat_state(model) -> dict[str, torch.Tensor]:
+    state = {}
+    for key, value in model.state_dict().items():
+        key = key.replace("gaussian_head.", "gaussian_param_head.", 1)
+        state[f"encoder.{key}"] = value.clone()
+    return state
+
+
+def _outputs(model):
+    with torch.no_grad():
+        return model(IMAGES)
+
+
+def test_our_format_round_trip(tmp_path, source, expected):
+    path = save_checkpoint(source, tmp_path / "run" / "tiny.safetensors", {"steps": 10, "data": "test"})
+    loaded = load_model(path)
+    assert loaded.preset == REDUCED and not loaded.training
+    assert loaded.provenance["steps"] == 10 and loaded.provenance["format"] == "lumos3d"
+    actual = _outputs(loaded)
+    assert torch.equal(actual.pose_enc, expected.pose_enc) and torch.equal(actual.depth, expected.depth)
+    assert torch.equal(actual.gaussians[0].sh, expected.gaussians[0].sh)
+    summary = summarize_checkpoint(path)
+    assert summary["format"] == "lumos3d" and summary["preset"] == "reduced-vggt"
+    assert summary["parameters"] == sum(p.numel() for p in source.parameters())
+    assert summary["provenance"] == {"steps": 10, "data": "test"} and summary["fresh_modules"] == []
+    with pytest.raises(InputError, match="carries its own preset"):
+        load_model(path, preset=REDUCED)
+
+
+@pytest.mark.parametrize("suffix", [".pt", ".safetensors"])
+def test_official_vggt_layout_loads_with_a_fresh_gaussian_head(tmp_path, caplog, source, expected, suffix):
+    path = tmp_path / f"model{suffix}"
+    state = _vggt_state(source)
+    if suffix == ".pt":
+        torch.save(state, path)
+    else:
+        save_file(state, str(path))
+    with caplog.at_level(logging.INFO):
+        loaded = load_model(tmp_path, preset=REDUCED)  # a folder holding model.* works too
+    assert "ignored 2 tensors" in caplog.text and "point_head, track_head" in caplog.text
+    assert any(r.levelno == logging.WARNING and "gaussian_head" in r.getMessage() for r in caplog.records)
+    assert loaded.provenance["format"] == "vggt"
+    actual = _outputs(loaded)
+    assert torch.equal(actual.pose_enc, expected.pose_enc)
+    assert torch.equal(actual.depth, expected.depth) and torch.equal(actual.depth_conf, expected.depth_conf)
+    summary = summarize_checkpoint(path)
+    assert summary["format"] == "vggt" and summary["ignored_tensors"] == 2 and summary["fresh_modules"] == ["gaussian_head"]
+
+
+def test_anysplat_layout_loads_everything_and_reads_the_sh_degree(tmp_path, source, expected):
+    path = tmp_path / "model.safetensors"
+    save_file(_anysplat_state(source), str(path))
+    loaded = load_model(path, preset=dataclasses.replace(REDUCED, sh_degree=4, gaussian_head_hidden=128))
+    assert loaded.preset.sh_degree == 2 and loaded.preset.gaussian_head_hidden == 24
+    actual = _outputs(loaded)
+    assert torch.equal(actual.pose_enc, expected.pose_enc) and torch.equal(actual.depth, expected.depth)
+    for name, tensor in expected.gaussians[0].tensors().items():
+        assert torch.equal(getattr(actual.gaussians[0], name), tensor), name
+    assert summarize_checkpoint(path)["format"] == "anysplat"
+
+
+def test_half_precision_files_load_as_float32(tmp_path, source):
+    path = tmp_path / "model.safetensors"
+    save_file({k: v.to(torch.bfloat16) for k, v in _anysplat_state(source).items()}, str(path))
+    loaded = load_model(path, preset=REDUCED)
+    assert all(p.dtype == torch.float32 for p in loaded.parameters())
+    assert summarize_checkpoint(path)["dtypes"] == {"BF16": len(source.state_dict())}
+
+
+def test_mismatches_list_missing_unexpected_and_misshaped_keys(tmp_path, source):
+    state = _vggt_state(source)
+    del state["aggregator.camera_token"]
+    state["aggregator.extra"] = torch.zeros(1)
+    state["depth_head.norm.weight"] = torch.zeros(7)
+    torch.save(state, tmp_path / "model.pt")
+    with pytest.raises(InputError) as error:
+        load_model(tmp_path / "model.pt", preset=REDUCED)
+    message = str(error.value)
+    assert "1 missing keys: aggregator.camera_token" in message
+    assert "1 unexpected keys: aggregator.extra" in message
+    assert "depth_head.norm.weight (file (7,), model (256,))" in message
+
+
+def test_long_key_lists_are_truncated(tmp_path, source):
+    state = _vggt_state(source)
+    state.update({f"aggregator.bogus_{i:02d}": torch.zeros(1) for i in range(25)})
+    torch.save(state, tmp_path / "model.pt")
+    with pytest.raises(InputError, match=r"25 unexpected keys: .*bogus_09 \.\.\. and 15 more"):
+        load_model(tmp_path / "model.pt", preset=REDUCED)
+
+
+def test_the_wrong_preset_for_an_official_file_is_a_shape_error(tmp_path, source):
+    torch.save(_vggt_state(source), tmp_path / "model.pt")
+    with pytest.raises(InputError, match="does not fit the model"):
+        load_model(tmp_path / "model.pt")  # defaults to vggt-1b
+
+
+class _Payload:
+    """Unpickling this would create a file: proof that loading executes no pickled code."""
+
+    def __init__(self, target: pathlib.Path):
+        self.target = target
+
+    def __reduce__(self):
+        return (pathlib.Path.touch, (self.target,))
+
+
+def test_pickled_code_is_never_executed(tmp_path):
+    target = tmp_path / "executed"
+    torch.save({"aggregator.camera_token": torch.zeros(1), "payload": _Payload(target)}, tmp_path / "model.pt")
+    with pytest.raises(InputError, match="refusing to unpickle"):
+        read_checkpoint(tmp_path / "model.pt")
+    assert not target.exists()
+
+
+def test_files_that_are_no_checkpoint_are_refused(tmp_path):
+    save_file({"weight": torch.zeros(2)}, str(tmp_path / "other.safetensors"))
+    with pytest.raises(InputError, match="not a Lumos3D, VGGT or AnySplat checkpoint"):
+        read_checkpoint(tmp_path / "other.safetensors")
+    (tmp_path / "notes.txt").write_text("hello")
+    with pytest.raises(InputError, match="not a checkpoint"):
+        read_checkpoint(tmp_path / "notes.txt")
+    (tmp_path / "broken.safetensors").write_bytes(b"\x00" * 5)
+    with pytest.raises(InputError, match="cannot read as safetensors"):
+        read_checkpoint(tmp_path / "broken.safetensors")
+    torch.save([torch.zeros(1)], tmp_path / "list.pt")
+    with pytest.raises(InputError, match="not a state dict"):
+        read_checkpoint(tmp_path / "list.pt")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match="folder holds none of"):
+        read_checkpoint(tmp_path / "empty")
+
+
+def test_damaged_config_and_unknown_sh_layouts_are_refused(tmp_path, source):
+    path = tmp_path / "ours.safetensors"
+    save_file({k: v.contiguous() for k, v in source.state_dict().items()}, str(path), metadata={"lumos3d": "{not json"})
+    with pytest.raises(InputError, match="config is damaged"):
+        read_checkpoint(path)
+    save_file({k: v.contiguous() for k, v in source.state_dict().items()}, str(path), metadata={"lumos3d": json.dumps({"format_version": 99})})
+    with pytest.raises(InputError, match="format version 99"):
+        read_checkpoint(path)
+    state = _anysplat_state(source)
+    state["encoder.gaussian_param_head.scratch.output_conv2.2.weight"] = torch.zeros(50, 24, 1, 1)
+    save_file(state, str(tmp_path / "model.safetensors"))
+    with pytest.raises(InputError, match="50 output channels"):
+        read_checkpoint(tmp_path / "model.safetensors")
+
+
+@pytest.mark.slow
+def test_full_size_vggt_1b_official_layout_round_trip(tmp_path):
+    """The real VGGT-1B size: random weights saved as model.pt with the official names and
+    shapes, loaded back strictly (about 5 GB on disk and 10 GB of memory)."""
+    source = build_model("vggt-1b", seed=0).eval()
+    state = {k: v for k, v in source.state_dict().items() if not k.startswith("gaussian_head.")}
+    torch.save(state, tmp_path / "model.pt")
+    loaded = load_model(tmp_path / "model.pt")
+    assert loaded.preset.name == "vggt-1b"
+    for key, value in state.items():
+        assert torch.equal(loaded.state_dict()[key], value), key
+    images = torch.rand(1, 1, 3, 28, 28)
+    with torch.no_grad():
+        assert torch.equal(loaded(images).depth, source(images).depth)

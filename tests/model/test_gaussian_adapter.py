@@ -1,0 +1,55 @@
+import dataclasses
+import math
+
+import torch
+import torch.nn.functional as F
+
+from lumos3d_cli.model.gaussian_adapter import activate_gaussians, sh_degree_weights, split_confidence
+from lumos3d_cli.model.presets import PRESETS
+
+PRESET = dataclasses.replace(PRESETS["tiny"], sh_degree=1)
+
+
+def _raw(n: int = 4) -> torch.Tensor:
+    return torch.randn(n, PRESET.gaussian_channels, generator=torch.Generator().manual_seed(0))
+
+
+def test_channel_layout_and_activations():
+    raw = _raw()
+    raw[0, 0] = 2.0  # opacity logit
+    raw[0, 1:4] = torch.tensor([0.0, 1000.0, -1e4])  # scale: softplus(0), clamped max, clamped min
+    raw[0, 4:8] = torch.tensor([0.0, 0.0, 3.0, 4.0])  # xyzw, length 5
+    raw[0, 8:20] = torch.arange(12.0)  # SH colour-major: R k0..3, G k0..3, B k0..3
+    params, confidence = split_confidence(raw)
+    assert params.shape == (4, 20) and torch.equal(confidence, raw[:, -1])
+    scale = torch.tensor(2.0)
+    gaussians = activate_gaussians(torch.zeros(4, 3), params, scale, PRESET)
+    torch.testing.assert_close(gaussians.opacities[0], torch.sigmoid(torch.tensor(2.0)))
+    expected_scale = torch.tensor([PRESET.gaussian_scale_base * math.log(2.0), PRESET.gaussian_scale_max, PRESET.gaussian_scale_min]) * 2.0
+    torch.testing.assert_close(gaussians.scales[0], expected_scale)
+    torch.testing.assert_close(gaussians.quats[0], torch.tensor([0.8, 0.0, 0.0, 0.6]))  # wxyz
+    weights = torch.tensor([1.0, 0.025, 0.025, 0.025])
+    torch.testing.assert_close(gaussians.sh[0, :, 0], torch.arange(4.0) * weights)  # red
+    torch.testing.assert_close(gaussians.sh[0, :, 2], torch.arange(8.0, 12.0) * weights)  # blue
+    assert gaussians.sh_degree == 1
+
+
+def test_zero_quaternion_becomes_identity():
+    raw = _raw(1)
+    raw[0, 4:8] = 0.0
+    gaussians = activate_gaussians(torch.zeros(1, 3), split_confidence(raw)[0], torch.tensor(1.0), PRESET)
+    torch.testing.assert_close(gaussians.quats[0], torch.tensor([1.0, 0.0, 0.0, 0.0]))
+
+
+def test_sh_degree_weights_follow_anysplat():
+    weights = sh_degree_weights(4)
+    assert weights.shape == (25,)
+    torch.testing.assert_close(weights[[0, 1, 4, 9, 16]], torch.tensor([1.0, 0.025, 0.00625, 0.0015625, 0.000390625]))
+
+
+def test_scale_is_proportional_to_scene_scale():
+    params = split_confidence(_raw())[0]
+    a = activate_gaussians(torch.zeros(4, 3), params, torch.tensor(1.0), PRESET)
+    b = activate_gaussians(torch.zeros(4, 3), params, torch.tensor(50.0), PRESET)
+    torch.testing.assert_close(b.scales, a.scales * 50)
+    torch.testing.assert_close(F.normalize(a.quats, dim=1), a.quats)

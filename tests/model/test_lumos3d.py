@@ -1,0 +1,140 @@
+import logging
+
+import pytest
+import torch
+
+from lumos3d_cli.errors import InputError, NonFiniteError
+from lumos3d_cli.model.geometry import unproject_depth
+from lumos3d_cli.model.lumos3d import Lumos3DOutput, build_model
+from lumos3d_cli.model.pose_encoding import decode_pose
+
+
+@pytest.fixture(scope="module")
+def model():
+    return build_model("tiny", seed=0).eval()
+
+
+def _check(output: Lumos3DOutput, batch: int, views: int, height: int, width: int) -> None:
+    """Shapes, finiteness, valid cameras and consistent Gaussian counts."""
+    assert output.pose_enc.shape == (batch, views, 9) and len(output.pose_enc_list) == 4
+    assert output.extrinsics.shape == (batch, views, 3, 4) and output.intrinsics.shape == (batch, views, 3, 3)
+    assert output.depth.shape == output.depth_conf.shape == output.pixel_confidence.shape == (batch, views, height, width)
+    assert output.world_points.shape == (batch, views, height, width, 3)
+    for tensor in (output.pose_enc, output.extrinsics, output.intrinsics, output.depth, output.depth_conf, output.world_points):
+        assert torch.isfinite(tensor).all()
+    assert (output.depth > 0).all() and (output.depth_conf >= 1).all()
+    for scene in range(batch):
+        output.cameras(scene).require_valid()
+        counts = output.counts[scene]
+        assert counts.pixels == views * height * width == len(output.pixel_gaussians[scene])
+        assert 0 < counts.voxels <= counts.pixels and len(output.gaussians[scene]) == counts.kept
+        for gaussians in (output.gaussians[scene], output.pixel_gaussians[scene]):
+            assert all(torch.isfinite(t).all() for t in gaussians.tensors().values())
+            assert (gaussians.scales > 0).all()
+            torch.testing.assert_close(gaussians.quats.norm(dim=1), torch.ones(len(gaussians)))
+
+
+def test_outputs_are_consistent(model):
+    images = torch.rand(2, 3, 3, 42, 56, generator=torch.Generator().manual_seed(1))
+    with torch.no_grad():
+        output = model(images)
+    _check(output, 2, 3, 42, 56)
+    assert torch.equal(output.pose_enc, output.pose_enc_list[-1])
+    extrinsics, intrinsics = decode_pose(output.pose_enc, (42, 56))
+    torch.testing.assert_close(output.extrinsics, extrinsics)
+    torch.testing.assert_close(output.intrinsics, intrinsics)
+    torch.testing.assert_close(output.world_points, unproject_depth(output.depth, extrinsics, intrinsics))
+    torch.testing.assert_close(output.pixel_gaussians[1].means, output.world_points[1].reshape(-1, 3))
+    torch.testing.assert_close(output.scene_scale, output.depth.flatten(1).median(dim=1).values)
+    assert output.image_size == (56, 42) and output.cameras(0).sizes == [(56, 42)] * 3
+    assert output.pixel_gaussians[0].sh_degree == model.preset.sh_degree
+
+
+def test_scenes_of_a_batch_are_independent(model):
+    images = torch.rand(2, 2, 3, 28, 42, generator=torch.Generator().manual_seed(2))
+    with torch.no_grad():
+        both = model(images)
+        second = model(images[1:])
+    torch.testing.assert_close(both.pose_enc[1:], second.pose_enc, atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(both.depth[1:], second.depth, atol=1e-5, rtol=1e-5)
+    assert both.counts[1] == second.counts[0]
+
+
+@pytest.mark.parametrize(
+    ("views", "height", "width", "fill"),
+    [
+        (1, 28, 28, None),  # one view, the smallest image (2 x 2 patches)
+        (2, 28, 70, None),  # non-square, wide
+        (2, 84, 28, None),  # non-square, tall
+        (3, 42, 42, 0.0),  # all black
+        (3, 42, 42, 1.0),  # saturated
+        (32, 28, 28, None),  # many views
+    ],
+)
+def test_extreme_inputs_give_finite_valid_outputs(model, views, height, width, fill):
+    images = torch.rand(1, views, 3, height, width, generator=torch.Generator().manual_seed(3))
+    if fill is not None:
+        images.fill_(fill)
+    with torch.no_grad():
+        _check(model(images), 1, views, height, width)
+
+
+def test_bf16_autocast_gives_finite_valid_outputs_close_to_float32(model):
+    images = torch.rand(1, 3, 3, 42, 42, generator=torch.Generator().manual_seed(4))
+    with torch.no_grad():
+        reference = model(images)
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            output = model(images)
+    _check(output, 1, 3, 42, 42)
+    assert output.depth.dtype == torch.float32 and output.pose_enc.dtype == torch.float32
+    torch.testing.assert_close(output.pose_enc, reference.pose_enc, atol=0.1, rtol=0.1)
+
+
+def test_gradients_reach_every_trainable_parameter():
+    model = build_model("tiny", seed=1).train()
+    output = model(torch.rand(1, 2, 3, 28, 28, generator=torch.Generator().manual_seed(5)))
+    gaussians = output.gaussians[0]
+    loss = (
+        sum(e.square().mean() for e in output.pose_enc_list)
+        + output.depth.mean() + output.depth_conf.mean()
+        + sum(t.square().mean() for t in gaussians.tensors().values())
+    )
+    loss.backward()
+    missing = [n for n, p in model.named_parameters() if p.requires_grad and (p.grad is None or not p.grad.abs().sum() > 0)]
+    assert missing == []
+
+
+def test_bad_inputs_are_refused_with_a_clear_message(model):
+    with pytest.raises(InputError, match="multiple of the patch size 14"):
+        model(torch.rand(1, 1, 3, 30, 28))
+    with pytest.raises(InputError, match=r"\[B, V, 3, H, W\]"):
+        model(torch.rand(1, 3, 28, 28))
+    images = torch.rand(1, 1, 3, 28, 28)
+    images[0, 0, 0, 0, 0] = float("nan")
+    with pytest.raises(NonFiniteError):
+        model(images)
+
+
+def test_prepare_then_forward_any_image_size(model):
+    prepared = model.prepare(torch.rand(2, 3, 37, 51))
+    assert prepared.network_size == (224, 168)
+    with torch.no_grad():
+        output = model(prepared.images[None])
+    original = prepared.intrinsics_to_original(output.intrinsics[0])
+    torch.testing.assert_close(original[:, :2, 2], torch.tensor([[51 / 2, 37 / 2]] * 2))
+
+
+def test_build_model_says_its_weights_are_random(caplog):
+    with caplog.at_level(logging.INFO, logger="lumos3d_cli.model.lumos3d"):
+        model = build_model("tiny", seed=3)
+    assert "random weights" in caplog.text
+    assert model.provenance == {"weights": "random", "seed": 3}
+    again = build_model("tiny", seed=3)
+    assert all(torch.equal(a, b) for a, b in zip(model.state_dict().values(), again.state_dict().values()))
+
+
+@pytest.mark.slow
+def test_thirty_two_views_at_the_tiny_preset_resolution(model):
+    size = model.preset.image_size
+    with torch.no_grad():
+        _check(model(torch.rand(1, 32, 3, size, size)), 1, 32, size, size)

@@ -1,0 +1,60 @@
+import pytest
+import torch
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.model.preprocess import network_size, prepare_images
+
+
+def test_resize_mode_sizes():
+    assert network_size(1000, 750, 518, 14) == (518, 392, 392)
+    assert network_size(750, 1000, 518, 14) == (392, 518, 518)  # portrait keeps its whole height
+    assert network_size(28, 28, 224, 14) == (224, 224, 224)  # small images are enlarged
+    assert network_size(4000, 10, 224, 14) == (224, 14, 14)  # at least one patch
+
+
+def test_crop_mode_follows_vggt():
+    assert network_size(1000, 750, 518, 14, "crop") == (518, 392, 392)
+    assert network_size(750, 1000, 518, 14, "crop") == (518, 518, 686)  # 686 rows, centre 518 kept
+    with pytest.raises(InputError, match="mode"):
+        network_size(10, 10, 518, 14, "stretch")
+
+
+def _project(intrinsics: torch.Tensor, point: torch.Tensor) -> torch.Tensor:
+    pixel = intrinsics @ point
+    return pixel[:2] / pixel[2]
+
+
+@pytest.mark.parametrize("mode", ["resize", "crop"])
+def test_intrinsics_map_pixels_exactly_between_original_and_network_images(mode):
+    images = torch.rand(2, 3, 300, 200, dtype=torch.float64)  # portrait, so crop mode crops
+    prepared = prepare_images(images, 224, 14, mode)
+    width, height = prepared.network_size
+    assert prepared.images.shape == (2, 3, height, width)
+    assert height % 14 == 0 and width % 14 == 0
+    original = torch.tensor([[250.0, 0, 100], [0, 260, 150], [0, 0, 1]], dtype=torch.float64)
+    network = prepared.intrinsics_to_network(original)
+    point = torch.tensor([0.3, -0.2, 2.0], dtype=torch.float64)
+    (sx, sy), (ox, oy) = prepared.scale, prepared.offset
+    expected = _project(original, point) * torch.tensor([sx, sy], dtype=torch.float64) - torch.tensor([ox, oy], dtype=torch.float64)
+    torch.testing.assert_close(_project(network, point), expected)
+    torch.testing.assert_close(prepared.intrinsics_to_original(network), original)
+    # the original image's centre maps to the network image's centre
+    centre = network @ torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
+    if mode == "resize":
+        torch.testing.assert_close(centre[:2], torch.tensor([width / 2, height / 2], dtype=torch.float64))
+
+
+def test_values_stay_in_range_and_sizes_that_fit_are_untouched():
+    images = torch.zeros(1, 3, 40, 40)
+    images[..., ::2, :] = 1.0  # high-contrast stripes make bicubic overshoot
+    prepared = prepare_images(images, 56, 14)
+    assert prepared.images.min() >= 0 and prepared.images.max() <= 1
+    exact = torch.rand(3, 56, 42)
+    assert torch.equal(prepare_images(exact, 56, 14).images, exact)
+
+
+def test_bad_inputs_are_refused():
+    with pytest.raises(InputError):
+        prepare_images(torch.zeros(3, 4, 4, dtype=torch.uint8), 56, 14)
+    with pytest.raises(InputError):
+        prepare_images(torch.zeros(4, 5, 5), 56, 14)
