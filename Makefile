@@ -11,6 +11,8 @@ $(STAMP): pyproject.toml
 	# torch first and pinned: an unpinned torch pulls the multi-GB CUDA build.
 	$(BIN)/pip install --quiet torch==2.13.0
 	$(BIN)/pip install --quiet -e '.[test]'
+	# LPIPS linear weights ship in the lpips package; its torchvision dependency has no CPU build.
+	$(BIN)/pip install --quiet --no-deps lpips==0.1.4
 	touch $(STAMP)
 
 test: $(STAMP)

@@ -45,3 +45,18 @@ def random_scene(n: int, seed: int, degree: int = 3, dtype=torch.float64, spread
         opacities=torch.rand(n, generator=g, dtype=dtype) * 0.9 + 0.05,
         sh=torch.randn(n, (degree + 1) ** 2, 3, generator=g, dtype=dtype) * 0.5,
     )
+
+
+def save_random_trunk(name: str, path, seed: int = 0) -> None:
+    """A torchvision-layout weight file for a VGG/AlexNet trunk with random weights (tests only)."""
+    from lumos3d_cli.losses.feature_networks import build_trunk
+
+    torch.manual_seed(seed)
+    trunk = build_trunk(name)
+    for module in trunk.features:
+        if isinstance(module, torch.nn.Conv2d):
+            torch.nn.init.kaiming_normal_(module.weight, nonlinearity="relu")
+            torch.nn.init.uniform_(module.bias, -0.1, 0.1)
+    state = dict(trunk.state_dict())
+    state["classifier.0.weight"] = torch.zeros(4, 4)  # present in real torchvision files; ignored
+    torch.save(state, path)

@@ -2,7 +2,8 @@ import subprocess
 import sys
 
 import lumos3d_cli
-from lumos3d_cli.model import Lumos3DOutput, build_model, load_model
+from lumos3d_cli.model.loading import load_model
+from lumos3d_cli.model.lumos3d import Lumos3DOutput, build_model
 
 
 def test_the_network_api_is_re_exported_from_the_package():

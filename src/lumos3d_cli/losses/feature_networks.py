@@ -25,13 +25,15 @@ IMAGENET_STD = (0.229, 0.224, 0.225)
 
 class FeatureTrunk(nn.Module):
     """`features` is an nn.Sequential with torchvision's indices; `taps` maps a layer name
-    (e.g. 'relu4_1') to the index of the module whose output it is."""
+    (e.g. 'relu4_1') to the index of the module whose output it is. Inputs smaller than
+    `min_size` (where the deepest layer would be empty) are upsampled to it first."""
 
-    def __init__(self, name: str, features: nn.Sequential, taps: dict[str, int]):
+    def __init__(self, name: str, features: nn.Sequential, taps: dict[str, int], min_size: int):
         super().__init__()
         self.name = name
         self.features = features
         self.taps = taps
+        self.min_size = min_size
 
     def forward(self, images: torch.Tensor, layers: list[str]) -> dict[str, torch.Tensor]:
         """images [N, 3, H, W] (already normalised as the trunk expects) -> {layer: [N, C, h, w]}."""
@@ -40,6 +42,11 @@ class FeatureTrunk(nn.Module):
             raise ValueError(f"{self.name} has no layer(s) {unknown}; choose from {list(self.taps)}")
         wanted = {self.taps[layer]: layer for layer in layers}
         outputs = {}
+        height, width = images.shape[-2:]
+        if min(height, width) < self.min_size:
+            factor = self.min_size / min(height, width)
+            size = (max(self.min_size, round(height * factor)), max(self.min_size, round(width * factor)))
+            images = nn.functional.interpolate(images, size=size, mode="bilinear", align_corners=False)
         x = images
         for index, module in enumerate(self.features):
             x = module(x)
@@ -60,7 +67,7 @@ def _vgg(name: str) -> FeatureTrunk:
             taps[f"relu{block}_{position}"] = len(modules) - 1
             channels = width
         modules.append(nn.MaxPool2d(2, 2))
-    return FeatureTrunk(name, nn.Sequential(*modules), taps)
+    return FeatureTrunk(name, nn.Sequential(*modules), taps, min_size=16)
 
 
 def _alexnet() -> FeatureTrunk:
@@ -71,7 +78,7 @@ def _alexnet() -> FeatureTrunk:
         nn.Conv2d(384, 256, 3, padding=1), nn.ReLU(),
         nn.Conv2d(256, 256, 3, padding=1), nn.ReLU(), nn.MaxPool2d(3, 2),
     )
-    return FeatureTrunk("alexnet", features, {"relu1": 1, "relu2": 4, "relu3": 7, "relu4": 9, "relu5": 11})
+    return FeatureTrunk("alexnet", features, {"relu1": 1, "relu2": 4, "relu3": 7, "relu4": 9, "relu5": 11}, min_size=32)
 
 
 def build_trunk(name: str) -> FeatureTrunk:

@@ -5,7 +5,7 @@ deviation over voxels are matched: sum_i w_i (|mu_i - mu_hat_i|_1 + |sigma_i - s
 with sum_i w_i = 1.
 
 Features: VGG-19 relu1_1 ... relu5_1 when VGG weights are configured, else an RGB pyramid
-(average pooling by 1, 2, 4, 8, 16). The voxel edge at scale i is voxel_size * 2^i times the
+(average pooling by 1, 2, 4, 8, 16; at least one pixel). The voxel edge at scale i is voxel_size * 2^i times the
 scene scale. The geometry (points, confidence) is detached: this term shapes appearance; the
 geometry is the distillation's job.
 """
@@ -35,7 +35,10 @@ class VoxelStatisticsLoss(nn.Module):
 
     def _features(self, images: torch.Tensor) -> list[torch.Tensor]:
         if self.trunk is None:
-            return [images if i == 0 else F.avg_pool2d(images, 2**i) for i in range(len(VGG_SCALES))]
+            height, width = images.shape[-2:]
+            return [
+                F.adaptive_avg_pool2d(images, (max(1, height >> i), max(1, width >> i))) for i in range(len(VGG_SCALES))
+            ]
         outputs = self.trunk(imagenet_normalise(images), list(VGG_SCALES))
         return [outputs[name] for name in VGG_SCALES]
 

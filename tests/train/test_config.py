@@ -1,0 +1,52 @@
+from pathlib import Path
+
+import pytest
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.train.config import config_to_yaml, load_config
+from lumos3d_cli.train.schedule import learning_rate_factor
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+
+@pytest.mark.parametrize("path", sorted(CONFIGS.glob("*.yaml")), ids=lambda p: p.name)
+def test_every_example_config_is_valid(path):
+    config = load_config(path)
+    assert load_config(path) == config
+    assert config.optim.lr > 0 and config.data.width % 14 == 0 and config.data.height % 14 == 0
+
+
+def test_the_gpu_recipe_matches_the_paper():
+    config = load_config(CONFIGS / "vggt-1b-gpu.yaml")
+    assert config.optim.lr == 2e-4 and config.optim.warmup_steps == 1000 and config.optim.steps == 30000
+    assert config.data.views == 22 and config.precision == "bf16" and config.stage == "student"
+    assert (config.loss.content, config.loss.image, config.loss.voxel) == (0.1, 1.0, 0.01)
+
+
+def test_overrides_and_errors(tmp_path):
+    config = load_config(CONFIGS / "low-light.yaml", ["optim.lr=1e-4", "data.views=6", "degrade.noise=true"])
+    assert config.optim.lr == 1e-4 and config.data.views == 6 and config.degrade.noise
+    with pytest.raises(InputError, match="unknown config key .optim.warmup. \\(did you mean .optim.warmup_steps.\\?\\)"):
+        load_config(CONFIGS / "low-light.yaml", ["optim.warmup=1"])
+    with pytest.raises(InputError, match="config key 'data.views': expected an integer, got 'many'"):
+        load_config(CONFIGS / "low-light.yaml", ["data.views=many"])
+    (tmp_path / "student.yaml").write_text("stage: student\noutput: x\n")
+    with pytest.raises(InputError, match="stage 'student' needs `teacher`"):
+        load_config(tmp_path / "student.yaml")
+    (tmp_path / "bad.yaml").write_text("stage: [unclosed")
+    with pytest.raises(InputError, match="invalid YAML"):
+        load_config(tmp_path / "bad.yaml")
+
+
+def test_resolved_config_round_trips(tmp_path):
+    config = load_config(CONFIGS / "over-exposure.yaml")
+    (tmp_path / "resolved.yaml").write_text(config_to_yaml(config))
+    assert load_config(tmp_path / "resolved.yaml") == config
+
+
+def test_warmup_then_cosine():
+    factors = [learning_rate_factor(s, 10, 110, 0.1) for s in range(110)]
+    assert factors[0] == pytest.approx(0.1) and factors[9] == pytest.approx(1.0)
+    assert factors[10] == pytest.approx(1.0) and factors[60] == pytest.approx(0.55)
+    assert factors[-1] == pytest.approx(0.1, abs=1e-3)
+    assert all(a >= b for a, b in zip(factors[10:], factors[11:]))

@@ -1,0 +1,129 @@
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+
+from lumos3d_cli.errors import RunError
+from lumos3d_cli.io.checkpoints import read_checkpoint
+from lumos3d_cli.train.config import load_config
+from lumos3d_cli.train.distributed import setup_distributed
+from lumos3d_cli.train.trainer import Trainer
+
+WORKER = Path(__file__).with_name("ddp_worker.py")
+
+
+def _trainer(path, overrides=()):
+    return Trainer(load_config(path, list(overrides)), setup_distributed("cpu"))
+
+
+def test_resumed_run_reproduces_the_uninterrupted_losses(tiny_config):
+    straight = _trainer(tiny_config(name="straight")).run()
+    assert straight.steps_done == 6 and not straight.stopped_early
+    interrupted = _trainer(tiny_config(name="resumed")).run(stop_after=3)
+    assert interrupted.stopped_early and interrupted.steps_done == 3
+    resumed = _trainer(tiny_config(name="resumed")).run(resume=True)
+    assert resumed.steps_done == 6
+    first = [r.terms["total"] for r in interrupted.history] + [r.terms["total"] for r in resumed.history]
+    assert first == [r.terms["total"] for r in straight.history]
+    a = read_checkpoint(straight.final_checkpoint).tensors
+    b = read_checkpoint(resumed.final_checkpoint).tensors
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    log = Path(str(tiny_config(name="resumed")).replace(".yaml", "")) / "metrics.jsonl"
+    assert [json.loads(line)["step"] for line in log.read_text().splitlines()] == list(range(6))
+
+
+def test_non_finite_steps_are_skipped_then_abort(tiny_config, monkeypatch):
+    trainer = _trainer(tiny_config(name="nan", max_nonfinite_steps=3))
+    original = trainer.objective.forward
+    calls = {"n": 0}
+
+    def sometimes_nan(*args, **kwargs):
+        terms = original(*args, **kwargs)
+        calls["n"] += 1
+        if calls["n"] == 2 or calls["n"] >= 4:
+            terms["total"] = terms["total"] * float("nan")
+        return terms
+
+    monkeypatch.setattr(trainer.objective, "forward", sometimes_nan)
+    before = {k: v.clone() for k, v in trainer.model.state_dict().items()}
+    with pytest.raises(RunError, match="3 steps in a row had a non-finite loss"):
+        trainer.run()
+    assert trainer.nonfinite_total == 4
+    assert any(not torch.equal(before[k], v) for k, v in trainer.model.state_dict().items())  # good steps applied
+    assert all(torch.isfinite(v).all() for v in trainer.model.state_dict().values())
+
+
+def test_student_stage_logs_every_term(tiny_config, tmp_path):
+    teacher = _trainer(tiny_config(name="teacher", optim__steps=1)).run()
+    config = tiny_config(stage="student", name="student", model=str(teacher.final_checkpoint),
+                         teacher=str(teacher.final_checkpoint), optim__steps=2, validate_every=2)
+    result = _trainer(config).run()
+    terms = result.history[-1].terms
+    assert {"mse", "distill_pose", "distill_depth", "image", "voxel", "total"} <= set(terms)
+    assert all(v == v for v in terms.values())
+    assert (Path(str(config).replace(".yaml", "")) / "validation" / "step_00000002.png").is_file()
+
+
+def _torchrun() -> str:
+    return str(Path(sys.executable).with_name("torchrun"))
+
+
+def test_two_process_ddp_keeps_ranks_identical(tiny_config, tmp_path):
+    config = tiny_config(name="ddp", optim__steps=3)
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    command = [_torchrun(), "--nproc_per_node", "2", "--master_port", "29517", str(WORKER), str(config), str(tmp_path)]
+    completed = subprocess.run(command, capture_output=True, text=True, env=env, timeout=600)
+    assert completed.returncode == 0, completed.stderr[-3000:]
+    rank0 = torch.load(tmp_path / "rank0.pt", weights_only=True)
+    rank1 = torch.load(tmp_path / "rank1.pt", weights_only=True)
+    assert rank0.keys() == rank1.keys()
+    assert all(torch.equal(rank0[k], rank1[k]) for k in rank0)
+    initial = torch.load(tmp_path / "initial.pt", weights_only=True)
+    assert any(not torch.equal(initial[k], rank0[k]) for k in rank0)
+
+
+def test_torchrun_command_line(tiny_config, tmp_path):
+    config = tiny_config(name="cli-ddp", optim__steps=2)
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    command = [_torchrun(), "--nproc_per_node", "2", "--master_port", "29518", "-m", "lumos3d_cli", "train", str(config), "--json"]
+    completed = subprocess.run(command, capture_output=True, text=True, env=env, timeout=600)
+    assert completed.returncode == 0, completed.stderr[-3000:]
+    summary = json.loads(completed.stdout[completed.stdout.index("{"):])
+    assert summary["world_size"] == 2 and summary["steps_done"] == 2
+    assert (Path(summary["output"]) / "final.safetensors").is_file()
+
+
+def test_sigterm_saves_a_checkpoint_and_stops(tiny_config):
+    config = tiny_config(name="signal", optim__steps=1000)
+    output = Path(str(config).replace(".yaml", ""))
+    lumos3d = shutil.which("lumos3d", path=os.path.dirname(sys.executable))
+    process = subprocess.Popen([lumos3d, "train", str(config), "--quiet"], stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 300
+    while not (output / "metrics.jsonl").is_file() and time.time() < deadline:
+        time.sleep(0.5)
+    process.send_signal(signal.SIGTERM)
+    _, stderr = process.communicate(timeout=300)
+    assert process.returncode == 0, stderr
+    latest = (output / "checkpoints" / "latest").read_text().strip()
+    step = int(latest.split("_")[1])
+    assert 1 <= step < 1000
+    assert (output / "checkpoints" / latest / "model.safetensors").is_file()
+    assert not (output / "final.safetensors").exists()
+
+
+@pytest.mark.slow
+def test_tiny_model_overfits_one_scene(tiny_config):
+    """The teacher stage drives its losses down on one scene within minutes on the CPU."""
+    config = tiny_config(name="overfit", data__scenes=["video_fox"], data__crop_scale=[1.0, 1.0], data__flip=False,
+                         data__width=112, data__height=84, optim__steps=150, optim__warmup_steps=10, optim__lr=1e-3)
+    result = _trainer(config).run()
+    first = sum(r.terms["total"] for r in result.history[:10]) / 10
+    last = sum(r.terms["total"] for r in result.history[-10:]) / 10
+    assert last < first / 3, (first, last)
