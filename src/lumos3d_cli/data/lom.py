@@ -1,0 +1,77 @@
+"""The LOM layout (Aleth-NeRF authors): `<scene>/{high,low,over_exp}/` photos of the same views
+and `transforms_{train,val,test}.json`. For evaluation only; never for training."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.image_files import IMAGE_SUFFIXES, natural_sort_key
+
+DEGRADED_FOLDERS = {"low-light": "low", "over-exposure": "over_exp"}
+
+
+@dataclass(frozen=True)
+class LomScene:
+    """frames: view ids (file stems) in natural order; test: the ids of transforms_test.json;
+    degraded[id] and reference[id]: the photo under the evaluated condition and under normal light."""
+
+    name: str
+    root: Path
+    mode: str
+    frames: list[str]
+    test: list[str]
+    degraded: dict[str, Path]
+    reference: dict[str, Path]
+
+
+def _by_stem(folder: Path) -> dict[str, Path]:
+    return {p.stem: p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".")}
+
+
+def is_lom_scene(folder: Path) -> bool:
+    return (folder / "high").is_dir() and (folder / "transforms_test.json").is_file() and any(
+        (folder / f).is_dir() for f in DEGRADED_FOLDERS.values()
+    )
+
+
+def read_lom_scene(folder: Path, mode: str) -> LomScene:
+    """One scene; InputError for a missing folder, test frame or degraded photo."""
+    if mode not in DEGRADED_FOLDERS:
+        raise InputError(f"--mode {mode!r}: use one of {', '.join(DEGRADED_FOLDERS)}")
+    degraded_folder = folder / DEGRADED_FOLDERS[mode]
+    if not degraded_folder.is_dir():
+        raise InputError(f"{folder}: no {DEGRADED_FOLDERS[mode]}/ folder for mode {mode}")
+    reference = _by_stem(folder / "high")
+    degraded = _by_stem(degraded_folder)
+    try:
+        frames = json.loads((folder / "transforms_test.json").read_text())["frames"]
+    except (OSError, json.JSONDecodeError, KeyError, TypeError) as error:
+        raise InputError(f"{folder / 'transforms_test.json'}: cannot read its frames ({error})") from error
+    test = [Path(frame["file_path"]).stem for frame in frames]
+    for frame in test:
+        if frame not in reference:
+            raise InputError(f"{folder}: test frame {frame!r} has no normal-light photo in high/")
+        if frame not in degraded:
+            raise InputError(f"{folder}: test frame {frame!r} has no photo in {DEGRADED_FOLDERS[mode]}/")
+    shared = sorted(set(reference) & set(degraded), key=natural_sort_key)
+    return LomScene(folder.name, folder, mode, shared, test, {k: degraded[k] for k in shared}, {k: reference[k] for k in shared})
+
+
+def find_lom_scenes(root: Path | str, mode: str, names: list[str] | None = None) -> list[LomScene]:
+    """Scenes under `root` (or `root` itself when it is one), optionally only `names`."""
+    root = Path(root)
+    if not root.is_dir():
+        raise InputError(f"{root}: no such folder")
+    folders = [root] if is_lom_scene(root) else sorted(p for p in root.iterdir() if p.is_dir() and is_lom_scene(p))
+    if names:
+        available = {p.name for p in folders}
+        missing = [n for n in names if n not in available]
+        if missing:
+            raise InputError(f"{root}: no LOM scene(s) {', '.join(missing)} (found: {', '.join(sorted(available)) or 'none'})")
+        folders = [p for p in folders if p.name in names]
+    if not folders:
+        raise InputError(f"{root}: no LOM-layout scenes (high/ + low/ or over_exp/ + transforms_test.json)")
+    return [read_lom_scene(folder, mode) for folder in folders]

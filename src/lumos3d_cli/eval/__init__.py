@@ -1,0 +1,1 @@
+"""Evaluation: image metrics, the LOM protocol, reports."""
