@@ -219,7 +219,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--presets", nargs="+", default=["tiny", "vggt-1b"])
     parser.add_argument("--budget-minutes", type=float, default=60.0, help="total time for the forward cells")
-    parser.add_argument("--cell-limit-seconds", type=float, default=300.0, help="skip cells estimated to take longer")
+    parser.add_argument("--cell-limit-seconds", type=float, default=600.0, help="skip cells estimated to take longer")
     parser.add_argument("--max-views", type=int, default=32)
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per cell (after one warm-up)")
     parser.add_argument("--json", type=Path, help="also write the raw results here")
