@@ -59,6 +59,8 @@ def test_our_format_round_trip(tmp_path, source, expected):
     loaded = load_model(path)
     assert loaded.preset == REDUCED and not loaded.training
     assert loaded.provenance["steps"] == 10 and loaded.provenance["format"] == "lumos3d"
+    # loaded weights stay trainable (fine-tuning), except DINOv2's unused mask token
+    assert {n for n, p in loaded.named_parameters() if not p.requires_grad} == {"aggregator.patch_embed.mask_token"}
     actual = _outputs(loaded)
     assert torch.equal(actual.pose_enc, expected.pose_enc) and torch.equal(actual.depth, expected.depth)
     assert torch.equal(actual.gaussians[0].sh, expected.gaussians[0].sh)
@@ -78,7 +80,7 @@ def test_official_vggt_layout_loads_with_a_fresh_gaussian_head(tmp_path, caplog,
         torch.save(state, path)
     else:
         save_file(state, str(path))
-    with caplog.at_level(logging.INFO):
+    with caplog.at_level(logging.INFO, logger="lumos3d_cli"):
         loaded = load_model(tmp_path, preset=REDUCED)  # a folder holding model.* works too
     assert "ignored 2 tensors" in caplog.text and "point_head, track_head" in caplog.text
     assert any(r.levelno == logging.WARNING and "gaussian_head" in r.getMessage() for r in caplog.records)

@@ -138,3 +138,21 @@ def test_thirty_two_views_at_the_tiny_preset_resolution(model):
     size = model.preset.image_size
     with torch.no_grad():
         _check(model(torch.rand(1, 32, 3, size, size)), 1, 32, size, size)
+
+
+def test_fusion_does_not_depend_on_the_world_unit(model):
+    generator = torch.Generator().manual_seed(6)
+    views, height, width = 2, 14, 14
+    points = torch.rand(views, height, width, 3, generator=generator, dtype=torch.float64) * 0.05
+    params = torch.randn(views, height, width, model.preset.gaussian_channels - 1, generator=generator, dtype=torch.float64)
+    confidence = torch.randn(views, height, width, generator=generator, dtype=torch.float64)
+    scale = torch.tensor(0.8, dtype=torch.float64)
+    unit = 1000.0  # the same scene in millimetres instead of metres
+    pixels, fused, counts = model.fuse_scene(points, params, confidence, scale)
+    pixels_mm, fused_mm, counts_mm = model.fuse_scene(points * unit, params, confidence, scale * unit)
+    assert counts == counts_mm and counts.voxels < counts.pixels
+    for a, b in ((pixels, pixels_mm), (fused, fused_mm)):
+        torch.testing.assert_close(b.means, a.means * unit)
+        torch.testing.assert_close(b.scales, a.scales * unit)
+        for name in ("quats", "opacities", "sh"):
+            torch.testing.assert_close(getattr(b, name), getattr(a, name))

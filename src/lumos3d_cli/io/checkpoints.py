@@ -198,25 +198,34 @@ def _anysplat_preset(path: Path, base: ModelPreset, shapes: dict[str, tuple[int,
     return dataclasses.replace(base, sh_degree=degree, gaussian_head_hidden=hidden)
 
 
-def _interpret(path: Path, keys_shapes: dict[str, tuple[int, ...]], metadata: dict[str, str], preset: ModelPreset | None):
-    """-> (format, preset, provenance, {file key: our name}, ignored keys, fresh modules)."""
-    file_format = _detect_format(path, list(keys_shapes), metadata)
-    names = {key: _our_name(file_format, key) for key in keys_shapes}
+@dataclass
+class _Layout:
+    """How a file's keys map onto our network (everything but the tensor data)."""
+
+    format: str
+    preset: ModelPreset
+    provenance: dict
+    names: dict[str, str]  # file key -> our parameter name
+    ignored: list[str]
+    fresh_modules: list[str]
+
+
+def _interpret(path: Path, shapes: dict[str, tuple[int, ...]], metadata: dict[str, str], preset: ModelPreset | None) -> _Layout:
+    file_format = _detect_format(path, list(shapes), metadata)
+    names = {key: _our_name(file_format, key) for key in shapes}
     ignored = sorted(key for key, name in names.items() if name is None)
     names = {key: name for key, name in names.items() if name is not None}
-    fresh: list[str] = []
     if file_format == FORMAT_LUMOS3D:
         if preset is not None:
             raise InputError(f"{path}: is a Lumos3D checkpoint and carries its own preset; do not pass one")
         preset, provenance = _our_config(path, metadata)
-        return file_format, preset, provenance, names, ignored, fresh
+        return _Layout(file_format, preset, provenance, names, ignored, [])
     preset = preset or get_preset(OFFICIAL_PRESET)
     provenance = {"source": f"{'VGGT' if file_format == FORMAT_VGGT else 'AnySplat'} checkpoint", "file": path.name}
     if file_format == FORMAT_ANYSPLAT:
-        preset = _anysplat_preset(path, preset, {names[k]: s for k, s in keys_shapes.items() if k in names})
-    else:
-        fresh = ["gaussian_head"]
-    return file_format, preset, provenance, names, ignored, fresh
+        preset = _anysplat_preset(path, preset, {names[k]: s for k, s in shapes.items() if k in names})
+        return _Layout(file_format, preset, provenance, names, ignored, [])
+    return _Layout(file_format, preset, provenance, names, ignored, ["gaussian_head"])
 
 
 def read_checkpoint(path: Path | str, preset: ModelPreset | None = None) -> Checkpoint:
@@ -231,16 +240,15 @@ def read_checkpoint(path: Path | str, preset: ModelPreset | None = None) -> Chec
             raise InputError(f"{path}: cannot read as safetensors ({error})") from None
     else:
         metadata, raw = {}, _load_torch_state_dict(path)
-    file_format, preset, provenance, names, ignored, fresh = _interpret(
-        path, {k: tuple(v.shape) for k, v in raw.items()}, metadata, preset
-    )
+    layout = _interpret(path, {k: tuple(v.shape) for k, v in raw.items()}, metadata, preset)
     tensors = {}
-    for key, name in names.items():
+    for key, name in layout.names.items():
         tensor = raw[key]
         tensors[name] = tensor.float() if tensor.is_floating_point() and tensor.dtype != torch.float32 else tensor
-    if ignored:
-        logger.info("%s: ignored %d tensors not used by Lumos3D (%s)", path.name, len(ignored), ", ".join(sorted({k.split(".")[0] for k in ignored})))
-    return Checkpoint(path, file_format, preset, tensors, provenance, ignored, fresh)
+    if layout.ignored:
+        modules = ", ".join(sorted({k.split(".")[0] for k in layout.ignored}))
+        logger.info("%s: ignored %d tensors not used by Lumos3D (%s)", path.name, len(layout.ignored), modules)
+    return Checkpoint(path, layout.format, layout.preset, tensors, layout.provenance, layout.ignored, layout.fresh_modules)
 
 
 def _header(path: Path) -> tuple[dict[str, tuple[int, ...]], Counter, dict[str, str]]:
@@ -263,24 +271,24 @@ def summarize_checkpoint(path: Path | str) -> dict:
     `lumos3d info`); reads only the header of safetensors files."""
     path = _resolve_file(Path(path))
     shapes, dtypes, metadata = _header(path)
-    file_format, preset, provenance, names, ignored, fresh = _interpret(path, shapes, metadata, None)
-    used = {name: shapes[key] for key, name in names.items()}
+    layout = _interpret(path, shapes, metadata, None)
+    used = {name: shapes[key] for key, name in layout.names.items()}
     modules = Counter(name.split(".")[0] for name in used)
     parameters = sum(int(torch.Size(shape).numel()) for shape in used.values())
     return {
         "kind": "checkpoint",
         "path": str(path),
         "file_bytes": path.stat().st_size,
-        "format": file_format,
-        "preset": preset.name,
-        "sh_degree": preset.sh_degree,
-        "voxel_size": preset.voxel_size,
-        "image_size": preset.image_size,
+        "format": layout.format,
+        "preset": layout.preset.name,
+        "sh_degree": layout.preset.sh_degree,
+        "voxel_size": layout.preset.voxel_size,
+        "image_size": layout.preset.image_size,
         "parameters": parameters,
         "tensors": len(used),
         "modules": dict(sorted(modules.items())),
         "dtypes": dict(sorted(dtypes.items())),
-        "ignored_tensors": len(ignored),
-        "fresh_modules": fresh,
-        "provenance": provenance,
+        "ignored_tensors": len(layout.ignored),
+        "fresh_modules": layout.fresh_modules,
+        "provenance": layout.provenance,
     }

@@ -20,7 +20,7 @@ from lumos3d_cli.model.heads.dpt import DepthHead
 from lumos3d_cli.model.heads.gaussian import GaussianHead
 from lumos3d_cli.model.pose_encoding import decode_pose
 from lumos3d_cli.model.preprocess import PreparedImages, prepare_images
-from lumos3d_cli.model.presets import ModelPreset, get_preset
+from lumos3d_cli.model.presets import DEFAULT_PRESET, ModelPreset, get_preset
 from lumos3d_cli.model.voxelize import voxelize
 
 logger = logging.getLogger(__name__)
@@ -116,6 +116,19 @@ class Lumos3D(nn.Module):
             )
         require_finite("model input images", images)
 
+    def fuse_scene(
+        self, points: torch.Tensor, params: torch.Tensor, confidence: torch.Tensor, scale: torch.Tensor
+    ) -> tuple[Gaussians, Gaussians, GaussianCounts]:
+        """One scene: points [V, H, W, 3], raw parameters [V, H, W, K-1], confidence [V, H, W],
+        scene scale -> (pixel Gaussians, fused and pruned Gaussians, counts)."""
+        points = points.reshape(-1, 3)
+        params = params.reshape(points.shape[0], -1)
+        pixels = activate_gaussians(points, params, scale, self.preset)
+        fused = voxelize(points, params, confidence.reshape(-1), self.preset.voxel_size * scale)
+        voxels = activate_gaussians(fused.points, fused.features, scale, self.preset)
+        keep = voxels.opacities >= self.preset.opacity_threshold
+        return pixels, voxels.select(keep), GaussianCounts(points.shape[0], len(fused), int((~keep).sum()))
+
     def forward(self, images: torch.Tensor) -> Lumos3DOutput:
         """images [B, V, 3, H, W] in [0, 1], H and W multiples of the patch size -> Lumos3DOutput.
 
@@ -123,7 +136,7 @@ class Lumos3D(nn.Module):
         in float32, as in VGGT.
         """
         self._check_images(images)
-        batch, views, _, height, width = images.shape
+        batch, _, _, height, width = images.shape
         tokens = self.aggregator(images, self.token_layers)
         with torch.autocast(images.device.type, enabled=False):
             tokens = {layer: t.float() for layer, t in tokens.items()}
@@ -131,21 +144,13 @@ class Lumos3D(nn.Module):
             pose_enc_list = self.camera_head(tokens[self.preset.depth - 1])
             depth, depth_conf = self.depth_head(tokens, images)
             raw = self.gaussian_head(tokens, images)  # [B, V, K, H, W]
-            del tokens
+            del tokens  # the layer tokens are the largest tensors; free them before fusion
             extrinsics, intrinsics = decode_pose(pose_enc_list[-1], (height, width))
             world_points = unproject_depth(depth, extrinsics, intrinsics)
             scales = scene_scale(depth)
             params, confidence = split_confidence(raw.permute(0, 1, 3, 4, 2))  # [B, V, H, W, K-1], [B, V, H, W]
-            pixel_gaussians, gaussians, counts = [], [], []
-            for scene in range(batch):
-                points = world_points[scene].reshape(-1, 3)
-                scene_params = params[scene].reshape(points.shape[0], -1)
-                pixel_gaussians.append(activate_gaussians(points, scene_params, scales[scene], self.preset))
-                fused = voxelize(points, scene_params, confidence[scene].reshape(-1), self.preset.voxel_size * scales[scene])
-                voxel_gaussians = activate_gaussians(fused.points, fused.features, scales[scene], self.preset)
-                keep = voxel_gaussians.opacities >= self.preset.opacity_threshold
-                gaussians.append(voxel_gaussians.select(keep))
-                counts.append(GaussianCounts(points.shape[0], len(fused), int((~keep).sum())))
+            scenes = [self.fuse_scene(world_points[b], params[b], confidence[b], scales[b]) for b in range(batch)]
+        pixel_gaussians, gaussians, counts = (list(column) for column in zip(*scenes))
         output = Lumos3DOutput(
             pose_enc=pose_enc_list[-1], pose_enc_list=pose_enc_list, extrinsics=extrinsics, intrinsics=intrinsics,
             depth=depth, depth_conf=depth_conf, world_points=world_points, pixel_confidence=confidence,
@@ -165,7 +170,7 @@ def _require_finite_output(output: Lumos3DOutput) -> None:
         gaussians.require_finite(f"model output pixel_gaussians[{scene}]")
 
 
-def build_model(preset: str | ModelPreset = "tiny", seed: int | None = None) -> Lumos3D:
+def build_model(preset: str | ModelPreset = DEFAULT_PRESET, seed: int | None = None) -> Lumos3D:
     """A network with **random** weights (for training, tests and benchmarks — not inference;
     use `load_model` for trained weights). `seed` makes the initialisation reproducible."""
     preset = get_preset(preset) if isinstance(preset, str) else preset
