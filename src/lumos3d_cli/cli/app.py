@@ -7,7 +7,7 @@ import sys
 import typer
 
 from lumos3d_cli import __version__
-from lumos3d_cli.cli import degrade, info, render, train
+from lumos3d_cli.cli import degrade, eval, info, render, restore, train
 from lumos3d_cli.cli.console import configure_logging, state, stderr_console
 from lumos3d_cli.errors import InputError, RunError
 
@@ -51,6 +51,8 @@ def global_options(
 
 
 app.command("degrade", epilog=degrade.EXAMPLES, rich_help_panel="Data")(degrade.degrade_command)
+app.command("restore", epilog=restore.EXAMPLES, rich_help_panel="Scenes")(restore.restore_command)
+app.command("eval", epilog=eval.EXAMPLES, rich_help_panel="Scenes")(eval.eval_command)
 app.command("train", epilog=train.EXAMPLES, rich_help_panel="Models", context_settings={"allow_extra_args": False})(train.train_command)
 app.command("render", epilog=render.EXAMPLES, rich_help_panel="Scenes")(render.render_command)
 app.command("info", epilog=info.EXAMPLES, rich_help_panel="Inspect")(info.info_command)

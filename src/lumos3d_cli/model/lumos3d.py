@@ -117,20 +117,33 @@ class Lumos3D(nn.Module):
         require_finite("model input images", images)
 
     def fuse_scene(
-        self, points: torch.Tensor, params: torch.Tensor, confidence: torch.Tensor, scale: torch.Tensor
+        self, points: torch.Tensor, params: torch.Tensor, confidence: torch.Tensor, scale: torch.Tensor,
+        voxel_size: float | None = None, fuse_views: torch.Tensor | None = None,
     ) -> tuple[Gaussians, Gaussians, GaussianCounts]:
         """One scene: points [V, H, W, 3], raw parameters [V, H, W, K-1], confidence [V, H, W],
-        scene scale -> (pixel Gaussians, fused and pruned Gaussians, counts)."""
+        scene scale -> (pixel Gaussians, fused and pruned Gaussians, counts).
+
+        voxel_size overrides the preset's (relative to the scene scale); fuse_views [V] bool keeps
+        only those views' pixel Gaussians in the fused scene (the others still shaped the cameras
+        and depth; evaluation's holdout protocol uses this)."""
+        if fuse_views is not None:
+            if not bool(fuse_views.any()):
+                raise ValueError("fuse_views selects no view")
+            points, params, confidence = points[fuse_views], params[fuse_views], confidence[fuse_views]
         points = points.reshape(-1, 3)
         params = params.reshape(points.shape[0], -1)
+        relative = self.preset.voxel_size if voxel_size is None else voxel_size
         pixels = activate_gaussians(points, params, scale, self.preset)
-        fused = voxelize(points, params, confidence.reshape(-1), self.preset.voxel_size * scale)
+        fused = voxelize(points, params, confidence.reshape(-1), relative * scale)
         voxels = activate_gaussians(fused.points, fused.features, scale, self.preset)
         keep = voxels.opacities >= self.preset.opacity_threshold
         return pixels, voxels.select(keep), GaussianCounts(points.shape[0], len(fused), int((~keep).sum()))
 
-    def forward(self, images: torch.Tensor) -> Lumos3DOutput:
+    def forward(
+        self, images: torch.Tensor, voxel_size: float | None = None, fuse_views: torch.Tensor | None = None
+    ) -> Lumos3DOutput:
         """images [B, V, 3, H, W] in [0, 1], H and W multiples of the patch size -> Lumos3DOutput.
+        `voxel_size` and `fuse_views` [V] bool are passed to `fuse_scene`.
 
         The aggregator follows any enclosing autocast (e.g. bf16); the heads and all geometry run
         in float32, as in VGGT.
@@ -149,7 +162,10 @@ class Lumos3D(nn.Module):
             world_points = unproject_depth(depth, extrinsics, intrinsics)
             scales = scene_scale(depth)
             params, confidence = split_confidence(raw.permute(0, 1, 3, 4, 2))  # [B, V, H, W, K-1], [B, V, H, W]
-            scenes = [self.fuse_scene(world_points[b], params[b], confidence[b], scales[b]) for b in range(batch)]
+            scenes = [
+                self.fuse_scene(world_points[b], params[b], confidence[b], scales[b], voxel_size, fuse_views)
+                for b in range(batch)
+            ]
         pixel_gaussians, gaussians, counts = (list(column) for column in zip(*scenes))
         output = Lumos3DOutput(
             pose_enc=pose_enc_list[-1], pose_enc_list=pose_enc_list, extrinsics=extrinsics, intrinsics=intrinsics,

@@ -1,0 +1,1 @@
+"""End-to-end jobs: photos -> restored scene (restore) and the LOM evaluation protocol."""

@@ -1,0 +1,37 @@
+"""Speed/accuracy presets of `lumos3d restore` and `lumos3d eval`: how many views the network
+sees, at which resolution (relative to the model's), the SH degree written and rendered, and
+the voxel size (relative to the model's)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from lumos3d_cli.errors import InputError
+
+
+@dataclass(frozen=True)
+class RestorePreset:
+    name: str
+    max_views: int
+    resolution: float  # multiplier of the model preset's image size
+    sh_degree: int | None  # None: the model's full degree
+    voxel_scale: float  # multiplier of the model preset's voxel size
+
+    def network_image_size(self, model_image_size: int, patch_size: int) -> int:
+        """The longer network side: a patch multiple, at least one patch."""
+        return max(patch_size, round(model_image_size * self.resolution / patch_size) * patch_size)
+
+
+RESTORE_PRESETS = {
+    "fast": RestorePreset("fast", max_views=8, resolution=0.75, sh_degree=0, voxel_scale=2.0),
+    "balanced": RestorePreset("balanced", max_views=16, resolution=1.0, sh_degree=None, voxel_scale=1.0),
+    "best": RestorePreset("best", max_views=32, resolution=1.25, sh_degree=None, voxel_scale=0.5),
+}
+DEFAULT_RESTORE_PRESET = "balanced"
+
+
+def get_restore_preset(name: str) -> RestorePreset:
+    try:
+        return RESTORE_PRESETS[name]
+    except KeyError:
+        raise InputError(f"--preset {name!r}: use one of {', '.join(RESTORE_PRESETS)}") from None
