@@ -1,0 +1,54 @@
+import csv
+import json
+
+import cv2
+import numpy as np
+
+
+def _expect_error(result, *fragments):
+    assert result.code == 2, (result.code, result.err)
+    for fragment in fragments:
+        assert fragment in result.err, result.err
+    assert "Traceback" not in result.err
+
+
+def test_eval_on_buu_writes_the_report(run_cli, buu, tmp_path, random_checkpoint):
+    result = run_cli("eval", buu.parent, "--scenes", "buu", "--checkpoint", random_checkpoint, "--out", tmp_path / "report",
+                     "--max-views", 5)
+    assert result.code == 0, result.err
+    assert "gamma" in result.out and "18.65" in result.out and "mean" in result.out
+    report = json.loads((tmp_path / "report" / "metrics.json").read_text())
+    rows = {(r["scene"], r["method"]): r for r in report["rows"]}
+    assert rows[("buu", "gamma")]["psnr"] == rows[("mean", "gamma")]["psnr"]
+    assert abs(rows[("buu", "gamma")]["ssim"] - 0.870) < 1e-3
+    assert report["frames"]["buu"]["test"] == ["1", "13", "19"] and report["frames"]["buu"]["views_used"] == 5
+    with open(tmp_path / "report" / "metrics.csv") as handle:
+        assert len(list(csv.DictReader(handle))) == 4
+    sheet = cv2.imread(str(tmp_path / "report" / "contact_sheet_buu.png"))
+    assert sheet is not None and sheet.shape[0] > 3 * 200
+
+
+def test_holdout_over_exposure(run_cli, buu, tmp_path, random_checkpoint):
+    result = run_cli("eval", buu, "--mode", "over-exposure", "--protocol", "holdout", "--checkpoint", random_checkpoint,
+                     "--out", tmp_path / "report", "--max-views", 5, "--json")
+    assert result.code == 0, result.err
+    report = json.loads(result.out)
+    assert report["protocol"] == "holdout" and report["mode"] == "over-exposure"
+    gamma = next(r for r in report["rows"] if r["method"] == "gamma")
+    assert abs(gamma["psnr"] - 15.47) < 0.01
+
+
+def test_eval_bad_inputs(run_cli, lom_copy, tmp_path, random_checkpoint):
+    out = tmp_path / "report"
+    (lom_copy / "high" / "13.JPG").unlink()
+    _expect_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out),
+                  "test frame '13' has no normal-light photo in high/")
+    cv2.imwrite(str(lom_copy / "high" / "13.JPG"), np.zeros((100, 120, 3), np.uint8))
+    _expect_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out, "--max-views", 4),
+                  "images have different sizes")
+    _expect_error(run_cli("eval", lom_copy.parent, "--scenes", "bike", "--checkpoint", random_checkpoint, "--out", out),
+                  "no LOM scene(s) bike")
+    _expect_error(run_cli("eval", tmp_path / "nowhere", "--checkpoint", random_checkpoint, "--out", out), "no such folder")
+    _expect_error(run_cli("eval", lom_copy.parent, "--protocol", "novel", "--checkpoint", random_checkpoint, "--out", out),
+                  "--protocol 'novel'")
+    assert not out.exists()
