@@ -22,12 +22,13 @@ state = CliState()
 
 
 def stderr_console() -> Console:
-    """Messages, logs and progress go to stderr so that stdout carries only results (--json)."""
-    return Console(file=sys.stderr, soft_wrap=True)
+    """Messages, logs and progress go to stderr so that stdout carries only results (--json).
+    The console looks up sys.stderr when it writes, so it follows later redirections."""
+    return Console(stderr=True, soft_wrap=True)
 
 
 def stdout_console() -> Console:
-    return Console(file=sys.stdout, soft_wrap=True)
+    return Console(soft_wrap=True)
 
 
 def configure_logging(debug: bool, quiet: bool) -> None:

@@ -1,4 +1,4 @@
-"""`lumos3d info`: summarise a Gaussian scene, a camera file or an image folder."""
+"""`lumos3d info`: summarise a Gaussian scene, a checkpoint, a camera file or an image folder."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from rich.table import Table
 from lumos3d_cli.cli.console import print_json, stdout_console
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.camera_files import find_camera_source
+from lumos3d_cli.io.checkpoints import summarize_checkpoint
 from lumos3d_cli.io.image_files import IMAGE_SUFFIXES, list_images
 from lumos3d_cli.io.summaries import summarize_camera_file, summarize_gaussian_file, summarize_image_files
 
@@ -32,11 +33,13 @@ def collect_summaries(path: Path) -> list[dict]:
         suffix = path.suffix.lower()
         if suffix == ".ply":
             return [summarize_gaussian_file(path)]
+        if suffix in (".safetensors", ".pt", ".pth", ".bin"):
+            return [summarize_checkpoint(path)]
         if suffix in IMAGE_SUFFIXES:
             return [summarize_image_files([path])]
         if find_camera_source(path) is not None:
             return [summarize_camera_file(path)]
-        raise InputError(f"{path}: cannot summarise '{path.suffix}' files; pass a .ply, camera file, image or folder")
+        raise InputError(f"{path}: cannot summarise '{path.suffix}' files; pass a .ply, checkpoint, camera file, image or folder")
     summaries = []
     if _has_images(path):
         summaries.append(summarize_image_files(list_images(path)))
@@ -60,10 +63,10 @@ def _format(value) -> str:
 
 
 def info_command(
-    path: Path = typer.Argument(..., help="A .ply scene, a camera file or COLMAP folder, an image or a folder."),
+    path: Path = typer.Argument(..., help="A .ply scene, a checkpoint, a camera file or COLMAP folder, an image or a folder."),
     json_output: bool = typer.Option(False, "--json", help="Print the summary as JSON on stdout."),
 ) -> None:
-    """Summarise a Gaussian scene, cameras or images."""
+    """Summarise a Gaussian scene, a model checkpoint, cameras or images."""
     summaries = collect_summaries(path)
     if json_output:
         print_json(summaries[0] if len(summaries) == 1 else {"path": str(path), "summaries": summaries})
