@@ -18,11 +18,15 @@ from lumos3d_cli.render.kernels.rasterize import (
 from lumos3d_cli.render.settings import RasterSettings
 
 _CHUNKS_PER_THREAD = 8
+# Below this many (Gaussians + pixels) one thread is faster than waking the others.
+_SMALL_PROBLEM = 20_000
 
 
-def _use_torch_thread_count() -> None:
-    """Run numba with torch's thread count (capped by NUMBA_NUM_THREADS)."""
-    numba.set_num_threads(max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS)))
+def _use_torch_thread_count(gaussians: int, pixels: int) -> None:
+    """Run numba with torch's thread count (capped by NUMBA_NUM_THREADS), or one thread for
+    problems too small to gain from more."""
+    threads = max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(1 if gaussians + pixels < _SMALL_PROBLEM else threads)
 
 
 def _array(tensor: torch.Tensor) -> np.ndarray:
@@ -37,7 +41,7 @@ class RasterizeGaussians(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
-        _use_torch_thread_count()
+        _use_torch_thread_count(means.shape[0], settings.width * settings.height)
         dtype = means.dtype
         numpy_dtype = np.float64 if dtype == torch.float64 else np.float32
         n = means.shape[0]
@@ -81,9 +85,9 @@ class RasterizeGaussians(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, v_colour, v_alpha, v_depth, _v_radii):
-        _use_torch_thread_count()
         means, quats, scales, opacities, sh = ctx.saved_tensors
         settings: RasterSettings = ctx.settings
+        _use_torch_thread_count(means.shape[0], settings.width * settings.height)
         means2d, conics, depths, opacities_eff, colours, radii = ctx.projected
         tile_offsets, entries, tiles_x = ctx.tiles
         transmittance, last = ctx.pixels
