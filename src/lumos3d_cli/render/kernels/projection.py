@@ -76,21 +76,37 @@ def _camera_space(means, i, viewmat):
 
 
 @njit(cache=True)
-def _covariances(rq, scales, i, viewmat, cov, cov_c):
+def _conjugate(rotation, matrix, out, scratch):
+    """out = rotation @ matrix @ rotation^T (3x3)."""
+    for r in range(3):
+        for c in range(3):
+            scratch[r, c] = rotation[r, 0] * matrix[0, c] + rotation[r, 1] * matrix[1, c] + rotation[r, 2] * matrix[2, c]
+    for r in range(3):
+        for c in range(3):
+            out[r, c] = scratch[r, 0] * rotation[c, 0] + scratch[r, 1] * rotation[c, 1] + scratch[r, 2] * rotation[c, 2]
+
+
+@njit(cache=True)
+def _conjugate_transposed(rotation, matrix, out, scratch):
+    """out = rotation^T @ matrix @ rotation (3x3)."""
+    for r in range(3):
+        for c in range(3):
+            scratch[r, c] = rotation[0, r] * matrix[0, c] + rotation[1, r] * matrix[1, c] + rotation[2, r] * matrix[2, c]
+    for r in range(3):
+        for c in range(3):
+            out[r, c] = scratch[r, 0] * rotation[0, c] + scratch[r, 1] * rotation[1, c] + scratch[r, 2] * rotation[2, c]
+
+
+@njit(cache=True)
+def _covariances(rq, scales, i, viewmat, cov, cov_c, scratch):
     """cov = R_q S^2 R_q^T (world) and cov_c = R_view cov R_view^T (camera), both [3,3]."""
+    s0 = float(scales[i, 0]) ** 2
+    s1 = float(scales[i, 1]) ** 2
+    s2 = float(scales[i, 2]) ** 2
     for r in range(3):
         for c in range(3):
-            value = 0.0
-            for k in range(3):
-                value += rq[r, k] * rq[c, k] * float(scales[i, k]) ** 2
-            cov[r, c] = value
-    for r in range(3):
-        for c in range(3):
-            value = 0.0
-            for a in range(3):
-                for b in range(3):
-                    value += viewmat[r, a] * cov[a, b] * viewmat[c, b]
-            cov_c[r, c] = value
+            cov[r, c] = rq[r, 0] * rq[c, 0] * s0 + rq[r, 1] * rq[c, 1] * s1 + rq[r, 2] * rq[c, 2] * s2
+    _conjugate(viewmat, cov, cov_c, scratch)
 
 
 @njit(cache=True)
@@ -123,6 +139,7 @@ def _cov2d(cov_c, j00, j02, j11, j12):
 def _project_one(
     i, means, quats, scales, opacities, sh, viewmat, campos, fx, fy, cx, cy, width, height, sh_degree,
     near, far, eps2d, antialiased, means2d, conics, depths, opacities_eff, colours, radii, q, rq, cov, cov_c, basis,
+    scratch,
 ):
     radii[i, 0] = 0
     radii[i, 1] = 0
@@ -131,7 +148,7 @@ def _project_one(
         return
     _unit_quaternion(quats, i, q)
     _rotation(q, rq)
-    _covariances(rq, scales, i, viewmat, cov, cov_c)
+    _covariances(rq, scales, i, viewmat, cov, cov_c, scratch)
     tx, ty, _, _ = _clamped_xy(x, y, z, fx, fy, cx, cy, width, height)
     a, b, c = _cov2d(cov_c, fx / z, -fx * tx / (z * z), fy / z, -fy * ty / (z * z))
     det_original = a * c - b * b
@@ -190,11 +207,12 @@ def project_forward(
         cov = np.empty((3, 3))
         cov_c = np.empty((3, 3))
         basis = np.empty((sh_degree + 1) * (sh_degree + 1))
+        scratch = np.empty((3, 3))
         for i in range(chunk * _CHUNK, min(n, (chunk + 1) * _CHUNK)):
             _project_one(
                 i, means, quats, scales, opacities, sh, viewmat, campos, fx, fy, cx, cy, width, height, sh_degree,
                 near, far, eps2d, antialiased, means2d, conics, depths, opacities_eff, colours, radii,
-                q, rq, cov, cov_c, basis,
+                q, rq, cov, cov_c, basis, scratch,
             )
 
 
@@ -207,7 +225,7 @@ def _project_one_backward(
     x, y, z = _camera_space(means, i, viewmat)
     qnorm = _unit_quaternion(quats, i, q)
     _rotation(q, rq)
-    _covariances(rq, scales, i, viewmat, cov, cov_c)
+    _covariances(rq, scales, i, viewmat, cov, cov_c, scratch)
     tx, ty, clamped_x, clamped_y = _clamped_xy(x, y, z, fx, fy, cx, cy, width, height)
     j00, j02, j11, j12 = fx / z, -fx * tx / (z * z), fy / z, -fy * ty / (z * z)
     a0, b, c0 = _cov2d(cov_c, j00, j02, j11, j12)
@@ -310,16 +328,12 @@ def _project_one_backward(
 
     # World covariance: v_cov = R_view^T v_cov_c R_view; cov = M M^T with M = R_q diag(s).
     v_cov = cov_c  # reuse: cov_c is not needed any more
+    _conjugate_transposed(viewmat, v_cov_c, v_cov, scratch)
     for r in range(3):
-        for col in range(3):
-            value = 0.0
-            for p in range(3):
-                for t in range(3):
-                    value += viewmat[p, r] * v_cov_c[p, t] * viewmat[t, col]
-            scratch[r, col] = value
-    for r in range(3):
-        for col in range(3):
-            v_cov[r, col] = scratch[r, col] + scratch[col, r]  # (v_cov + v_cov^T), used as v_M = (.) M
+        for col in range(r, 3):
+            symmetric = v_cov[r, col] + v_cov[col, r]  # (v_cov + v_cov^T), used as v_M = (.) M
+            v_cov[r, col] = symmetric
+            v_cov[col, r] = symmetric
     v_rq = scratch
     for col in range(3):
         s = float(scales[i, col])

@@ -43,11 +43,11 @@ def rasterize_forward(
         x_end = min(x0 + TILE_SIZE, width)
         y_end = min(y0 + TILE_SIZE, height)
         pixel_count = (x_end - x0) * (y_end - y0)
+        # A finished pixel stores its transmittance negated: one load tells both.
         transmittance = np.ones(_PIXELS)
         colour = np.zeros((_PIXELS, 3))
         depth = np.zeros(_PIXELS)
         last = np.full(_PIXELS, -1, dtype=np.int64)
-        done = np.zeros(_PIXELS, dtype=np.bool_)
         finished = 0
         for e in range(tile_offsets[tile], tile_offsets[tile + 1]):
             if finished == pixel_count:
@@ -69,7 +69,8 @@ def rasterize_forward(
                 dy = v - (i + 0.5)
                 for j in range(j0, j1):
                     p = (i - y0) * TILE_SIZE + (j - x0)
-                    if done[p]:
+                    t = transmittance[p]
+                    if t < 0.0:
                         continue
                     dx = u - (j + 0.5)
                     sigma = 0.5 * (ca * dx * dx + cc * dy * dy) + cb * dx * dy
@@ -78,12 +79,12 @@ def rasterize_forward(
                     alpha = min(MAX_ALPHA, opacity * math.exp(-sigma))
                     if alpha < ALPHA_THRESHOLD:
                         continue
-                    next_t = transmittance[p] * (1.0 - alpha)
+                    next_t = t * (1.0 - alpha)
                     if next_t <= TRANSMITTANCE_THRESHOLD:
-                        done[p] = True
+                        transmittance[p] = -t
                         finished += 1
                         continue
-                    weight = alpha * transmittance[p]
+                    weight = alpha * t
                     colour[p, 0] += weight * r
                     colour[p, 1] += weight * gr
                     colour[p, 2] += weight * b
@@ -97,7 +98,7 @@ def rasterize_forward(
                 out_colour[i, j, 1] = colour[p, 1]
                 out_colour[i, j, 2] = colour[p, 2]
                 out_depth[i, j] = depth[p]
-                out_transmittance[i, j] = transmittance[p]
+                out_transmittance[i, j] = abs(transmittance[p])
                 out_last[i, j] = last[p]
 
 
