@@ -14,6 +14,7 @@ from lumos3d_cli import __version__
 from lumos3d_cli.io.ply import write_ply
 
 from factories import random_gaussians
+from assertions import expect_input_error
 
 
 def test_help_lists_every_command_with_examples(run_cli):
@@ -77,15 +78,6 @@ def test_degrade_single_file_and_raw(run_cli, shared_data, tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dark.png"]
 
 
-def _expect_error(result, *fragments):
-    assert result.code == 2, (result.code, result.err)
-    line = result.err.strip().splitlines()[-1]
-    assert line.startswith("error:"), result.err
-    for fragment in fragments:
-        assert fragment in result.err, result.err
-    assert "Traceback" not in result.err
-
-
 def _write_exr_with_nan(path):
     pixels = np.ones((4, 4, 3), np.float32)
     pixels[1, 2, 0] = np.nan
@@ -113,7 +105,7 @@ def test_degrade_bad_inputs(run_cli, tmp_path, make, fragments):
     make(bad)
     target = next(bad.iterdir())
     result = run_cli("degrade", target, "-o", tmp_path / "out")
-    _expect_error(result, *fragments)
+    expect_input_error(result, *fragments)
     assert not (tmp_path / "out").exists()
 
 
@@ -122,17 +114,17 @@ def test_degrade_corrupt_jpeg_among_good_ones_leaves_no_partial_output(run_cli, 
     data = (inputs / "1.JPG").read_bytes()
     (inputs / "99.jpg").write_bytes(data[: len(data) // 3])
     result = run_cli("degrade", inputs, "-o", tmp_path / "out")
-    _expect_error(result, "99.jpg: cannot decode as JPG (corrupt, truncated")
+    expect_input_error(result, "99.jpg: cannot decode as JPG (corrupt, truncated")
     assert not (tmp_path / "out").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
 
 
 def test_degrade_bad_values(run_cli, buu, tmp_path):
     image = buu / "high" / "1.JPG"
-    _expect_error(run_cli("degrade", image, "-o", tmp_path / "o", "--mode", "sunny"), "--mode 'sunny'", "low-light")
-    _expect_error(run_cli("degrade", image, "-o", tmp_path / "o", "--bit-depth", "12"), "--bit-depth 12")
-    _expect_error(run_cli("degrade", image, "-o", tmp_path / "o.jpg", "--bit-depth", "16"), "JPEG holds 8 bits only")
-    _expect_error(run_cli("degrade", buu / "high", "-o", tmp_path / "one.png"), "names one file but there are 25 inputs")
+    expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--mode", "sunny"), "--mode 'sunny'", "low-light")
+    expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--bit-depth", "12"), "--bit-depth 12")
+    expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o.jpg", "--bit-depth", "16"), "JPEG holds 8 bits only")
+    expect_input_error(run_cli("degrade", buu / "high", "-o", tmp_path / "one.png"), "names one file but there are 25 inputs")
 
 
 def test_info_on_a_scene_file(run_cli, tmp_path):
@@ -174,13 +166,13 @@ def test_info_on_cameras_images_and_scene_folders(run_cli, shared_data, buu):
 
 
 def test_info_bad_inputs(run_cli, tmp_path):
-    _expect_error(run_cli("info", tmp_path / "missing.ply"), "missing.ply: no such file or folder")
+    expect_input_error(run_cli("info", tmp_path / "missing.ply"), "missing.ply: no such file or folder")
     (tmp_path / "notes.txt").write_text("hi")
-    _expect_error(run_cli("info", tmp_path / "notes.txt"), "cannot summarise '.txt' files")
+    expect_input_error(run_cli("info", tmp_path / "notes.txt"), "cannot summarise '.txt' files")
     (tmp_path / "empty").mkdir()
-    _expect_error(run_cli("info", tmp_path / "empty"), "nothing to summarise")
+    expect_input_error(run_cli("info", tmp_path / "empty"), "nothing to summarise")
     (tmp_path / "broken.ply").write_text("ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\nend_header\n")
-    _expect_error(run_cli("info", tmp_path / "broken.ply"), "missing vertex properties")
+    expect_input_error(run_cli("info", tmp_path / "broken.ply"), "missing vertex properties")
 
 
 def test_console_script_and_debug_traceback(tmp_path):

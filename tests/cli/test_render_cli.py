@@ -10,6 +10,7 @@ from lumos3d_cli.render.camera_paths import orbit_from_gaussians
 from lumos3d_cli.render.render import render
 
 from factories import random_scene
+from assertions import expect_input_error
 
 
 def _scene(tmp_path):
@@ -60,20 +61,15 @@ def test_render_orbit_without_cameras(run_cli, tmp_path):
     assert image.shape == (512, 512, 3) and image.mean() > 1
 
 
-def _expect_error(result, fragment):
-    assert result.code == 2, (result.code, result.err)
-    assert fragment in result.err and "Traceback" not in result.err
-
-
 def test_render_bad_inputs_leave_nothing(run_cli, tmp_path):
     path, _ = _scene(tmp_path)
     out = tmp_path / "out"
-    _expect_error(run_cli("render", path, "-o", out), "give exactly one of --poses CAMERAS or --orbit N")
-    _expect_error(run_cli("render", path, "-o", out, "--orbit", 3, "--background", "red"), "--background 'red'")
-    _expect_error(run_cli("render", path, "-o", out, "--orbit", 0), "--orbit 0")
-    _expect_error(run_cli("render", path, "-o", out, "--orbit", 3, "--width", 0), "--width 0")
-    _expect_error(run_cli("render", path, "-o", out, "--orbit", 3, "--video", tmp_path / "a.avi"), "must end in .mp4")
-    _expect_error(run_cli("render", path, "-o", out, "--poses", tmp_path / "missing.json"), "missing.json: no such file")
+    expect_input_error(run_cli("render", path, "-o", out), "give exactly one of --poses CAMERAS or --orbit N")
+    expect_input_error(run_cli("render", path, "-o", out, "--orbit", 3, "--background", "red"), "--background 'red'")
+    expect_input_error(run_cli("render", path, "-o", out, "--orbit", 0), "--orbit 0")
+    expect_input_error(run_cli("render", path, "-o", out, "--orbit", 3, "--width", 0), "--width 0")
+    expect_input_error(run_cli("render", path, "-o", out, "--orbit", 3, "--video", tmp_path / "a.avi"), "must end in .mp4")
+    expect_input_error(run_cli("render", path, "-o", out, "--poses", tmp_path / "missing.json"), "missing.json: no such file")
     (tmp_path / "bad.ply").write_text("not a ply")
-    _expect_error(run_cli("render", tmp_path / "bad.ply", "-o", out, "--orbit", 2), "not a PLY file")
+    expect_input_error(run_cli("render", tmp_path / "bad.ply", "-o", out, "--orbit", 2), "not a PLY file")
     assert not out.exists()

@@ -130,7 +130,7 @@ def test_ground_truth_supervision():
 
 def test_trunk_loader_is_strict(tmp_path):
     save_random_trunk("vgg16", tmp_path / "vgg16.pth")
-    with pytest.raises(InputError, match="not a torchvision vgg19 weight file .*missing"):
+    with pytest.raises(InputError, match=r"vgg16.pth \(torchvision vgg19\): does not fit the model; .*missing keys"):
         load_trunk("vgg19", tmp_path / "vgg16.pth")
     with pytest.raises(InputError, match="weight file not found"):
         load_trunk("vgg19", tmp_path / "missing.pth")

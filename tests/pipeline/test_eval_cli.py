@@ -3,13 +3,7 @@ import json
 
 import cv2
 import numpy as np
-
-
-def _expect_error(result, *fragments):
-    assert result.code == 2, (result.code, result.err)
-    for fragment in fragments:
-        assert fragment in result.err, result.err
-    assert "Traceback" not in result.err
+from assertions import expect_input_error
 
 
 def test_eval_on_buu_writes_the_report(run_cli, buu, tmp_path, random_checkpoint):
@@ -41,14 +35,14 @@ def test_holdout_over_exposure(run_cli, buu, tmp_path, random_checkpoint):
 def test_eval_bad_inputs(run_cli, lom_copy, tmp_path, random_checkpoint):
     out = tmp_path / "report"
     (lom_copy / "high" / "13.JPG").unlink()
-    _expect_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out),
+    expect_input_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out),
                   "test frame '13' has no normal-light photo in high/")
     cv2.imwrite(str(lom_copy / "high" / "13.JPG"), np.zeros((100, 120, 3), np.uint8))
-    _expect_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out, "--max-views", 4),
+    expect_input_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out, "--max-views", 4),
                   "images have different sizes")
-    _expect_error(run_cli("eval", lom_copy.parent, "--scenes", "bike", "--checkpoint", random_checkpoint, "--out", out),
+    expect_input_error(run_cli("eval", lom_copy.parent, "--scenes", "bike", "--checkpoint", random_checkpoint, "--out", out),
                   "no LOM scene(s) bike")
-    _expect_error(run_cli("eval", tmp_path / "nowhere", "--checkpoint", random_checkpoint, "--out", out), "no such folder")
-    _expect_error(run_cli("eval", lom_copy.parent, "--protocol", "novel", "--checkpoint", random_checkpoint, "--out", out),
+    expect_input_error(run_cli("eval", tmp_path / "nowhere", "--checkpoint", random_checkpoint, "--out", out), "no such folder")
+    expect_input_error(run_cli("eval", lom_copy.parent, "--protocol", "novel", "--checkpoint", random_checkpoint, "--out", out),
                   "--protocol 'novel'")
     assert not out.exists()

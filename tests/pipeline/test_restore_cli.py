@@ -13,6 +13,7 @@ from lumos3d_cli.io.colmap import read_colmap_model
 from lumos3d_cli.io.images import read_image
 from lumos3d_cli.pipeline import restore as restore_module
 from lumos3d_cli.pipeline.restore import even_subset, resolve_checkpoint
+from assertions import expect_input_error
 
 
 def _copy(buu, tmp_path, names, folder="low"):
@@ -70,31 +71,24 @@ def test_many_views_are_subsampled_evenly(run_cli, buu, tmp_path, random_checkpo
     assert len(even_subset(10, 4, required=[1, 2])) == 4
 
 
-def _expect_error(result, *fragments):
-    assert result.code == 2, (result.code, result.err)
-    for fragment in fragments:
-        assert fragment in result.err, result.err
-    assert "Traceback" not in result.err
-
-
 def test_restore_bad_inputs_leave_nothing(run_cli, buu, tmp_path, random_checkpoint):
     out = tmp_path / "out" / "scene.ply"
     empty = tmp_path / "empty"
     empty.mkdir()
-    _expect_error(run_cli("restore", empty, "-o", out, "--checkpoint", random_checkpoint), "folder holds no images")
+    expect_input_error(run_cli("restore", empty, "-o", out, "--checkpoint", random_checkpoint), "folder holds no images")
     photos = _copy(buu, tmp_path, ["1.JPG", "2.JPG"])
     data = (buu / "low" / "3.JPG").read_bytes()
     (photos / "3.JPG").write_bytes(data[: len(data) // 2])
-    _expect_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint), "3.JPG: cannot decode as JPG")
+    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint), "3.JPG: cannot decode as JPG")
     (photos / "3.JPG").unlink()
-    _expect_error(run_cli("restore", photos, "-o", tmp_path / "o.obj", "--checkpoint", random_checkpoint), "must end in .ply")
-    _expect_error(run_cli("restore", photos, "-o", out, "--checkpoint", tmp_path / "none.safetensors"), "none.safetensors: no such")
-    _expect_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--preset", "ultra"), "--preset 'ultra'")
+    expect_input_error(run_cli("restore", photos, "-o", tmp_path / "o.obj", "--checkpoint", random_checkpoint), "must end in .ply")
+    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", tmp_path / "none.safetensors"), "none.safetensors: no such")
+    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--preset", "ultra"), "--preset 'ultra'")
     small = tmp_path / "small"
     small.mkdir()
     for name in ("1", "2"):
         cv2.imwrite(str(small / f"{name}.png"), np.zeros((10, 10, 3), np.uint8))
-    _expect_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--reference", small),
+    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--reference", small),
                   "images are 10x10, the inputs 500x375")
     assert not (tmp_path / "out").exists()
 

@@ -17,7 +17,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import pickle
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +28,7 @@ from safetensors.torch import load_file, save_file
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import atomic_path
+from lumos3d_cli.io.state_dicts import listing, load_torch_state_dict
 from lumos3d_cli.model.presets import ModelPreset, get_preset
 
 if TYPE_CHECKING:
@@ -45,7 +45,6 @@ OFFICIAL_PRESET = "vggt-1b"
 TORCH_SUFFIXES = (".pt", ".pth", ".bin")
 # Files looked for, in order, when a folder (e.g. a Hugging Face snapshot) is given.
 FOLDER_FILES = ("model.safetensors", "model.pt", "pytorch_model.bin")
-_SHOWN_KEYS = 10
 _GAUSSIAN_OUTPUT = "gaussian_head.scratch.output_conv2.2.weight"
 
 
@@ -70,32 +69,6 @@ class Checkpoint:
 def bundled_weights_path(preset_name: str) -> Path:
     """Where the packaged weights of a preset live: lumos3d_cli/weights/<preset>.safetensors."""
     return Path(__file__).resolve().parents[1] / "weights" / f"{preset_name}.safetensors"
-
-
-def _listing(names: list[str]) -> str:
-    shown = ", ".join(names[:_SHOWN_KEYS])
-    return shown + (f" ... and {len(names) - _SHOWN_KEYS} more" if len(names) > _SHOWN_KEYS else "")
-
-
-def check_tensors(expected: dict[str, tuple[int, ...]], tensors: dict[str, torch.Tensor], source: str) -> None:
-    """Strict check: the same key set and every shape equal; else InputError listing the
-    missing, unexpected and mis-shaped keys (at most 10 of each)."""
-    missing = sorted(set(expected) - set(tensors))
-    unexpected = sorted(set(tensors) - set(expected))
-    mismatched = sorted(
-        f"{key} (file {tuple(tensors[key].shape)}, model {tuple(expected[key])})"
-        for key in set(expected) & set(tensors)
-        if tuple(tensors[key].shape) != tuple(expected[key])
-    )
-    problems = []
-    if missing:
-        problems.append(f"{len(missing)} missing keys: {_listing(missing)}")
-    if unexpected:
-        problems.append(f"{len(unexpected)} unexpected keys: {_listing(unexpected)}")
-    if mismatched:
-        problems.append(f"{len(mismatched)} keys of the wrong shape: {_listing(mismatched)}")
-    if problems:
-        raise InputError(f"{source}: does not fit the model; " + "; ".join(problems))
 
 
 def save_checkpoint(model: Lumos3D, path: Path | str, provenance: dict | None = None) -> Path:
@@ -124,24 +97,6 @@ def _resolve_file(path: Path) -> Path:
     return path
 
 
-def _load_torch_state_dict(path: Path) -> dict[str, torch.Tensor]:
-    try:
-        try:
-            loaded = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
-        except RuntimeError:
-            # Files saved with the legacy (non-zip) serialisation cannot be memory-mapped.
-            loaded = torch.load(path, map_location="cpu", weights_only=True)
-    except pickle.UnpicklingError as error:
-        raise InputError(f"{path}: holds objects other than tensors; refusing to unpickle them ({error})") from None
-    except (RuntimeError, EOFError, OSError) as error:
-        raise InputError(f"{path}: cannot read as a torch checkpoint ({error})") from None
-    if isinstance(loaded, dict) and isinstance(loaded.get("model"), dict):
-        loaded = loaded["model"]  # training checkpoints wrap the state dict
-    if not isinstance(loaded, dict) or not all(isinstance(v, torch.Tensor) for v in loaded.values()):
-        raise InputError(f"{path}: is not a state dict (a mapping of names to tensors)")
-    return loaded
-
-
 def _read_metadata(path: Path) -> dict[str, str]:
     try:
         with safe_open(str(path), framework="pt") as handle:
@@ -159,7 +114,7 @@ def _detect_format(path: Path, keys: list[str], metadata: dict[str, str]) -> str
         return FORMAT_VGGT
     raise InputError(
         f"{path}: not a Lumos3D, VGGT or AnySplat checkpoint (no lumos3d metadata, no aggregator.* keys; "
-        f"first keys: {_listing(sorted(keys))})"
+        f"first keys: {listing(sorted(keys))})"
     )
 
 
@@ -239,7 +194,7 @@ def read_checkpoint(path: Path | str, preset: ModelPreset | None = None) -> Chec
         except (SafetensorError, OSError) as error:
             raise InputError(f"{path}: cannot read as safetensors ({error})") from None
     else:
-        metadata, raw = {}, _load_torch_state_dict(path)
+        metadata, raw = {}, load_torch_state_dict(path)
     layout = _interpret(path, {k: tuple(v.shape) for k, v in raw.items()}, metadata, preset)
     tensors = {}
     for key, name in layout.names.items():
@@ -262,7 +217,7 @@ def _header(path: Path) -> tuple[dict[str, tuple[int, ...]], Counter, dict[str, 
                 shapes[key] = tuple(piece.get_shape())
                 dtypes[piece.get_dtype()] += 1
         return shapes, dtypes, metadata
-    state = _load_torch_state_dict(path)
+    state = load_torch_state_dict(path)
     return {k: tuple(v.shape) for k, v in state.items()}, Counter(str(v.dtype).removeprefix("torch.") for v in state.values()), {}
 
 

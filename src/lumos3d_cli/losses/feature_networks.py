@@ -10,7 +10,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.state_dicts import check_tensors, read_state_dict
 
 logger = logging.getLogger(__name__)
 
@@ -90,45 +90,14 @@ def build_trunk(name: str) -> FeatureTrunk:
     raise ValueError(f"unknown feature network {name!r}; use vgg16, vgg19 or alexnet")
 
 
-def read_state_dict(path: Path | str) -> dict[str, torch.Tensor]:
-    """A state dict from .safetensors or a torch file (loaded with weights_only=True: no code runs)."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: weight file not found")
-    try:
-        if path.suffix == ".safetensors":
-            from safetensors.torch import load_file
-
-            return load_file(str(path))
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as error:  # noqa: BLE001 - any unreadable file is the user's input problem
-        raise InputError(f"{path}: cannot read weights ({type(error).__name__}: {error})") from error
-    if isinstance(state, dict) and "state_dict" in state and isinstance(state["state_dict"], dict):
-        state = state["state_dict"]
-    if not isinstance(state, dict):
-        raise InputError(f"{path}: not a state dict")
-    return state
-
-
 def load_trunk(name: str, path: Path | str) -> FeatureTrunk:
     """Build the trunk and load `features.*` from a torchvision-layout file (classifier weights,
     if present, are ignored). Missing, unexpected or mis-shaped keys are an InputError."""
     trunk = build_trunk(name)
     state = read_state_dict(path)
     features = {k: v for k, v in state.items() if k.startswith("features.")}
-    expected = {k: v.shape for k, v in trunk.state_dict().items()}
-    missing = sorted(set(expected) - set(features))
-    unexpected = sorted(set(features) - set(expected))
-    wrong = sorted(k for k in set(expected) & set(features) if tuple(features[k].shape) != tuple(expected[k]))
-    if missing or unexpected or wrong:
-        details = []
-        if missing:
-            details.append(f"missing {missing[:6]}{' ...' if len(missing) > 6 else ''}")
-        if unexpected:
-            details.append(f"unexpected {unexpected[:6]}{' ...' if len(unexpected) > 6 else ''}")
-        if wrong:
-            details.append(f"wrong shape {wrong[:6]}")
-        raise InputError(f"{path}: not a torchvision {name} weight file ({'; '.join(details)})")
+    expected = {k: tuple(v.shape) for k, v in trunk.state_dict().items()}
+    check_tensors(expected, features, f"{path} (torchvision {name})")
     trunk.load_state_dict({k: v.float() for k, v in features.items()})
     ignored = len(state) - len(features)
     if ignored:

@@ -14,7 +14,8 @@ import torch
 from torch import nn
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.losses.feature_networks import load_trunk, read_state_dict
+from lumos3d_cli.io.state_dicts import read_state_dict
+from lumos3d_cli.losses.feature_networks import load_trunk
 
 # Input scaling of LPIPS v0.1, applied to images in [-1, 1].
 _SHIFT = (-0.030, -0.088, -0.188)

@@ -12,7 +12,8 @@ from pathlib import Path
 import torch
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.checkpoints import FORMAT_VGGT, Checkpoint, bundled_weights_path, check_tensors, read_checkpoint
+from lumos3d_cli.io.checkpoints import FORMAT_VGGT, Checkpoint, bundled_weights_path, read_checkpoint
+from lumos3d_cli.io.state_dicts import check_tensors
 from lumos3d_cli.model.heads.gaussian import GaussianHead
 from lumos3d_cli.model.lumos3d import Lumos3D
 from lumos3d_cli.model.presets import PRESETS, ModelPreset

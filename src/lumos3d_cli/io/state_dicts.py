@@ -1,0 +1,75 @@
+"""Read weight files safely (safetensors, or torch files with weights_only=True: no pickled code
+runs) and check them strictly against the tensors a network expects."""
+
+from __future__ import annotations
+
+import pickle
+from pathlib import Path
+
+import torch
+
+from lumos3d_cli.errors import InputError
+
+_SHOWN_KEYS = 10  # keys listed per problem in error messages
+
+
+def listing(names: list[str]) -> str:
+    shown = ", ".join(names[:_SHOWN_KEYS])
+    return shown + (f" ... and {len(names) - _SHOWN_KEYS} more" if len(names) > _SHOWN_KEYS else "")
+
+
+def check_tensors(expected: dict[str, tuple[int, ...]], tensors: dict[str, torch.Tensor], source: str) -> None:
+    """Strict check: the same key set and every shape equal; else InputError listing the
+    missing, unexpected and mis-shaped keys (at most 10 of each)."""
+    missing = sorted(set(expected) - set(tensors))
+    unexpected = sorted(set(tensors) - set(expected))
+    mismatched = sorted(
+        f"{key} (file {tuple(tensors[key].shape)}, model {tuple(expected[key])})"
+        for key in set(expected) & set(tensors)
+        if tuple(tensors[key].shape) != tuple(expected[key])
+    )
+    problems = []
+    if missing:
+        problems.append(f"{len(missing)} missing keys: {listing(missing)}")
+    if unexpected:
+        problems.append(f"{len(unexpected)} unexpected keys: {listing(unexpected)}")
+    if mismatched:
+        problems.append(f"{len(mismatched)} keys of the wrong shape: {listing(mismatched)}")
+    if problems:
+        raise InputError(f"{source}: does not fit the model; " + "; ".join(problems))
+
+
+def read_state_dict(path: Path | str) -> dict[str, torch.Tensor]:
+    """A name -> tensor mapping from .safetensors or a torch file (a training checkpoint's
+    "model" or "state_dict" entry is unwrapped). InputError for anything else."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: weight file not found")
+    if path.suffix == ".safetensors":
+        from safetensors import SafetensorError
+        from safetensors.torch import load_file
+
+        try:
+            return load_file(str(path))
+        except (SafetensorError, OSError) as error:
+            raise InputError(f"{path}: cannot read as safetensors ({error})") from None
+    return load_torch_state_dict(path)
+
+
+def load_torch_state_dict(path: Path) -> dict[str, torch.Tensor]:
+    try:
+        try:
+            loaded = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
+        except RuntimeError:
+            # Files saved with the legacy (non-zip) serialisation cannot be memory-mapped.
+            loaded = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as error:
+        raise InputError(f"{path}: holds objects other than tensors; refusing to unpickle them ({error})") from None
+    except (RuntimeError, EOFError, OSError) as error:
+        raise InputError(f"{path}: cannot read as a torch checkpoint ({error})") from None
+    for wrapper in ("model", "state_dict"):  # training checkpoints wrap the state dict
+        if isinstance(loaded, dict) and isinstance(loaded.get(wrapper), dict):
+            loaded = loaded[wrapper]
+    if not isinstance(loaded, dict) or not all(isinstance(v, torch.Tensor) for v in loaded.values()):
+        raise InputError(f"{path}: is not a state dict (a mapping of names to tensors)")
+    return loaded
