@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: test test-slow test-all benchmarks clean
+.PHONY: test test-slow test-all demo benchmarks clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -23,6 +23,16 @@ test-slow: $(STAMP)
 
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -m ''
+
+demo: $(STAMP)
+	$(BIN)/lumos3d restore examples/lowlight-buu -o out/demo/scene.ply
+	@echo "results in out/demo/: scene.ply, cameras.json, restored/, contact_sheet.png, preview.glb, summary.json"
+
+benchmarks: $(STAMP)
+	$(BIN)/python benchmarks/rasterizer.py
+	$(BIN)/python benchmarks/model.py
+	$(BIN)/python benchmarks/train.py
+	$(BIN)/python benchmarks/presets.py
 
 clean:
 	rm -rf $(VENV) build dist src/*.egg-info .pytest_cache
