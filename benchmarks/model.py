@@ -6,6 +6,7 @@ Writes the "model" section of docs/performance.md.
     python benchmarks/model.py                                  # tiny and vggt-1b, 60-minute budget
     python benchmarks/model.py --presets tiny --budget-minutes 3
     python benchmarks/model.py --max-views 4 --cell-limit-seconds 120
+    python benchmarks/model.py --json r.json; python benchmarks/model.py --retry r.json   # redo contended cells
 
 Every cell runs in its own process, so its peak RSS is its own. A cell whose estimated time
 (FLOPs / the rate achieved by the previous cell) exceeds the per-cell limit or the remaining
@@ -205,6 +206,31 @@ def measure(args: argparse.Namespace) -> dict:
     return results
 
 
+def retry_contended(results: dict, args: argparse.Namespace) -> dict:
+    """Run again every measured cell whose process got too little CPU (†), after waiting for an
+    idle machine; keep whichever run got the larger CPU share."""
+    for preset_name, entry in results["presets"].items():
+        for key, cell in entry["cells"].items():
+            if "seconds" not in cell or cell["cpu_share"] >= SHARE_WARNING:
+                continue
+            precision, views = key.split("/")
+            wait_for_idle(args.max_wait_seconds)
+            timeout = max(120.0, 3 * cell["seconds"] * (1 + cell["runs"]) + 120)
+            again = _child(["--cell", preset_name, views, precision, str(cell["runs"])], timeout=timeout)
+            print(f"retry {preset_name} {key}: {again}", file=sys.stderr, flush=True)
+            if again.get("cpu_share", 0.0) > cell["cpu_share"]:
+                again.update(runs=cell["runs"], flops=cell["flops"], estimated_seconds=cell["estimated_seconds"])
+                again["gflops_per_s"] = cell["flops"] / again["seconds"] / 1e9
+                entry["cells"][key] = again
+    for views, cell in results["training"].items():
+        if "seconds" in cell and cell["cpu_share"] < SHARE_WARNING:
+            wait_for_idle(args.max_wait_seconds)
+            again = _child(["--train", str(views), str(args.repeats)], timeout=600)
+            if again.get("cpu_share", 0.0) > cell["cpu_share"]:
+                results["training"][views] = again
+    return results
+
+
 def render(results: dict, args: argparse.Namespace) -> str:
     rates = results["matmul_gflops"]
     lines = [
@@ -279,10 +305,14 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=3, help="timed runs per cell (after one warm-up)")
     parser.add_argument("--json", type=Path, help="also write the raw results here")
     parser.add_argument("--render", type=Path, metavar="JSON", help="measure nothing; render the results of an earlier --json")
+    parser.add_argument("--retry", type=Path, metavar="JSON", help="re-measure the contended (†) cells of an earlier --json")
     parser.add_argument("--no-write", action="store_true", help="print the section instead of writing docs/performance.md")
     args = parser.parse_args()
     if args.render:
         results = json.loads(args.render.read_text())
+    elif args.retry:
+        results = retry_contended(json.loads(args.retry.read_text()), args)
+        args.retry.write_text(json.dumps(results, indent=2) + "\n")
     else:
         results = measure(args)
         if args.json:
