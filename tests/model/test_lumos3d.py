@@ -156,3 +156,46 @@ def test_fusion_does_not_depend_on_the_world_unit(model):
         torch.testing.assert_close(b.scales, a.scales * unit)
         for name in ("quats", "opacities", "sh"):
             torch.testing.assert_close(getattr(b, name), getattr(a, name))
+
+
+def test_fuse_views_keeps_only_the_selected_views(model):
+    images = torch.rand(1, 3, 3, 28, 42, generator=torch.Generator().manual_seed(5))
+    only_first = torch.tensor([True, False, False])
+    with torch.no_grad():
+        full = model(images)
+        held = model(images, fuse_views=only_first)
+    # The cameras and depth still see every view; only the fused scene is restricted.
+    torch.testing.assert_close(held.depth, full.depth)
+    assert held.counts[0].pixels == 28 * 42 < full.counts[0].pixels
+    torch.testing.assert_close(held.pixel_gaussians[0].means, full.world_points[0, 0].reshape(-1, 3))
+    with pytest.raises(ValueError, match="selects no view"):
+        with torch.no_grad():
+            model(images, fuse_views=torch.zeros(3, dtype=torch.bool))
+
+
+def test_voxel_size_override_sets_the_fusion_grain(model):
+    images = torch.rand(1, 2, 3, 28, 42, generator=torch.Generator().manual_seed(6))
+    with torch.no_grad():
+        fine = model(images, voxel_size=1e-9)
+        preset = model(images)
+        coarse = model(images, voxel_size=1e9)
+    # Distinct points never share a voxel of a vanishing size; one huge voxel holds them all.
+    assert fine.counts[0].voxels == fine.counts[0].pixels
+    assert coarse.counts[0].voxels == 1
+    assert coarse.counts[0].voxels <= preset.counts[0].voxels <= fine.counts[0].voxels
+
+
+def test_rendering_the_model_output_reaches_the_weights(model):
+    """The training path: forward -> fused Gaussians -> rasterizer -> loss -> every head's weights."""
+    from lumos3d_cli.render.render import render
+
+    images = torch.rand(1, 2, 3, 28, 42, generator=torch.Generator().manual_seed(7))
+    trained = build_model("tiny", seed=0)
+    output = trained(images)
+    rendered = render(output.gaussians[0], output.cameras(0))
+    assert rendered.images.shape == (2, 3, 28, 42) and torch.isfinite(rendered.images).all()
+    assert (rendered.alphas > 0.5).float().mean() > 0.5  # the predicted cameras see their own Gaussians
+    (rendered.images - images[0]).square().mean().backward()
+    head = trained.gaussian_head
+    assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in head.parameters())
+    assert all(torch.isfinite(p.grad).all() for p in trained.parameters() if p.grad is not None)
