@@ -7,7 +7,7 @@ import sys
 import typer
 
 from lumos3d_cli import __version__
-from lumos3d_cli.cli import degrade, eval, info, render, restore, train
+from lumos3d_cli.cli import convert, degrade, eval, info, render, restore, train
 from lumos3d_cli.cli.console import configure_logging, state, stderr_console
 from lumos3d_cli.errors import InputError, RunError
 
@@ -56,6 +56,7 @@ app.command("eval", epilog=eval.EXAMPLES, rich_help_panel="Scenes")(eval.eval_co
 app.command("train", epilog=train.EXAMPLES, rich_help_panel="Models", context_settings={"allow_extra_args": False})(train.train_command)
 app.command("render", epilog=render.EXAMPLES, rich_help_panel="Scenes")(render.render_command)
 app.command("info", epilog=info.EXAMPLES, rich_help_panel="Inspect")(info.info_command)
+app.command("convert", epilog=convert.EXAMPLES, rich_help_panel="Models")(convert.convert_command)
 
 
 _GLOBAL_FLAGS = ("--debug", "--quiet", "-q")

@@ -71,14 +71,29 @@ def bundled_weights_path(preset_name: str) -> Path:
     return Path(__file__).resolve().parents[1] / "weights" / f"{preset_name}.safetensors"
 
 
-def save_checkpoint(model: Lumos3D, path: Path | str, provenance: dict | None = None) -> Path:
+STORAGE_DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
+
+
+def save_checkpoint(model: Lumos3D, path: Path | str, provenance: dict | None = None, dtype: str = "float32") -> Path:
     """Write `model` in our format (atomically). `provenance` (JSON-serialisable) records how the
-    weights were made, e.g. training data, steps, git commit."""
+    weights were made, e.g. training data, steps, git commit. `dtype` is the storage precision of
+    floating-point tensors ("float16" halves the file; loading always returns float32)."""
     path = Path(path)
     if path.suffix != ".safetensors":
         raise InputError(f"{path}: checkpoints are written as .safetensors files")
+    if dtype not in STORAGE_DTYPES:
+        raise InputError(f"storage dtype {dtype!r}: use one of {', '.join(STORAGE_DTYPES)}")
+    storage = STORAGE_DTYPES[dtype]
     config = {"format_version": FORMAT_VERSION, "preset": model.preset.to_dict(), "provenance": provenance or {}}
-    tensors = {name: t.detach().to("cpu", torch.float32).contiguous() for name, t in model.state_dict().items()}
+    tensors = {}
+    for name, tensor in model.state_dict().items():
+        tensor = tensor.detach().to("cpu", torch.float32 if tensor.is_floating_point() else tensor.dtype)
+        if tensor.is_floating_point() and storage != torch.float32:
+            limit = torch.finfo(storage).max
+            if tensor.abs().max() > limit:
+                raise InputError(f"{name}: values beyond the {dtype} range (±{limit:.4g}); store this checkpoint as float32")
+            tensor = tensor.to(storage)
+        tensors[name] = tensor.contiguous()
     with atomic_path(path) as temporary:
         save_file(tensors, str(temporary), metadata={METADATA_KEY: json.dumps(config)})
     return path
