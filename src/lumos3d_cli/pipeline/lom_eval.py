@@ -22,7 +22,7 @@ from lumos3d_cli.io.images import load_images
 from lumos3d_cli.model.lumos3d import Lumos3D
 from lumos3d_cli.pipeline.presets import RestorePreset
 from lumos3d_cli.pipeline.quality import QualityMeter
-from lumos3d_cli.pipeline.restore import even_subset, input_cameras, render_at, run_network
+from lumos3d_cli.pipeline.restore import even_subset, input_cameras, render_at, run_network, scene_gaussians
 
 PROTOCOLS = ("context", "holdout")
 
@@ -76,7 +76,7 @@ def evaluate_lom_scene(
     output, prepared = run_network(model, images, preset, fuse_views)
     cameras = input_cameras(output, prepared, frames)
     order = [frames.index(f) for f in scene.test]
-    gaussians = output.gaussians[0].detach().to(device="cpu")
+    gaussians = scene_gaussians(output)
     renders = render_at(gaussians, cameras[order], preset.sh_degree)
     inputs = images[order]
     baseline_images = auto_gamma(inputs)

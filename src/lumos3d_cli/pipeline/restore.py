@@ -22,6 +22,7 @@ from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D
 from lumos3d_cli.model.preprocess import prepare_images
 from lumos3d_cli.pipeline.presets import RestorePreset
+from lumos3d_cli.pipeline.sampling_filter import apply_sampling_filter
 from lumos3d_cli.render.render import render
 
 logger = logging.getLogger(__name__)
@@ -107,6 +108,14 @@ def run_network(
     return output, prepared
 
 
+def scene_gaussians(output) -> Gaussians:
+    """The fused Gaussians of the (single) scene on the CPU, with the network's pixel grid baked
+    in (`apply_sampling_filter`) so that they render well at any resolution."""
+    cameras = output.cameras(0)
+    network_cameras = Cameras(cameras.extrinsics.cpu(), cameras.intrinsics.cpu(), cameras.sizes)
+    return apply_sampling_filter(output.gaussians[0].detach().to(device="cpu"), network_cameras)
+
+
 def input_cameras(output, prepared, names: list[str]) -> Cameras:
     """The predicted cameras mapped back to the input images' pixels."""
     intrinsics = prepared.intrinsics_to_original(output.intrinsics[0].detach().double().cpu())
@@ -142,7 +151,7 @@ def restore_scene(
         on_stage("network")
     output, prepared = run_network(model, batch.images[selected], preset)
     timings["network"] = time.perf_counter() - started
-    gaussians = output.gaussians[0].detach().to(device="cpu")
+    gaussians = scene_gaussians(output)
     if preset.sh_degree is not None and preset.sh_degree < gaussians.sh_degree:
         gaussians = Gaussians(gaussians.means, gaussians.quats, gaussians.scales, gaussians.opacities,
                               gaussians.sh[:, : (preset.sh_degree + 1) ** 2].contiguous())
