@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: test test-slow test-all demo benchmarks clean
+.PHONY: test test-slow test-all demo weights benchmarks clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -27,6 +27,14 @@ test-all: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/lumos3d restore examples/lowlight-buu -o out/demo/scene.ply
 	@echo "results in out/demo/: scene.ply, cameras.json, restored/, contact_sheet.png, preview.glb, summary.json"
+
+# Retrain the bundled models from ../shared/data/scenes (docs/model-card.md; hours on a CPU).
+weights: $(STAMP)
+	$(BIN)/lumos3d train configs/default-teacher.yaml
+	$(BIN)/lumos3d train configs/default-low-light.yaml
+	$(BIN)/lumos3d train configs/default-over-exposure.yaml
+	$(BIN)/lumos3d convert runs/default-low-light/final.safetensors -o src/lumos3d_cli/weights/lumos3d-low-light.safetensors --dtype float16
+	$(BIN)/lumos3d convert runs/default-over-exposure/final.safetensors -o src/lumos3d_cli/weights/lumos3d-over-exposure.safetensors --dtype float16
 
 benchmarks: $(STAMP)
 	$(BIN)/python benchmarks/rasterizer.py
