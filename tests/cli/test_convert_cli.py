@@ -6,7 +6,7 @@ from safetensors import safe_open
 from lumos3d_cli.io.checkpoints import save_checkpoint
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import build_model
-from tests.assertions import expect_input_error
+from assertions import expect_input_error
 
 
 def _random_checkpoint(path):

@@ -199,3 +199,16 @@ def test_rendering_the_model_output_reaches_the_weights(model):
     head = trained.gaussian_head
     assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in head.parameters())
     assert all(torch.isfinite(p.grad).all() for p in trained.parameters() if p.grad is not None)
+
+
+def test_rendering_gradients_do_not_reach_the_camera_head():
+    """Gaussian centres use stop-gradient cameras: only camera losses train the camera head."""
+    model = build_model("tiny", seed=0)
+    images = torch.rand(1, 2, 3, 28, 42, generator=torch.Generator().manual_seed(8))
+    output = model(images)
+    output.gaussians[0].means.sum().backward()
+    assert all(p.grad is None or not p.grad.any() for p in model.camera_head.parameters())
+    assert any(p.grad is not None and p.grad.any() for p in model.depth_head.parameters())
+    model.zero_grad()
+    model(images).pose_enc.sum().backward()
+    assert any(p.grad is not None and p.grad.any() for p in model.camera_head.parameters())

@@ -159,7 +159,10 @@ class Lumos3D(nn.Module):
             raw = self.gaussian_head(tokens, images)  # [B, V, K, H, W]
             del tokens  # the layer tokens are the largest tensors; free them before fusion
             extrinsics, intrinsics = decode_pose(pose_enc_list[-1], (height, width))
-            world_points = unproject_depth(depth, extrinsics, intrinsics)
+            # Stop-gradient cameras: rendering losses train depth and appearance, only camera
+            # losses train the camera head. Otherwise the rendering loss pulls the predicted
+            # field of view to a degenerate extreme (docs/model.md, "Geometry").
+            world_points = unproject_depth(depth, extrinsics.detach(), intrinsics.detach())
             scales = scene_scale(depth)
             params, confidence = split_confidence(raw.permute(0, 1, 3, 4, 2))  # [B, V, H, W, K-1], [B, V, H, W]
             scenes = [
