@@ -205,3 +205,15 @@ def test_full_size_vggt_1b_official_layout_round_trip(tmp_path):
     images = torch.rand(1, 1, 3, 28, 28)
     with torch.no_grad():
         assert torch.equal(loaded(images).depth, source(images).depth)
+
+
+def test_saved_checkpoints_follow_the_umask(tmp_path):
+    """safetensors replaces the temporary file with its own 0600 one; ours must still follow the umask."""
+    import os
+
+    previous = os.umask(0o022)
+    try:
+        path = save_checkpoint(build_model("tiny", seed=0), tmp_path / "m.safetensors")
+    finally:
+        os.umask(previous)
+    assert path.stat().st_mode & 0o777 == 0o644

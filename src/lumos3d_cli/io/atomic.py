@@ -25,9 +25,10 @@ def atomic_path(final: Path | str) -> Iterator[Path]:
     handle, name = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=f".tmp{final.suffix}", dir=final.parent)
     os.close(handle)
     temporary = Path(name)
-    os.chmod(temporary, 0o666 & ~_current_umask())  # mkstemp creates 0600; outputs follow the umask
     try:
         yield temporary
+        # mkstemp (and writers that replace the file, like safetensors) create 0600; outputs follow the umask
+        os.chmod(temporary, 0o666 & ~_current_umask())
         os.replace(temporary, final)
     except BaseException:
         temporary.unlink(missing_ok=True)
