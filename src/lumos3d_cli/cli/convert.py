@@ -8,8 +8,7 @@ from pathlib import Path
 import typer
 
 from lumos3d_cli.cli.console import print_json, say
-from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.checkpoints import STORAGE_DTYPES, save_checkpoint, summarize_checkpoint
+from lumos3d_cli.io.checkpoints import STORAGE_DTYPES, save_checkpoint, storage_dtype, summarize_checkpoint
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.presets import get_preset
 
@@ -27,8 +26,7 @@ def convert_command(
     as_json: bool = typer.Option(False, "--json", help="Print the written checkpoint's summary as JSON."),
 ) -> None:
     """Rewrite a checkpoint in lumos3d's format (e.g. float16 to halve it)."""
-    if dtype not in STORAGE_DTYPES:
-        raise InputError(f"--dtype {dtype!r}: use one of {', '.join(STORAGE_DTYPES)}")
+    storage_dtype(dtype)  # refuse a bad --dtype before the (possibly large) checkpoint is read
     model = load_model(source, preset=get_preset(preset) if preset else None)
     provenance = {key: value for key, value in model.provenance.items() if key not in ("path", "format")}
     provenance["converted_from"] = {"file": Path(source).name, "format": model.provenance.get("format"), "dtype": dtype}

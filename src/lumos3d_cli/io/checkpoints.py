@@ -74,6 +74,13 @@ def bundled_weights_path(preset_name: str) -> Path:
 STORAGE_DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
 
 
+def storage_dtype(name: str) -> torch.dtype:
+    """The torch dtype of a storage precision name; InputError listing the choices otherwise."""
+    if name not in STORAGE_DTYPES:
+        raise InputError(f"storage dtype {name!r}: use one of {', '.join(STORAGE_DTYPES)}")
+    return STORAGE_DTYPES[name]
+
+
 def save_checkpoint(model: Lumos3D, path: Path | str, provenance: dict | None = None, dtype: str = "float32") -> Path:
     """Write `model` in our format (atomically). `provenance` (JSON-serialisable) records how the
     weights were made, e.g. training data, steps, git commit. `dtype` is the storage precision of
@@ -81,9 +88,7 @@ def save_checkpoint(model: Lumos3D, path: Path | str, provenance: dict | None = 
     path = Path(path)
     if path.suffix != ".safetensors":
         raise InputError(f"{path}: checkpoints are written as .safetensors files")
-    if dtype not in STORAGE_DTYPES:
-        raise InputError(f"storage dtype {dtype!r}: use one of {', '.join(STORAGE_DTYPES)}")
-    storage = STORAGE_DTYPES[dtype]
+    storage = storage_dtype(dtype)
     config = {"format_version": FORMAT_VERSION, "preset": model.preset.to_dict(), "provenance": provenance or {}}
     tensors = {}
     for name, tensor in model.state_dict().items():
