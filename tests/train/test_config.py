@@ -38,6 +38,18 @@ def test_overrides_and_errors(tmp_path):
         load_config(tmp_path / "bad.yaml")
 
 
+def test_mixed_mode_takes_per_mode_ranges():
+    config = load_config(CONFIGS / "ablation-mixed.yaml")
+    assert config.degrade.ranges("low-light").exposure == (0.03, 0.2)
+    assert config.degrade.ranges("over-exposure").gamma == (1.2, 2.2)
+    single = load_config(CONFIGS / "default-low-light.yaml")
+    assert single.degrade.ranges("low-light").exposure == (0.03, 0.2)
+    with pytest.raises(InputError, match="degrade.mode=mixed takes its ranges from degrade.low_light"):
+        load_config(CONFIGS / "default-low-light.yaml", ["degrade.mode=mixed"])
+    with pytest.raises(InputError, match="teacher_input"):
+        load_config(CONFIGS / "default-low-light.yaml", ["teacher_input=low-light"])
+
+
 def test_resolved_config_round_trips(tmp_path):
     config = load_config(CONFIGS / "over-exposure.yaml")
     (tmp_path / "resolved.yaml").write_text(config_to_yaml(config))

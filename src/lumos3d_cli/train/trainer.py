@@ -183,7 +183,8 @@ class Trainer:
         if mode == "mixed":
             mode = "low-light" if torch.rand((), generator=generator).item() < 0.5 else "over-exposure"
         base = Degradation.for_mode(mode, noise=settings.noise)
-        return Degradation(mode, settings.exposure or base.exposure_range, settings.gamma or base.gamma_range, base.noise)
+        ranges = settings.ranges(mode)
+        return Degradation(mode, ranges.exposure or base.exposure_range, ranges.gamma or base.gamma_range, base.noise)
 
     def inputs_and_targets(self, batch: dict[str, torch.Tensor], step: int) -> tuple[torch.Tensor, torch.Tensor]:
         """(network input, normal-light targets), both [B, V, 3, H, W]."""
@@ -207,8 +208,9 @@ class Trainer:
             output = self.network(inputs)
             teacher = None
             if self.teacher is not None:
+                teacher_sees = targets if self.config.teacher_input == "normal-light" else inputs
                 with torch.no_grad():
-                    teacher = self.teacher(targets)
+                    teacher = self.teacher(teacher_sees)
         renders, rendered_depth = render_views(output, self.config.loss.background)
         stage_batch = StageBatch(targets, batch["extrinsics"], batch["intrinsics"], batch["sparse_depth"], batch["has_poses"])
         return self.objective(output, renders, rendered_depth, stage_batch, teacher)
