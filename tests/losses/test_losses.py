@@ -119,7 +119,13 @@ def test_ground_truth_supervision():
     target = encode_pose(extrinsics, intrinsics, (42, 56))
     has = torch.tensor([True])
     assert pose_supervision([target] * 4, extrinsics, intrinsics, (42, 56), has).item() == pytest.approx(0, abs=1e-7)
-    assert pose_supervision([target + 0.2] * 4, extrinsics, intrinsics, (42, 56), has).item() > 0
+    # VGGT's camera loss: L1 of translation + quaternion + 0.5 x field of view = 0.5 per
+    # refinement, refinements weighted 0.6^3, 0.6^2, 0.6, 1 and averaged
+    expected = 0.5 * (0.216 + 0.36 + 0.6 + 1.0) / 4
+    assert pose_supervision([target + 0.2] * 4, extrinsics, intrinsics, (42, 56), has).item() == pytest.approx(expected)
+    rotated = target.clone()
+    rotated[..., 3:7] += 0.1  # only the rotation part is off: 0.1 per refinement
+    assert pose_supervision([rotated], extrinsics, intrinsics, (42, 56), has).item() == pytest.approx(0.1)
     assert pose_supervision([target + 0.2] * 4, extrinsics, intrinsics, (42, 56), ~has).item() == 0
     sparse = torch.zeros(1, 2, 4, 4)
     sparse[0, 0, 1, 1] = 2.0

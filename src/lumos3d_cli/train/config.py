@@ -96,7 +96,7 @@ class LossConfig:
     vgg_weights: str | None = None  # torchvision vgg19 file for the content (and voxel) features
     voxel_scale_weights: tuple[float, float, float, float, float] = (1.0, 1.0, 1.0, 1.0, 1.0)
     voxel_size: float = 0.002  # relative to the scene scale, at full resolution
-    supervised_pose: float = 1.0  # teacher stage
+    supervised_pose: float = 5.0  # teacher stage; VGGT's camera-loss weight
     supervised_depth: float = 1.0  # teacher stage, sparse COLMAP depth
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
