@@ -20,6 +20,9 @@ def test_eval_on_buu_writes_the_report(run_cli, buu, tmp_path, random_checkpoint
         assert len(list(csv.DictReader(handle))) == 4
     sheet = cv2.imread(str(tmp_path / "report" / "contact_sheet_buu.png"))
     assert sheet is not None and sheet.shape[0] > 3 * 200
+    cameras = report["cameras"]["buu"]
+    assert cameras["pairs"] == 10 and 0 <= cameras["auc_30"] <= 1 and 0 <= cameras["rotation_error_median"] <= 180
+    assert "buu cameras (5 views, 10 pairs)" in result.out
 
 
 def test_holdout_over_exposure(run_cli, buu, tmp_path, random_checkpoint):
@@ -46,3 +49,11 @@ def test_eval_bad_inputs(run_cli, lom_copy, tmp_path, random_checkpoint):
     expect_input_error(run_cli("eval", lom_copy.parent, "--protocol", "novel", "--checkpoint", random_checkpoint, "--out", out),
                   "--protocol 'novel'")
     assert not out.exists()
+
+
+def test_cameras_are_not_scored_without_reference_poses(run_cli, lom_copy, tmp_path, random_checkpoint):
+    (lom_copy / "transforms_train.json").unlink()  # the test frames keep theirs, the other views lose them
+    result = run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", tmp_path / "report",
+                     "--max-views", 4, "--json")
+    assert result.code == 0, result.err
+    assert json.loads(result.out)["cameras"] == {}

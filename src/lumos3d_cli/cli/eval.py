@@ -1,5 +1,6 @@
 """`lumos3d eval`: the paper's protocol on LOM-layout scenes, with PSNR/SSIM/LPIPS and a blind
-gamma baseline row in every report."""
+gamma baseline row in every report, plus the accuracy of the predicted cameras against the
+scene's transforms files."""
 
 from __future__ import annotations
 
@@ -87,6 +88,7 @@ def eval_command(
         "rows": rows,
         "frames": {r.scene: {"test": r.test_frames, "views_used": r.views_used, "lumos3d": r.ours, "gamma": r.baseline}
                    for r in results},
+        "cameras": {r.scene: r.pose.as_dict() for r in results if r.pose is not None},
     }
     with atomic_directory(out) as staging:
         (staging / "metrics.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -116,4 +118,12 @@ def eval_command(
         table.add_row(row["scene"], row["method"], _cell(row["psnr"], 2), _cell(row["ssim"], 3), _cell(row["lpips"], 3),
                       _cell(row["seconds"], 1), end_section=row["scene"] == "mean" and row["method"] == methods[-1])
     stdout_console().print(table)
+    for result in results:
+        if result.pose is not None:
+            pose = result.pose
+            stdout_console().print(
+                f"{result.scene} cameras ({result.views_used} views, {pose.pairs} pairs): rotation error median "
+                f"{pose.rotation_error_median:.1f}°, translation direction {pose.translation_error_median:.1f}°, "
+                f"RRA@15 {pose.rra_15:.2f}, RTA@15 {pose.rta_15:.2f}, AUC@30 {pose.auc_30:.3f}"
+            )
     stdout_console().print(f"report: {out}/metrics.json, {out}/metrics.csv, contact sheets in {out}/")

@@ -7,10 +7,14 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+import torch
+
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.image_files import IMAGE_SUFFIXES, natural_sort_key
+from lumos3d_cli.io.transforms_json import read_transforms_json
 
 DEGRADED_FOLDERS = {"low-light": "low", "over-exposure": "over_exp"}
+CAMERA_FILES = ("transforms_train.json", "transforms_val.json", "transforms_test.json")
 
 
 @dataclass(frozen=True)
@@ -75,3 +79,16 @@ def find_lom_scenes(root: Path | str, mode: str, names: list[str] | None = None)
     if not folders:
         raise InputError(f"{root}: no LOM-layout scenes (high/ + low/ or over_exp/ + transforms_test.json)")
     return [read_lom_scene(folder, mode) for folder in folders]
+
+
+def lom_reference_extrinsics(scene: LomScene) -> dict[str, torch.Tensor]:
+    """The dataset's cameras of the scene's frames: id -> world->camera extrinsics [3, 4]
+    (float64, OpenCV axes), from whichever transforms_{train,val,test}.json exist."""
+    extrinsics = {}
+    for name in CAMERA_FILES:
+        path = scene.root / name
+        if path.is_file():
+            cameras = read_transforms_json(path, warn_on_distortion=False)
+            for index, file_path in enumerate(cameras.names):
+                extrinsics[Path(file_path).stem] = cameras.extrinsics[index]
+    return extrinsics

@@ -37,8 +37,9 @@ def _image_size(path: Path, frame: dict, merged: dict) -> tuple[int, int]:
     raise InputError(f"{path}: frame {frame.get('file_path')!r} has no 'w'/'h' and its image was not found")
 
 
-def read_transforms_json(path: Path | str) -> Cameras:
-    """Read all frames in file order."""
+def read_transforms_json(path: Path | str, warn_on_distortion: bool = True) -> Cameras:
+    """Read all frames in file order. `warn_on_distortion=False` for callers that use only the
+    poses, which the lens distortion does not affect."""
     path = Path(path)
     try:
         document = json.loads(path.read_text())
@@ -78,7 +79,7 @@ def read_transforms_json(path: Path | str) -> Cameras:
         cy.append(float(merged.get("cy", height / 2)))
         sizes.append((width, height))
         names.append(str(frame.get("file_path", "")))
-    if distorted:
+    if distorted and warn_on_distortion:
         logger.warning("%s: lens distortion coefficients are ignored (pinhole model)", path)
     cameras = Cameras.from_camera_to_world(torch.stack(camera_to_world), make_intrinsics(fx, fy, cx, cy), sizes, names)
     cameras.require_valid(str(path))

@@ -5,24 +5,30 @@ through the network; the scene is rendered at the predicted cameras of the test 
 photos' resolution (500x375 for LOM), and compared with `high/`.
 holdout: the same forward pass, but the test frames' pixel Gaussians are left out of the fused
 scene, so the test views are novel views of a scene built from the others.
-The blind auto-gamma baseline is scored on the same frames.
+The blind auto-gamma baseline is scored on the same frames. When the scene's transforms files
+give every view used a camera, the predicted cameras of those views are scored too
+(eval/pose_accuracy.py).
 """
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass
 
 import torch
 
-from lumos3d_cli.data.lom import LomScene
+from lumos3d_cli.data.lom import LomScene, lom_reference_extrinsics
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.eval.metrics import auto_gamma
+from lumos3d_cli.eval.pose_accuracy import PoseAccuracy, pose_accuracy
 from lumos3d_cli.io.images import load_images
 from lumos3d_cli.model.lumos3d import Lumos3D
 from lumos3d_cli.pipeline.presets import RestorePreset
 from lumos3d_cli.pipeline.quality import QualityMeter
 from lumos3d_cli.pipeline.restore import even_subset, input_cameras, render_at, run_network, scene_gaussians
+
+logger = logging.getLogger(__name__)
 
 PROTOCOLS = ("context", "holdout")
 
@@ -30,7 +36,8 @@ PROTOCOLS = ("context", "holdout")
 @dataclass
 class SceneEvaluation:
     """Per test frame: metrics of ours and of the baseline; the images for the contact sheet
-    (inputs, ours, baseline, references [T, 3, H, W])."""
+    (inputs, ours, baseline, references [T, 3, H, W]); the accuracy of the predicted cameras of
+    all views used (None without reference cameras)."""
 
     scene: str
     protocol: str
@@ -43,6 +50,19 @@ class SceneEvaluation:
     renders: torch.Tensor
     baseline_images: torch.Tensor
     references: torch.Tensor
+    pose: PoseAccuracy | None = None
+
+
+def _pose_accuracy(scene: LomScene, frames: list[str], predicted: torch.Tensor) -> PoseAccuracy | None:
+    """predicted extrinsics [V, 3, 4] of `frames` scored against the scene's transforms."""
+    if len(frames) < 2:
+        return None
+    reference = lom_reference_extrinsics(scene)
+    missing = [f for f in frames if f not in reference]
+    if missing:
+        logger.info("%s: no reference camera for %s; camera accuracy not scored", scene.root, ", ".join(missing))
+        return None
+    return pose_accuracy(predicted, torch.stack([reference[f] for f in frames]))
 
 
 def _load_same_size(paths, what: str) -> torch.Tensor:
@@ -80,8 +100,9 @@ def evaluate_lom_scene(
     renders = render_at(gaussians, cameras[order], preset.sh_degree)
     inputs = images[order]
     baseline_images = auto_gamma(inputs)
+    pose = _pose_accuracy(scene, frames, output.extrinsics[0].detach().double().cpu())
     return SceneEvaluation(
         scene.name, protocol, len(frames), list(scene.test), meter.measure(renders, references),
         meter.measure(baseline_images, references), time.perf_counter() - started, inputs, renders, baseline_images,
-        references,
+        references, pose,
     )
