@@ -1,6 +1,7 @@
 """Every loss: zero for identical inputs, positive otherwise, finite gradients on black and
 saturated inputs."""
 
+import math
 import pytest
 import torch
 
@@ -130,8 +131,15 @@ def test_ground_truth_supervision():
     sparse = torch.zeros(1, 2, 4, 4)
     sparse[0, 0, 1, 1] = 2.0
     depth = torch.full((1, 2, 4, 4), 2.0, requires_grad=True)
-    assert sparse_depth_supervision(depth, sparse).item() == 0
-    assert sparse_depth_supervision(depth + 1, sparse).item() == pytest.approx(0.5)
+    confidence = torch.full((1, 2, 4, 4), 2.0, requires_grad=True)
+    # |error| * confidence - 0.2 * log(confidence), on the one pixel holding a point
+    assert sparse_depth_supervision(depth, confidence, sparse).item() == pytest.approx(-0.2 * math.log(2))
+    assert sparse_depth_supervision(depth + 1, confidence, sparse).item() == pytest.approx(2 - 0.2 * math.log(2))
+    sparse_depth_supervision(depth + 1, confidence, sparse).backward()
+    assert confidence.grad[0, 0, 1, 1] == pytest.approx(1 - 0.2 / 2)  # d/dc (c - 0.2 log c)
+    assert confidence.grad.abs().sum() == confidence.grad[0, 0, 1, 1].abs()
+    no_points = sparse_depth_supervision(depth, confidence, torch.zeros_like(sparse))
+    assert no_points.item() == 0 and no_points.requires_grad
 
 
 def test_trunk_loader_is_strict(tmp_path):

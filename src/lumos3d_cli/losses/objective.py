@@ -78,7 +78,7 @@ class TrainingObjective(nn.Module):
         if self.stage == "teacher":
             size = tuple(output.depth.shape[-2:])
             terms["pose"] = pose_supervision(output.pose_enc_list, batch.extrinsics, batch.intrinsics, size, batch.has_poses)
-            terms["depth"] = sparse_depth_supervision(output.depth, batch.sparse_depth)
+            terms["depth"] = sparse_depth_supervision(output.depth, output.depth_conf, batch.sparse_depth)
             total = total + c.supervised_pose * terms["pose"] + c.supervised_depth * terms["depth"]
         else:
             if teacher is None:

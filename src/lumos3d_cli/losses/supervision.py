@@ -1,15 +1,16 @@
-"""Ground-truth supervision of the normal-light teacher stage: dataset cameras (VGGT's camera
-loss on the pose encodings, every refinement weighted as in distillation) and sparse COLMAP depth."""
+"""Ground-truth supervision of the normal-light teacher stage, as VGGT is trained: dataset cameras
+(VGGT's camera loss on the pose encodings, every refinement weighted as in distillation) and
+sparse COLMAP depth (VGGT's confidence-aware depth loss)."""
 
 from __future__ import annotations
 
 import torch
-import torch.nn.functional as F
 
 from lumos3d_cli.losses.distillation import iteration_weights
 from lumos3d_cli.model.pose_encoding import encode_pose
 
 FOCAL_WEIGHT = 0.5  # VGGT's weight of the field-of-view part
+CONFIDENCE_REGULARISER = 0.2  # VGGT's alpha
 
 
 def camera_l1(prediction: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -40,9 +41,15 @@ def pose_supervision(
     return total / len(pose_enc_list)
 
 
-def sparse_depth_supervision(depth: torch.Tensor, sparse_depth: torch.Tensor) -> torch.Tensor:
-    """Huber between predicted depth and sparse points, on pixels holding a point; [B, V, H, W]."""
+def sparse_depth_supervision(depth: torch.Tensor, confidence: torch.Tensor, sparse_depth: torch.Tensor) -> torch.Tensor:
+    """VGGT's confidence-aware depth loss on the pixels holding a sparse point, all [B, V, H, W]:
+    mean of |depth - point| * confidence - CONFIDENCE_REGULARISER * log(confidence).
+
+    This is what trains the depth head's confidence (> 1), which the student's depth
+    distillation uses to pick the teacher's reliable pixels.
+    """
     valid = sparse_depth > 0
     if not bool(valid.any()):
-        return depth.sum() * 0.0
-    return F.huber_loss(depth[valid], sparse_depth[valid], delta=1.0)
+        return (depth.sum() + confidence.sum()) * 0.0
+    error = (depth[valid] - sparse_depth[valid]).abs()
+    return (error * confidence[valid] - CONFIDENCE_REGULARISER * confidence[valid].log()).mean()
