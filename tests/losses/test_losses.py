@@ -2,6 +2,7 @@
 saturated inputs."""
 
 import math
+
 import pytest
 import torch
 
