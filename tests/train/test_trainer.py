@@ -64,12 +64,19 @@ def test_non_finite_steps_are_skipped_then_abort(tiny_config, monkeypatch):
 def test_student_stage_logs_every_term(tiny_config, tmp_path):
     teacher = _trainer(tiny_config(name="teacher", optim__steps=1)).run()
     config = tiny_config(stage="student", name="student", model=str(teacher.final_checkpoint),
-                         teacher=str(teacher.final_checkpoint), optim__steps=2, validate_every=2)
+                         teacher=str(teacher.final_checkpoint), optim__steps=2, validate_every=2,
+                         validation_samples=3)
     result = _trainer(config).run()
     terms = result.history[-1].terms
     assert {"mse", "distill_pose", "distill_depth", "image", "voxel", "total"} <= set(terms)
     assert all(v == v for v in terms.values())
-    assert (Path(str(config).replace(".yaml", "")) / "validation" / "step_00000002.png").is_file()
+    run = Path(str(config).replace(".yaml", ""))
+    assert (run / "validation" / "step_00000002.png").is_file()
+    validation = [json.loads(line) for line in (run / "validation.jsonl").read_text().splitlines()]
+    assert [v["step"] for v in validation] == [2] and validation[0]["samples"] == 3
+    assert 0 < validation[0]["psnr"] < 60
+    cameras = validation[0]["cameras"]
+    assert cameras["pairs"] == 3 and 0 <= cameras["auc_30"] <= 1 and 0 <= cameras["rotation_error_median"] <= 180
 
 
 @pytest.mark.parametrize("teacher_input", ["normal-light", "degraded"])

@@ -75,11 +75,11 @@ def area_under_curve(errors: torch.Tensor, max_threshold: int) -> float:
     return float((errors[:, None] < thresholds).double().mean(dim=0).mean())
 
 
-def pose_accuracy(predicted: torch.Tensor, reference: torch.Tensor) -> PoseAccuracy:
-    """The summary for extrinsics [V, 3, 4] (V >= 2)."""
-    if predicted.shape[0] < 2:
-        raise ValueError("pose accuracy needs at least two views")
-    rotation_error, translation_error = relative_pose_errors(predicted, reference)
+def summarise_pose_errors(rotation_error: torch.Tensor, translation_error: torch.Tensor) -> PoseAccuracy:
+    """The summary of pair errors [P] (degrees), e.g. `relative_pose_errors` of several scenes
+    concatenated."""
+    if len(rotation_error) == 0:
+        raise ValueError("pose accuracy needs at least one pair of views")
     if not (torch.isfinite(rotation_error).all() and torch.isfinite(translation_error).all()):
         raise ValueError("non-finite camera poses")
     return PoseAccuracy(
@@ -90,3 +90,10 @@ def pose_accuracy(predicted: torch.Tensor, reference: torch.Tensor) -> PoseAccur
         rta_15=float((translation_error < 15).double().mean()),
         auc_30=area_under_curve(torch.maximum(rotation_error, translation_error), 30),
     )
+
+
+def pose_accuracy(predicted: torch.Tensor, reference: torch.Tensor) -> PoseAccuracy:
+    """The summary for extrinsics [V, 3, 4] (V >= 2)."""
+    if predicted.shape[0] < 2:
+        raise ValueError("pose accuracy needs at least two views")
+    return summarise_pose_errors(*relative_pose_errors(predicted, reference))

@@ -134,15 +134,16 @@ class TrainConfig:
     log_every: int = 10
     checkpoint_every: int = 500
     validate_every: int = 0  # 0: no validation renders
-    validation_views: int = 2
+    validation_views: int = 2  # views per row block of the validation picture
+    validation_samples: int = 8  # samples scored at each validation (validation.jsonl)
     max_nonfinite_steps: int = 5
     tensorboard: bool = False
 
     def __post_init__(self) -> None:
         if self.stage == "student" and not self.teacher:
             raise ValueError("stage 'student' needs `teacher`: a checkpoint of the normal-light model")
-        if self.batch_size < 1 or self.optim.steps < 1:
-            raise ValueError("batch_size and optim.steps must be at least 1")
+        if self.batch_size < 1 or self.optim.steps < 1 or self.validation_samples < 1:
+            raise ValueError("batch_size, optim.steps and validation_samples must be at least 1")
 
 
 def load_config(path: Path | str, overrides: list[str] = ()) -> TrainConfig:

@@ -23,6 +23,8 @@ from lumos3d_cli.data.degradations import Degradation, degrade, white_balance_sh
 from lumos3d_cli.data.multiview_dataset import MultiViewDataset
 from lumos3d_cli.data.scene_records import scan_dl3dv, scan_scene_folders
 from lumos3d_cli.errors import InputError, NonFiniteError, RunError
+from lumos3d_cli.eval.metrics import psnr
+from lumos3d_cli.eval.pose_accuracy import relative_pose_errors, summarise_pose_errors
 from lumos3d_cli.io.atomic import write_bytes_atomic
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.checkpoints import save_checkpoint
@@ -166,8 +168,11 @@ class Trainer:
         return list(range(first, first + size))
 
     def _load_batch(self, step: int) -> dict[str, torch.Tensor]:
+        return self._load_samples(self._sample_indices(step))
+
+    def _load_samples(self, sample_ids: list[int]) -> dict[str, torch.Tensor]:
         samples = []
-        for sample_id in self._sample_indices(step):
+        for sample_id in sample_ids:
             self.dataset.set_epoch(sample_id // len(self.dataset))
             samples.append(self.dataset[sample_id % len(self.dataset)])
         keys = ("images", "intrinsics", "extrinsics", "sparse_depth", "has_poses")
@@ -307,18 +312,42 @@ class Trainer:
             write_bytes_atomic(path, ("\n".join(kept) + "\n" if kept else "").encode())
 
     def validate(self, step: int) -> Path | None:
-        """Render the first validation sample's views: rows of input | render | target."""
+        """Score the first `validation_samples` samples of epoch 0 (fixed across the run): PSNR
+        of the renders against the normal-light images and, for samples with dataset cameras,
+        the accuracy of the predicted cameras (eval/pose_accuracy.py) — one line of
+        validation.jsonl; and render the first sample's views: rows of input | render | target."""
         if not self.context.is_main:
             return None
-        batch = self._load_batch(0)
-        inputs, targets = self.inputs_and_targets(batch, 0)
-        views = min(self.config.validation_views, inputs.shape[1])
         self.model.eval()
-        with torch.no_grad(), self._autocast():
-            output = self.model(inputs[:1, :views])
-        renders, _ = render_views(output, self.config.loss.background)
+        rotation_errors, translation_errors, psnrs = [], [], []
+        first = None
+        for sample_id in range(min(self.config.validation_samples, len(self.dataset))):
+            batch = self._load_samples([sample_id])
+            inputs, targets = self.inputs_and_targets(batch, sample_id)
+            with torch.no_grad(), self._autocast():
+                output = self.model(inputs)
+            renders, _ = render_views(output, self.config.loss.background)
+            renders = renders.to(targets).clamp(0, 1)
+            psnrs.append(float(psnr(renders[0], targets[0]).mean()))
+            if bool(batch["has_poses"][0]) and inputs.shape[1] > 1:
+                errors = relative_pose_errors(output.extrinsics[0].detach().double().cpu(), batch["extrinsics"][0].double().cpu())
+                rotation_errors.append(errors[0])
+                translation_errors.append(errors[1])
+            if first is None:
+                first = (inputs, renders, targets)
         self.model.train()
-        rows = [torch.cat([inputs[0, v], renders[0, v].to(inputs), targets[0, v]], dim=-1) for v in range(views)]
+        line = {"step": step, "samples": len(psnrs), "psnr": float(np.mean(psnrs))}
+        if rotation_errors:
+            line["cameras"] = summarise_pose_errors(torch.cat(rotation_errors), torch.cat(translation_errors)).as_dict()
+        with open(self.output / "validation.jsonl", "a") as handle:
+            handle.write(json.dumps(line) + "\n")
+        cameras = line.get("cameras")
+        logger.info("validation at step %d: PSNR %.2f dB%s", step, line["psnr"],
+                    f", cameras AUC@30 {cameras['auc_30']:.3f}, rotation error median {cameras['rotation_error_median']:.1f}°"
+                    if cameras else "")
+        inputs, renders, targets = first
+        views = min(self.config.validation_views, inputs.shape[1])
+        rows = [torch.cat([inputs[0, v], renders[0, v], targets[0, v]], dim=-1) for v in range(views)]
         grid = torch.cat(rows, dim=-2).permute(1, 2, 0).float().cpu().numpy()
         path = self.output / "validation" / f"step_{step:08d}.png"
         write_image(path, grid)
