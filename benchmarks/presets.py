@@ -27,12 +27,14 @@ FOLDERS = {"low-light": "low", "over-exposure": "over_exp"}
 
 
 DEFAULT_REASON = (
-    "Why `balanced` is the default: it runs the network at the resolution it was trained at, and it "
-    "gives the best novel views (holdout) in both modes, which is what a 3D scene is for. With the "
-    "bundled `tiny` models the presets lie within about 1 dB of each other, because their multi-view "
-    "geometry is coarse: more views add more misaligned Gaussians, so `fast` (8 views) even matches "
-    "`balanced` on the context frames at two thirds of the time and memory, and `best` (25 views) is both "
-    "the slowest and the lowest (docs/model-card.md). `fast` is the choice for previews."
+    "Why `balanced` is the default: it runs the network at the resolution it was trained at, and on "
+    "low light (the paper's task and the default mode) it gives the best novel views (holdout) with "
+    "the same context quality as `fast`, which is what a 3D scene is for. With the bundled `tiny` "
+    "models the presets lie within about 1 dB of each other, because their multi-view geometry is "
+    "coarse: more views add more misaligned Gaussians, so `best` (25 views) is both the slowest and "
+    "the lowest, and on over-exposure `fast` (8 views) scores about 1 dB higher than `balanced` "
+    "(docs/model-card.md). `fast` is the choice for previews and, with these models, for over-exposed "
+    "photos."
 )
 
 
