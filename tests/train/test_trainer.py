@@ -40,6 +40,21 @@ def test_resumed_run_reproduces_the_uninterrupted_losses(tiny_config):
     assert [json.loads(line)["step"] for line in log.read_text().splitlines()] == list(range(6))
 
 
+def test_resume_drops_the_log_lines_of_redone_work(tiny_config):
+    config = tiny_config(name="logs", validate_every=2, validation_samples=1)
+    run = Path(str(config).replace(".yaml", ""))
+    _trainer(config).run(stop_after=3)
+    # a hard kill after a later validation, before any checkpoint: its lines must not survive
+    with open(run / "metrics.jsonl", "a") as handle:
+        handle.write(json.dumps({"step": 3, "total": 0.0}) + "\n")
+    with open(run / "validation.jsonl", "a") as handle:
+        handle.write(json.dumps({"step": 4, "samples": 1, "psnr": 0.0}) + "\n")
+    _trainer(config).run(resume=True)
+    assert [json.loads(line)["step"] for line in (run / "metrics.jsonl").read_text().splitlines()] == list(range(6))
+    validation = [json.loads(line) for line in (run / "validation.jsonl").read_text().splitlines()]
+    assert [v["step"] for v in validation] == [2, 4, 6] and all(v["psnr"] > 0 for v in validation)
+
+
 def test_non_finite_steps_are_skipped_then_abort(tiny_config, monkeypatch):
     trainer = _trainer(tiny_config(name="nan", max_nonfinite_steps=3))
     original = trainer.objective.forward

@@ -304,12 +304,17 @@ class Trainer:
                 self._tensorboard.add_scalar(f"loss/{name}", value, report.step)
             self._tensorboard.add_scalar("lr", report.learning_rate, report.step)
 
-    def _truncate_log(self, step: int) -> None:
-        """Drop log lines of steps at or after `step` (they are about to be redone)."""
-        path = self.output / "metrics.jsonl"
-        if self.context.is_main and path.is_file():
-            kept = [line for line in path.read_text().splitlines() if line and json.loads(line)["step"] < step]
-            write_bytes_atomic(path, ("\n".join(kept) + "\n" if kept else "").encode())
+    def _truncate_logs(self, start: int) -> None:
+        """Drop the log lines of the work about to be redone from step `start`: metrics.jsonl
+        lines of steps >= start, validation.jsonl lines after `start` steps (its step counts the
+        steps done before it, so the validation at `start` itself is kept)."""
+        if not self.context.is_main:
+            return
+        for name, last_kept in (("metrics.jsonl", start - 1), ("validation.jsonl", start)):
+            path = self.output / name
+            if path.is_file():
+                kept = [line for line in path.read_text().splitlines() if line and json.loads(line)["step"] <= last_kept]
+                write_bytes_atomic(path, ("\n".join(kept) + "\n" if kept else "").encode())
 
     def validate(self, step: int) -> Path | None:
         """Score the first `validation_samples` samples of epoch 0 (fixed across the run): PSNR
@@ -369,7 +374,7 @@ class Trainer:
         self.output.mkdir(parents=True, exist_ok=True)
         self.nonfinite_in_a_row = self.nonfinite_total = 0
         start = self.resume() if resume else 0
-        self._truncate_log(start)
+        self._truncate_logs(start)
         if self.context.is_main:
             (self.output / "config.yaml").write_text(config_to_yaml(self.config))
         end = min(self.config.optim.steps, max_steps) if max_steps else self.config.optim.steps
