@@ -1,5 +1,6 @@
 """Shared helpers for the benchmark scripts: machine description, timing, peak memory, and
-writing one section of docs/performance.md between markers (each script owns its section)."""
+writing one section of a document (docs/performance.md unless told) between markers (each script
+owns its section)."""
 
 from __future__ import annotations
 
@@ -65,12 +66,15 @@ def markdown_table(header: list[str], rows: list[list[object]]) -> str:
     return "\n".join(lines)
 
 
-def write_section(name: str, markdown: str) -> None:
-    """Replace (or append) the section `name` of docs/performance.md."""
+def write_section(name: str, markdown: str, document: Path = PERFORMANCE_DOC) -> None:
+    """Replace (or append) the section `name` of `document`."""
     begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"
-    text = PERFORMANCE_DOC.read_text() if PERFORMANCE_DOC.exists() else _HEADER
+    if document.exists():
+        text = document.read_text()
+    else:
+        text = _HEADER if document == PERFORMANCE_DOC else ""
     block = f"{begin}\n{markdown.strip()}\n{end}"
     pattern = re.compile(re.escape(begin) + r".*?" + re.escape(end), re.S)
     text = pattern.sub(lambda _: block, text) if pattern.search(text) else text.rstrip() + "\n\n" + block + "\n"
-    PERFORMANCE_DOC.parent.mkdir(parents=True, exist_ok=True)
-    PERFORMANCE_DOC.write_text(text)
+    document.parent.mkdir(parents=True, exist_ok=True)
+    document.write_text(text)
