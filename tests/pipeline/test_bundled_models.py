@@ -7,9 +7,8 @@ import pytest
 import torch
 from safetensors import safe_open
 
-from lumos3d_cli.io.checkpoints import bundled_weights_path, summarize_checkpoint
+from lumos3d_cli.io.checkpoints import BUNDLED_MODELS, bundled_weights_path, summarize_checkpoint
 from lumos3d_cli.io.images import load_images
-from lumos3d_cli.pipeline.restore import BUNDLED_MODELS
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "lowlight-buu"
 WEIGHTS = {mode: bundled_weights_path(name) for mode, name in BUNDLED_MODELS.items()}

@@ -66,9 +66,13 @@ class Checkpoint:
     fresh_modules: list[str] = field(default_factory=list)
 
 
-def bundled_weights_path(preset_name: str) -> Path:
-    """Where the packaged weights of a preset live: lumos3d_cli/weights/<preset>.safetensors."""
-    return Path(__file__).resolve().parents[1] / "weights" / f"{preset_name}.safetensors"
+BUNDLED_MODELS = {"low-light": "lumos3d-low-light", "over-exposure": "lumos3d-over-exposure"}
+"""Restoration mode -> file stem of the model shipped for it in lumos3d_cli/weights/."""
+
+
+def bundled_weights_path(name: str) -> Path:
+    """Where the packaged weights `name` live: lumos3d_cli/weights/<name>.safetensors."""
+    return Path(__file__).resolve().parents[1] / "weights" / f"{name}.safetensors"
 
 
 STORAGE_DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}

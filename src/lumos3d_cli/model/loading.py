@@ -1,7 +1,8 @@
-"""`load_model`: a trained network from a checkpoint file or a preset's bundled weights.
+"""`load_model`: a trained network from a checkpoint file or a bundled model's name.
 
-Inference never silently runs on random weights: a preset name without bundled weights is an
-error naming the missing file. Random weights come only from `build_model`, which says so.
+Inference never silently runs on random weights: a name that is not a bundled model (a preset
+name included: presets are architectures, not trained weights) is an error saying what to pass.
+Random weights come only from `build_model`, which says so.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from pathlib import Path
 import torch
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.checkpoints import FORMAT_VGGT, Checkpoint, bundled_weights_path, read_checkpoint
+from lumos3d_cli.io.checkpoints import BUNDLED_MODELS, FORMAT_VGGT, Checkpoint, bundled_weights_path, read_checkpoint
 from lumos3d_cli.io.state_dicts import check_tensors
 from lumos3d_cli.model.heads.gaussian import GaussianHead
 from lumos3d_cli.model.lumos3d import Lumos3D
@@ -25,16 +26,20 @@ def _checkpoint_for(source: str | Path, preset: ModelPreset | None) -> Checkpoin
     path = Path(source)
     if path.exists():
         return read_checkpoint(path, preset)
-    if isinstance(source, str) and source in PRESETS:
-        bundled = bundled_weights_path(source)
+    bundled_names = ", ".join(f"'{mode}'" for mode in BUNDLED_MODELS)
+    if isinstance(source, str) and source in BUNDLED_MODELS:
+        bundled = bundled_weights_path(BUNDLED_MODELS[source])
         if not bundled.is_file():
-            raise InputError(
-                f"preset '{source}' has no trained weights: {bundled} is missing. Pass a checkpoint file "
-                "(ours, VGGT's model.pt/model.safetensors or AnySplat's model.safetensors), or train one; "
-                "build_model() gives random weights for experiments"
-            )
+            raise InputError(f"the bundled {source} model is missing from this installation ({bundled}); "
+                             "reinstall lumos3d or pass a checkpoint file")
         return read_checkpoint(bundled)
-    raise InputError(f"'{source}' is neither a checkpoint file nor a preset name ({', '.join(PRESETS)})")
+    if isinstance(source, str) and source in PRESETS:
+        raise InputError(
+            f"'{source}' is a model preset (an architecture), not trained weights: pass a checkpoint file "
+            f"(ours, VGGT's model.pt/model.safetensors or AnySplat's model.safetensors) or a bundled model "
+            f"({bundled_names}); build_model('{source}') gives random weights for experiments"
+        )
+    raise InputError(f"'{source}' is neither a checkpoint file nor a bundled model ({bundled_names})")
 
 
 def model_from_checkpoint(checkpoint: Checkpoint) -> Lumos3D:
@@ -61,8 +66,8 @@ def model_from_checkpoint(checkpoint: Checkpoint) -> Lumos3D:
 
 
 def load_model(source: str | Path, device: str | torch.device = "cpu", preset: ModelPreset | None = None) -> Lumos3D:
-    """A network in eval mode on `device`, from a checkpoint path (file or folder) or a preset name
-    (its bundled weights). `preset` sets the size of a foreign (VGGT/AnySplat) checkpoint; it
+    """A network in eval mode on `device`, from a checkpoint path (file or folder) or the name of a
+    bundled model ('low-light', 'over-exposure'). `preset` sets the size of a foreign (VGGT/AnySplat) checkpoint; it
     defaults to vggt-1b and must not be given for our own files, which carry theirs."""
     model = model_from_checkpoint(_checkpoint_for(source, preset))
     logger.info("loaded preset '%s' from %s", model.preset.name, model.provenance.get("path"))

@@ -15,7 +15,7 @@ import torch
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.cameras import Cameras
-from lumos3d_cli.io.checkpoints import bundled_weights_path
+from lumos3d_cli.io.checkpoints import BUNDLED_MODELS, bundled_weights_path
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.io.images import ImageBatch
 from lumos3d_cli.model.loading import load_model
@@ -28,9 +28,6 @@ from lumos3d_cli.render.render import render
 logger = logging.getLogger(__name__)
 
 # The bundled model of each mode (src/lumos3d_cli/weights/<name>.safetensors).
-BUNDLED_MODELS = {"low-light": "lumos3d-low-light", "over-exposure": "lumos3d-over-exposure"}
-
-
 @dataclass
 class RestoredScene:
     """gaussians: the fused scene (world = first selected view's camera frame); cameras at the
