@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: test test-slow test-all demo weights benchmarks clean
+.PHONY: test test-slow test-all demo weights ablations benchmarks clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -35,6 +35,11 @@ weights: $(STAMP)
 	$(BIN)/lumos3d train configs/default-over-exposure.yaml
 	$(BIN)/lumos3d convert runs/default-low-light/final.safetensors -o src/lumos3d_cli/weights/lumos3d-low-light.safetensors --dtype float16
 	$(BIN)/lumos3d convert runs/default-over-exposure/final.safetensors -o src/lumos3d_cli/weights/lumos3d-over-exposure.safetensors --dtype float16
+
+# Train the ablation students the model card reports (after `make weights`; hours on a CPU) and
+# rewrite its ablation table.
+ablations: $(STAMP)
+	$(BIN)/python benchmarks/ablations.py --train
 
 benchmarks: $(STAMP)
 	$(BIN)/python benchmarks/rasterizer.py

@@ -123,6 +123,8 @@ def main() -> None:
         "`lumos3d eval --preset balanced --max-views N` on buu, N from 4 to all 25 photos:",
         markdown_table(["mode", "views", "context PSNR / SSIM", "holdout PSNR / SSIM", "cameras AUC@30"], view_rows),
         VIEWS_NOTE,
+        "The paper's ablations at this scale (Lumos loss terms, the teacher's input, one model for both "
+        "modes) are in [model-card.md](model-card.md#ablations-tiny-scale-shipped-teacher).",
     ])
     print(text)
     if not args.no_doc:
