@@ -51,7 +51,7 @@ VARIANTS = (
     Variant("+ Lumos image term (no voxel term)", "runs/ablation-image-only", LOW_LIGHT, ("loss.voxel=0",)),
     Variant("teacher sees the degraded images", "runs/ablation-teacher-degraded", LOW_LIGHT,
             ("teacher_input=degraded",)),
-    Variant("over-exposure model (shipped)", "runs/default-over-exposure", "configs/default-over-exposure.yaml",
+    Variant("over-exposure model (shipped, seed 2)", "runs/default-over-exposure", "configs/default-over-exposure.yaml",
             modes=("over-exposure",)),
     Variant("one model for both modes, 1,000 steps", "runs/ablation-mixed", "configs/ablation-mixed.yaml",
             ("optim.steps=1000",), ("low-light", "over-exposure")),

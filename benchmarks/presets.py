@@ -31,7 +31,7 @@ DEFAULT_REASON = (
     "Why `balanced` is the default: it runs the network at the resolution it was trained at, and on "
     "low light (the paper's task and the default mode) it gives the highest holdout PSNR — novel views, "
     "which are what a 3D scene is for — while `fast` is within a few hundredths of a dB on the context "
-    "frames, a little higher in SSIM and about 1.7× quicker. With the bundled `tiny` models the presets "
+    "frames, a little higher in SSIM and about twice as quick. With the bundled `tiny` models the presets "
     "lie within about 1 dB of each other, because their multi-view geometry is coarse and more views add "
     "more misaligned Gaussians: `best` (25 views) is the slowest, has the lowest SSIM in both modes and "
     "the lowest PSNR on low light. On over-exposure `fast` scores about 1 dB more PSNR than `balanced`; "
