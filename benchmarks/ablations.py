@@ -15,21 +15,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
-import subprocess
 import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cli_runs import REPO, evaluate_buu, run_lumos3d  # noqa: E402
 from report import machine_description, markdown_table, write_section  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
-LOM = REPO.parent / "shared" / "data" / "lom"
 MODEL_CARD = REPO / "docs" / "model-card.md"
-LUMOS3D = str(Path(sys.executable).with_name("lumos3d"))
 
 
 @dataclass(frozen=True)
@@ -58,34 +54,15 @@ VARIANTS = (
 )
 
 
-def _lumos3d(arguments: list[str]) -> str:
-    result = subprocess.run([LUMOS3D, *arguments], capture_output=True, text=True, env=os.environ)
-    if result.returncode != 0:
-        raise RuntimeError(f"lumos3d {' '.join(arguments)} failed:\n{result.stderr}")
-    return result.stdout
-
-
 def _train(variant: Variant) -> None:
     print(f"training {variant.run} ({variant.label})", flush=True)
-    _lumos3d(["train", variant.config, f"output={variant.run}", *variant.overrides, "--quiet"])
+    run_lumos3d(["train", variant.config, f"output={variant.run}", *variant.overrides])
 
 
 def _training_minutes(run: Path) -> float:
     """Steps times the median logged step time (the runs log every 10 steps)."""
     rows = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines() if line.strip()]
     return (rows[-1]["step"] + 1) * statistics.median(r["seconds"] for r in rows) / 60
-
-
-def _score(weights: Path, mode: str, folder: str) -> dict[str, dict]:
-    scores = {}
-    for protocol in ("context", "holdout"):
-        report = json.loads(_lumos3d(
-            ["eval", str(LOM), "--scenes", "buu", "--mode", mode, "--protocol", protocol, "--checkpoint", str(weights),
-             "--out", f"{folder}/{protocol}", "--json", "--quiet"]
-        ))
-        ours = next(r for r in report["rows"] if r["scene"] == "mean" and r["method"] == "lumos3d")
-        scores[protocol] = {"psnr": ours["psnr"], "ssim": ours["ssim"], "auc_30": report["cameras"]["buu"]["auc_30"]}
-    return scores
 
 
 def main() -> None:
@@ -104,12 +81,12 @@ def main() -> None:
         for variant in VARIANTS:
             run = REPO / variant.run
             for mode in variant.modes:
-                scores = _score(run / "final.safetensors", mode, f"{folder}/{run.name}-{mode}")
-                context, holdout = scores["context"], scores["holdout"]
+                scores = evaluate_buu(mode, ["--checkpoint", str(run / "final.safetensors")], f"{folder}/{run.name}-{mode}")
+                (context, _, cameras), (holdout, _, _) = scores["context"], scores["holdout"]
                 rows.append([
                     variant.label, mode, f"`{' '.join(variant.overrides)}`" if variant.overrides else "",
                     f"{context['psnr']:.2f} / {context['ssim']:.3f}", f"{holdout['psnr']:.2f} / {holdout['ssim']:.3f}",
-                    f"{context['auc_30']:.3f}", f"{_training_minutes(run):.0f}",
+                    f"{cameras['auc_30']:.3f}", f"{_training_minutes(run):.0f}",
                 ])
                 print(rows[-1], flush=True)
     text = "\n\n".join([

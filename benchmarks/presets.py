@@ -9,20 +9,14 @@ holdout protocols) with the bundled models; then `balanced` with 4 to 25 views t
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cli_runs import LOM, evaluate_buu, run_lumos3d_json  # noqa: E402
 from report import machine_description, markdown_table, write_section  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
-LOM = REPO.parent / "shared" / "data" / "lom"
-LUMOS3D = str(Path(sys.executable).with_name("lumos3d"))
 FOLDERS = {"low-light": "low", "over-exposure": "over_exp"}
 VIEW_COUNTS = (4, 8, 12, 16, 25)
 
@@ -48,34 +42,12 @@ VIEWS_NOTE = (
 )
 
 
-def _run_json(arguments: list[str]) -> tuple[dict, float]:
-    started = time.perf_counter()
-    result = subprocess.run([LUMOS3D, *arguments, "--json", "--quiet"], capture_output=True, text=True, env=os.environ)
-    if result.returncode != 0:
-        raise RuntimeError(f"lumos3d {' '.join(arguments)} failed:\n{result.stderr}")
-    return json.loads(result.stdout), time.perf_counter() - started
-
-
-def _evaluate(mode: str, options: list[str], folder: str) -> dict[str, tuple[dict, dict, dict]]:
-    """protocol -> (our mean row, the gamma mean row, camera accuracy) of `lumos3d eval` on buu."""
-    scores = {}
-    for protocol in ("context", "holdout"):
-        report, _ = _run_json(
-            ["eval", str(LOM), "--scenes", "buu", "--mode", mode, "--protocol", protocol, "--out", f"{folder}-{protocol}",
-             *options]
-        )
-        ours = next(r for r in report["rows"] if r["scene"] == "mean" and r["method"] == "lumos3d")
-        gamma = next(r for r in report["rows"] if r["scene"] == "mean" and r["method"] == "gamma")
-        scores[protocol] = (ours, gamma, report["cameras"]["buu"])
-    return scores
-
-
 def _views_sweep(folder: str, extra: list[str]) -> list[list[object]]:
     """`balanced` with the network seeing 4 to 25 of buu's photos."""
     rows = []
     for mode in FOLDERS:
         for views in VIEW_COUNTS:
-            scores = _evaluate(mode, ["--preset", "balanced", "--max-views", str(views), *extra],
+            scores = evaluate_buu(mode, ["--preset", "balanced", "--max-views", str(views), *extra],
                                f"{folder}/views-{mode}-{views}")
             (context, _, cameras), (holdout, _, _) = scores["context"], scores["holdout"]
             rows.append([mode, views, f"{context['psnr']:.2f} / {context['ssim']:.3f}",
@@ -94,11 +66,11 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as folder:
         for mode, photos in FOLDERS.items():
             for preset in ("fast", "balanced", "best"):
-                summary, seconds = _run_json(
+                summary, seconds = run_lumos3d_json(
                     ["restore", str(LOM / "buu" / photos), "-o", f"{folder}/{mode}-{preset}/scene.ply", "--preset", preset,
                      "--mode", mode, *extra]
                 )
-                scores = _evaluate(mode, ["--preset", preset, *extra], f"{folder}/report-{mode}-{preset}")
+                scores = evaluate_buu(mode, ["--preset", preset, *extra], f"{folder}/report-{mode}-{preset}")
                 context, gamma, _ = scores["context"]
                 holdout, _, _ = scores["holdout"]
                 rows.append([
