@@ -67,8 +67,9 @@ def model_from_checkpoint(checkpoint: Checkpoint) -> Lumos3D:
 
 def load_model(source: str | Path, device: str | torch.device = "cpu", preset: ModelPreset | None = None) -> Lumos3D:
     """A network in eval mode on `device`, from a checkpoint path (file or folder) or the name of a
-    bundled model ('low-light', 'over-exposure'). `preset` sets the size of a foreign (VGGT/AnySplat) checkpoint; it
-    defaults to vggt-1b and must not be given for our own files, which carry theirs."""
+    bundled model ('low-light', 'over-exposure'). `preset` sets the size of a foreign
+    (VGGT/AnySplat) checkpoint; it defaults to vggt-1b and must not be given for our own files,
+    which carry theirs."""
     model = model_from_checkpoint(_checkpoint_for(source, preset))
     logger.info("loaded preset '%s' from %s", model.preset.name, model.provenance.get("path"))
     return model.to(device).eval()

@@ -27,7 +27,7 @@ from lumos3d_cli.render.render import render
 
 logger = logging.getLogger(__name__)
 
-# The bundled model of each mode (src/lumos3d_cli/weights/<name>.safetensors).
+
 @dataclass
 class RestoredScene:
     """gaussians: the fused scene (world = first selected view's camera frame); cameras at the
