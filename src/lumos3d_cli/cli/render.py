@@ -1,4 +1,5 @@
-"""`lumos3d render`: render a Gaussian scene from given cameras or an orbit, to PNGs and a video."""
+"""`lumos3d render`: render a Gaussian scene from given cameras or an orbit, to PNGs and a video
+(H.264 .mp4 or .gif)."""
 
 from __future__ import annotations
 
@@ -6,8 +7,6 @@ import contextlib
 import time
 from pathlib import Path
 
-import cv2
-import numpy as np
 import torch
 import typer
 
@@ -17,6 +16,7 @@ from lumos3d_cli.io.atomic import atomic_directory, atomic_path
 from lumos3d_cli.io.camera_files import find_camera_source, read_cameras
 from lumos3d_cli.io.image_write import write_image
 from lumos3d_cli.io.ply import read_ply
+from lumos3d_cli.io.video import VideoWriter, probe_video, video_kind
 from lumos3d_cli.render.camera_paths import orbit_from_cameras, orbit_from_gaussians
 from lumos3d_cli.render.render import render
 
@@ -24,6 +24,7 @@ EXAMPLES = """
   lumos3d render out/scene.ply --orbit 60 -o frames/ --video orbit.mp4
   lumos3d render scene.ply --poses cameras.json -o views/ --width 1024
   lumos3d render scene.ply --poses sparse/0 -o views/ --background 1,1,1 --json
+  lumos3d render out/scene.ply --orbit 48 -o frames/ --video orbit.gif --fps 12 --width 320
 """
 
 _DEFAULT_ORBIT_SIZE = 512
@@ -53,6 +54,14 @@ def _output_size(native: tuple[int, int], width: int | None, height: int | None)
     return native
 
 
+def _video_summary(path: Path, frames: int, fps: int) -> dict:
+    """What the written video holds, as ffmpeg reads it back (codec and size may differ from the
+    frames': H.264 pads odd sides)."""
+    stream = probe_video(path)
+    return {"path": str(path), "codec": stream.codec, "pixel_format": stream.pixel_format,
+            "width": stream.width, "height": stream.height, "frames": frames, "fps": fps}
+
+
 def render_command(
     scene: Path = typer.Argument(..., help="Gaussian scene (.ply, INRIA 3DGS layout)."),
     output: Path = typer.Option(..., "--output", "-o", help="Folder for the rendered PNGs."),
@@ -60,7 +69,7 @@ def render_command(
     orbit: int | None = typer.Option(None, "--orbit", help="Render N frames on an orbit around the scene."),
     width: int | None = typer.Option(None, "--width", help="Output width (default: the cameras', or 512 for orbits without cameras)."),
     height: int | None = typer.Option(None, "--height", help="Output height."),
-    video: Path | None = typer.Option(None, "--video", help="Also write the frames as an .mp4 video."),
+    video: Path | None = typer.Option(None, "--video", help="Also write the frames as a video: .mp4 (H.264, plays in browsers) or .gif."),
     fps: int = typer.Option(30, "--fps", help="Frames per second of the video."),
     background: str = typer.Option("0,0,0", "--background", help="Background colour r,g,b in [0, 1]."),
     antialiased: bool = typer.Option(False, "--antialiased", help="Mip-Splatting 2D filter (opacity compensation)."),
@@ -71,8 +80,7 @@ def render_command(
         raise InputError("give exactly one of --poses CAMERAS or --orbit N")
     if orbit is not None and not 1 <= orbit <= 100000:
         raise InputError(f"--orbit {orbit}: use between 1 and 100000 frames")
-    if video is not None and video.suffix.lower() != ".mp4":
-        raise InputError(f"--video {video}: the file name must end in .mp4")
+    kind = video_kind(video) if video is not None else None
     if not 1 <= fps <= 240:
         raise InputError(f"--fps {fps}: use between 1 and 240")
     colour = parse_background(background)
@@ -97,13 +105,9 @@ def render_command(
     render_seconds = 0.0
     with atomic_directory(output) as staging, progress_bar() as progress:
         task = progress.add_task("render", total=len(cameras))
-        writer = None
         with atomic_path(video) if video is not None else contextlib.nullcontext() as video_temporary:
-            if video_temporary is not None:
-                writer = cv2.VideoWriter(str(video_temporary), cv2.VideoWriter_fourcc(*"mp4v"), fps, (frame_width, frame_height))
-                if not writer.isOpened():
-                    raise InputError(f"--video {video}: OpenCV cannot write mp4 here; render PNGs only")
-            try:
+            with (VideoWriter(video_temporary, frame_width, frame_height, fps, kind)
+                  if video_temporary is not None else contextlib.nullcontext()) as writer:
                 for index in range(len(cameras)):
                     frame_started = time.perf_counter()
                     with torch.no_grad():
@@ -112,16 +116,12 @@ def render_command(
                     pixels = image.permute(1, 2, 0).numpy()
                     write_image(staging / f"{index:05d}.png", pixels)
                     if writer is not None:
-                        codes = np.round(np.clip(pixels, 0, 1) * 255).astype(np.uint8)
-                        writer.write(np.ascontiguousarray(codes[..., ::-1]))
+                        writer.write(pixels)
                     progress.advance(task)
-            finally:
-                if writer is not None:
-                    writer.release()
     summary = {
         "scene": str(scene), "gaussians": len(gaussians), "sh_degree": gaussians.sh_degree,
         "cameras": source, "frames": len(cameras), "width": frame_width, "height": frame_height,
-        "output": str(output), "video": str(video) if video else None,
+        "output": str(output), "video": _video_summary(video, len(cameras), fps) if video else None,
         "render_ms_per_frame": round(1000 * render_seconds / len(cameras), 2),
         "total_seconds": round(time.perf_counter() - started, 3),
     }
