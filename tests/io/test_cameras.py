@@ -154,3 +154,13 @@ def test_bad_camera_files(tmp_path):
     with pytest.raises(InputError, match="no cameras found"):
         read_cameras(tmp_path / "empty_dir")
     assert find_camera_source(tmp_path / "missing") is None
+
+
+def test_concatenate_keeps_order_sizes_and_names():
+    first = Cameras(torch.eye(3, 4)[None].double(), torch.eye(3)[None].double() * 2, [(4, 3)], ["a.png"])
+    second = Cameras(torch.eye(3, 4).repeat(2, 1, 1), torch.eye(3).repeat(2, 1, 1), [(8, 6), (2, 1)], ["b.png", "c.png"])
+    joined = Cameras.concatenate([first, second])
+    assert joined.names == ["a.png", "b.png", "c.png"] and joined.sizes == [(4, 3), (8, 6), (2, 1)]
+    assert joined.extrinsics.dtype == torch.float64 and joined.intrinsics[0, 0, 0] == 2 and joined.intrinsics[1, 0, 0] == 1
+    with pytest.raises(ValueError):
+        Cameras.concatenate([])

@@ -93,6 +93,18 @@ class Cameras:
         )
 
     @staticmethod
+    def concatenate(parts: Sequence[Cameras]) -> Cameras:
+        """The cameras of `parts` in order, as one Cameras (extrinsics in float64 when the parts'
+        dtypes differ)."""
+        if not parts:
+            raise ValueError("no cameras to concatenate")
+        dtype = parts[0].extrinsics.dtype if len({p.extrinsics.dtype for p in parts}) == 1 else torch.float64
+        return Cameras(
+            torch.cat([p.extrinsics.to(dtype) for p in parts]), torch.cat([p.intrinsics.to(dtype) for p in parts]),
+            [size for p in parts for size in p.sizes], [name for p in parts for name in p.names],
+        )
+
+    @staticmethod
     def from_camera_to_world(
         camera_to_world: torch.Tensor, intrinsics: torch.Tensor, sizes, names: Sequence[str] = ()
     ) -> Cameras:
