@@ -1,10 +1,10 @@
 """Speed and memory of the Lumos3D network (random weights): forward time, peak resident memory and
-achieved FLOP rate over 1-32 views at each preset's resolution, in float32 and under bf16
+achieved FLOP rate over 1-32 views at each architecture's resolution, in float32 and under bf16
 autocast, against a matrix multiply measured in the same run; plus a training step of `tiny`.
 Writes the "model" section of docs/performance.md.
 
     python benchmarks/model.py                                  # tiny and vggt-1b, 60-minute budget
-    python benchmarks/model.py --presets tiny --budget-minutes 3
+    python benchmarks/model.py --architectures tiny --budget-minutes 3
     python benchmarks/model.py --max-views 4 --cell-limit-seconds 120
     python benchmarks/model.py --json r.json; python benchmarks/model.py --retry r.json   # redo contended cells
 
@@ -28,8 +28,8 @@ from torch.utils.flop_counter import FlopCounterMode
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from report import machine_description, markdown_table, median_seconds, peak_rss_mib, write_section  # noqa: E402
 
+from lumos3d_cli.model.architectures import get_architecture  # noqa: E402
 from lumos3d_cli.model.lumos3d import Lumos3D, build_model  # noqa: E402
-from lumos3d_cli.model.presets import get_preset  # noqa: E402
 
 VIEWS = (1, 2, 4, 8, 16, 32)
 PRECISIONS = ("fp32", "bf16")
@@ -42,17 +42,17 @@ IDLE_THRESHOLD = 0.1
 SHARE_WARNING = 0.85
 
 
-def network_flops(preset_name: str, views: int) -> int:
+def network_flops(architecture_name: str, views: int) -> int:
     """FLOPs of one forward pass of the aggregator and heads for `views` square images at the
-    preset's size, counted on the meta device (shapes only; the voxelizer is not included)."""
-    preset = get_preset(preset_name)
-    size = preset.image_size
+    architecture's size, counted on the meta device (shapes only; the voxelizer is not included)."""
+    architecture = get_architecture(architecture_name)
+    size = architecture.image_size
     with torch.device("meta"):
-        model = Lumos3D(preset).requires_grad_(False)
+        model = Lumos3D(architecture).requires_grad_(False)
         images = torch.rand(1, views, 3, size, size)
     with FlopCounterMode(display=False) as counter:
         tokens = model.aggregator(images, model.token_layers)
-        model.camera_head(tokens[preset.depth - 1])
+        model.camera_head(tokens[architecture.depth - 1])
         model.depth_head(tokens, images)
         model.gaussian_head(tokens, images)
     return counter.get_total_flops()
@@ -98,14 +98,14 @@ def _timed(function, repeats: int, warmup: int) -> tuple[float, float]:
     return seconds, min(share, 1.0)
 
 
-def run_cell(preset_name: str, views: int, precision: str, repeats: int) -> dict:
+def run_cell(architecture_name: str, views: int, precision: str, repeats: int) -> dict:
     """(In a child process.) Time the full forward pass, voxelizer included, and a matmul of the
     same precision just before it (the reference for the achieved rate)."""
     matmul = matmul_gflops(torch.float32 if precision == "fp32" else torch.bfloat16)
     start = time.perf_counter()
-    model = build_model(preset_name, seed=0).eval()
+    model = build_model(architecture_name, seed=0).eval()
     build_seconds = time.perf_counter() - start
-    size = model.preset.image_size
+    size = model.architecture.image_size
     images = torch.rand(1, views, 3, size, size, generator=torch.Generator().manual_seed(0))
 
     def forward() -> None:
@@ -125,7 +125,7 @@ def training_step(views: int, repeats: int) -> dict:
     backward and AdamW."""
     model = build_model("tiny", seed=0).train()
     optimizer = torch.optim.AdamW(model.parameters(), lr=2e-4)
-    size = model.preset.image_size
+    size = model.architecture.image_size
     images = torch.rand(1, views, 3, size, size, generator=torch.Generator().manual_seed(0))
 
     def step() -> None:
@@ -163,12 +163,12 @@ def _dagger(cell: dict) -> str:
 def measure(args: argparse.Namespace) -> dict:
     deadline = time.monotonic() + 60 * args.budget_minutes
     rates = {precision: matmul_gflops(torch.float32 if precision == "fp32" else torch.bfloat16) for precision in PRECISIONS}
-    results: dict = {"matmul_gflops": rates, "presets": {}, "training": {}}
-    for preset_name in args.presets:
-        preset = get_preset(preset_name)
-        flops = {views: network_flops(preset_name, views) for views in VIEWS}
+    results: dict = {"matmul_gflops": rates, "architectures": {}, "training": {}}
+    for architecture_name in args.architectures:
+        architecture = get_architecture(architecture_name)
+        flops = {views: network_flops(architecture_name, views) for views in VIEWS}
         with torch.device("meta"):
-            parameters = sum(p.numel() for p in Lumos3D(preset).parameters())
+            parameters = sum(p.numel() for p in Lumos3D(architecture).parameters())
         cells = {}
         # GFLOP/s expected for the next cell of each precision; views-major order, so that both
         # precisions are measured at the small view counts before the budget runs out
@@ -186,7 +186,7 @@ def measure(args: argparse.Namespace) -> dict:
                     repeats = args.repeats if estimate * (1 + args.repeats) <= allowed else 1
                     busy = wait_for_idle(args.max_wait_seconds)
                     cell = _child(
-                        ["--cell", preset_name, str(views), precision, str(repeats)],
+                        ["--cell", architecture_name, str(views), precision, str(repeats)],
                         timeout=max(120.0, 3 * estimate * (1 + repeats) + 120),
                     )
                     cell["runs"] = repeats
@@ -197,9 +197,9 @@ def measure(args: argparse.Namespace) -> dict:
                 cell["estimated_seconds"] = estimate
                 cell["flops"] = flops[views]
                 cells[f"{precision}/{views}"] = cell
-                print(f"{preset_name} {precision} {views} views: {cell}", file=sys.stderr, flush=True)
-        results["presets"][preset_name] = {"parameters": parameters, "image_size": preset.image_size, "cells": cells}
-    if "tiny" in args.presets:
+                print(f"{architecture_name} {precision} {views} views: {cell}", file=sys.stderr, flush=True)
+        results["architectures"][architecture_name] = {"parameters": parameters, "image_size": architecture.image_size, "cells": cells}
+    if "tiny" in args.architectures:
         for views in (2, 4):
             wait_for_idle(args.max_wait_seconds)
             results["training"][views] = _child(["--train", str(views), str(args.repeats)], timeout=600)
@@ -209,15 +209,15 @@ def measure(args: argparse.Namespace) -> dict:
 def retry_contended(results: dict, args: argparse.Namespace) -> dict:
     """Run again every measured cell whose process got too little CPU (†), after waiting for an
     idle machine; keep whichever run got the larger CPU share."""
-    for preset_name, entry in results["presets"].items():
+    for architecture_name, entry in results["architectures"].items():
         for key, cell in entry["cells"].items():
             if "seconds" not in cell or cell["cpu_share"] >= SHARE_WARNING:
                 continue
             precision, views = key.split("/")
             wait_for_idle(args.max_wait_seconds)
             timeout = max(120.0, 3 * cell["seconds"] * (1 + cell["runs"]) + 120)
-            again = _child(["--cell", preset_name, views, precision, str(cell["runs"])], timeout=timeout)
-            print(f"retry {preset_name} {key}: {again}", file=sys.stderr, flush=True)
+            again = _child(["--cell", architecture_name, views, precision, str(cell["runs"])], timeout=timeout)
+            print(f"retry {architecture_name} {key}: {again}", file=sys.stderr, flush=True)
             if again.get("cpu_share", 0.0) > cell["cpu_share"]:
                 again.update(runs=cell["runs"], flops=cell["flops"], estimated_seconds=cell["estimated_seconds"])
                 again["gflops_per_s"] = cell["flops"] / again["seconds"] / 1e9
@@ -239,7 +239,7 @@ def render(results: dict, args: argparse.Namespace) -> str:
         f"Machine: {machine_description()}.",
         "",
         f"Matrix multiply ({MATMUL_SIZE}x{MATMUL_SIZE}) at the start of the run: {rates['fp32']:.1f} GFLOP/s (fp32), "
-        f"{rates['bf16']:.1f} GFLOP/s (bf16). Random weights, square images at each preset's resolution, batch 1, "
+        f"{rates['bf16']:.1f} GFLOP/s (bf16). Random weights, square images at each architecture's resolution, batch 1, "
         f"median of {args.repeats} timed runs after one warm-up, or a single cold run where only one fits the limits. "
         "Time covers the whole forward pass (backbone, heads, unprojection, voxel fusion, pruning). GFLOP/s counts the "
         "FLOPs of the backbone and heads (counted on the meta device; the voxelizer's few FLOPs are left out) over that "
@@ -249,8 +249,8 @@ def render(results: dict, args: argparse.Namespace) -> str:
         f"{100 * SHARE_WARNING:.0f} % of its {torch.get_num_threads()} threads' CPU time (the machine is shared), so its "
         "time is inflated. Cells marked *not measured* show the estimate FLOPs / rate of the previous cell, and why.",
     ]
-    for preset_name, entry in results["presets"].items():
-        lines += ["", f"### `{preset_name}` ({entry['parameters'] / 1e6:.1f} M parameters, {entry['image_size']} px)", ""]
+    for architecture_name, entry in results["architectures"].items():
+        lines += ["", f"### `{architecture_name}` ({entry['parameters'] / 1e6:.1f} M parameters, {entry['image_size']} px)", ""]
         header = ["views", "TFLOP"]
         for precision in PRECISIONS:
             header += [f"{precision} time (s)", f"{precision} peak RSS (MiB)", f"{precision} GFLOP/s (% matmul)"]
@@ -272,7 +272,7 @@ def render(results: dict, args: argparse.Namespace) -> str:
     if results["training"]:
         lines += [
             "",
-            f"### `tiny` training step ({get_preset('tiny').image_size} px)",
+            f"### `tiny` training step ({get_architecture('tiny').image_size} px)",
             "",
             "Forward, a loss on every output (stand-in for the rendering losses, whose rasterizer time is not "
             "included), backward and AdamW, fp32.",
@@ -290,14 +290,14 @@ def render(results: dict, args: argparse.Namespace) -> str:
 
 def main() -> int:
     if len(sys.argv) > 1 and sys.argv[1] == "--cell":
-        preset_name, views, precision, repeats = sys.argv[2], int(sys.argv[3]), sys.argv[4], int(sys.argv[5])
-        print(json.dumps(run_cell(preset_name, views, precision, repeats)))
+        architecture_name, views, precision, repeats = sys.argv[2], int(sys.argv[3]), sys.argv[4], int(sys.argv[5])
+        print(json.dumps(run_cell(architecture_name, views, precision, repeats)))
         return 0
     if len(sys.argv) > 1 and sys.argv[1] == "--train":
         print(json.dumps(training_step(int(sys.argv[2]), int(sys.argv[3]))))
         return 0
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--presets", nargs="+", default=["tiny", "vggt-1b"])
+    parser.add_argument("--architectures", nargs="+", default=["tiny", "vggt-1b"])
     parser.add_argument("--budget-minutes", type=float, default=60.0, help="total time for the forward cells")
     parser.add_argument("--cell-limit-seconds", type=float, default=600.0, help="skip cells estimated to take longer")
     parser.add_argument("--max-views", type=int, default=32)

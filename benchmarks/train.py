@@ -89,7 +89,7 @@ def main() -> None:
                                  "—" if values["gpu_peak_mib"] is None else f"{values['gpu_peak_mib']:.0f}"])
                     print(rows[-1], flush=True)
     text = "\n\n".join([
-        "## Training (tiny preset)",
+        "## Training (tiny architecture)",
         f"Machine: {machine_description()}. Script: `benchmarks/train.py`. One process, batch of one "
         "scene, fp32, the full objective of each stage (teacher: rendering + pose + sparse depth; "
         "student: reconstruction + distillation from a frozen teacher + Lumos loss without VGG "

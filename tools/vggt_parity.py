@@ -7,11 +7,11 @@ that file with our `load_model`, runs both networks in float32 on the same rando
 reports the relative errors of the pose encodings (every refinement iteration), depth and depth
 confidence.
 
-  python tools/vggt_parity.py /path/to/vggt-checkout --preset vggt-1b --views 2 --height 350 --width 518
-  python tools/vggt_parity.py /path/to/vggt-checkout --preset small            # reduced, same key layout
+  python tools/vggt_parity.py /path/to/vggt-checkout --architecture vggt-1b --views 2 --height 350 --width 518
+  python tools/vggt_parity.py /path/to/vggt-checkout --architecture small            # reduced, same key layout
 
-Presets other than vggt-1b are rebuilt from the reference's components (Aggregator with the
-matching DINOv2 patch embed, CameraHead, DPTHead) at the preset's dimensions. The reference
+Architectures other than vggt-1b are rebuilt from the reference's components (Aggregator with the
+matching DINOv2 patch embed, CameraHead, DPTHead) at the architecture's dimensions. The reference
 imports `einops` (track head) and `huggingface_hub` (a mix-in base class) at module level;
 neither is used on this path, so when missing they are replaced by empty stand-ins.
 """
@@ -28,8 +28,8 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from lumos3d_cli.model.architectures import ARCHITECTURES, Architecture
 from lumos3d_cli.model.loading import load_model
-from lumos3d_cli.model.presets import PRESETS, ModelPreset
 
 DINO_NAMES = {384: "dinov2_vits14_reg", 768: "dinov2_vitb14_reg", 1024: "dinov2_vitl14_reg"}
 
@@ -55,28 +55,28 @@ def install_stand_ins() -> None:
 
 
 class ReferenceParts(nn.Module):
-    """The reference aggregator, camera head and depth head at a preset's dimensions."""
+    """The reference aggregator, camera head and depth head at an architecture's dimensions."""
 
-    def __init__(self, preset: ModelPreset):
+    def __init__(self, architecture: Architecture):
         super().__init__()
         from vggt.heads.camera_head import CameraHead
         from vggt.heads.dpt_head import DPTHead
         from vggt.models.aggregator import Aggregator
 
         self.aggregator = Aggregator(
-            img_size=preset.image_size, patch_size=preset.patch_size, embed_dim=preset.embed_dim, depth=preset.depth,
-            num_heads=preset.num_heads, mlp_ratio=preset.mlp_ratio, num_register_tokens=preset.num_register_tokens,
-            patch_embed=DINO_NAMES[preset.embed_dim] if preset.patch_embed.kind == "dinov2" else "conv",
-            rope_freq=preset.rope_frequency, init_values=preset.layer_scale_init,
+            img_size=architecture.image_size, patch_size=architecture.patch_size, embed_dim=architecture.embed_dim, depth=architecture.depth,
+            num_heads=architecture.num_heads, mlp_ratio=architecture.mlp_ratio, num_register_tokens=architecture.num_register_tokens,
+            patch_embed=DINO_NAMES[architecture.embed_dim] if architecture.patch_embed.kind == "dinov2" else "conv",
+            rope_freq=architecture.rope_frequency, init_values=architecture.layer_scale_init,
         )
         self.camera_head = CameraHead(
-            dim_in=2 * preset.embed_dim, trunk_depth=preset.camera_trunk_depth, num_heads=preset.camera_num_heads,
-            mlp_ratio=preset.mlp_ratio, init_values=preset.layer_scale_init,
+            dim_in=2 * architecture.embed_dim, trunk_depth=architecture.camera_trunk_depth, num_heads=architecture.camera_num_heads,
+            mlp_ratio=architecture.mlp_ratio, init_values=architecture.layer_scale_init,
         )
         self.depth_head = DPTHead(
-            dim_in=2 * preset.embed_dim, patch_size=preset.patch_size, output_dim=2, activation="exp",
-            conf_activation="expp1", features=preset.dpt_features, out_channels=list(preset.dpt_out_channels),
-            intermediate_layer_idx=list(preset.intermediate_layers),
+            dim_in=2 * architecture.embed_dim, patch_size=architecture.patch_size, output_dim=2, activation="exp",
+            conf_activation="expp1", features=architecture.dpt_features, out_channels=list(architecture.dpt_out_channels),
+            intermediate_layer_idx=list(architecture.intermediate_layers),
         )
 
     def forward(self, images: torch.Tensor) -> dict:
@@ -86,12 +86,12 @@ class ReferenceParts(nn.Module):
         return {"pose_enc": pose_enc_list[-1], "pose_enc_list": pose_enc_list, "depth": depth, "depth_conf": depth_conf}
 
 
-def build_reference(preset: ModelPreset) -> nn.Module:
-    if preset.name == "vggt-1b":
+def build_reference(architecture: Architecture) -> nn.Module:
+    if architecture.name == "vggt-1b":
         from vggt.models.vggt import VGGT
 
         return VGGT()
-    return ReferenceParts(preset)
+    return ReferenceParts(architecture)
 
 
 @torch.no_grad()
@@ -125,16 +125,16 @@ def relative_error(ours: torch.Tensor, reference: torch.Tensor) -> dict:
     }
 
 
-def run(reference_path: Path, preset_name: str, views: int, height: int, width: int, seed: int, workdir: Path) -> dict:
+def run(reference_path: Path, architecture_name: str, views: int, height: int, width: int, seed: int, workdir: Path) -> dict:
     install_stand_ins()
     sys.path.insert(0, str(reference_path))
-    preset = PRESETS[preset_name]
+    architecture = ARCHITECTURES[architecture_name]
     torch.manual_seed(seed)
-    reference = build_reference(preset).eval()
+    reference = build_reference(architecture).eval()
     randomize(reference, seed)
     checkpoint = workdir / "model.pt"
     torch.save(reference.state_dict(), checkpoint)
-    ours = load_model(checkpoint, preset=preset)
+    ours = load_model(checkpoint, architecture=architecture)
     images = torch.rand(1, views, 3, height, width, generator=torch.Generator().manual_seed(seed + 1))
     with torch.no_grad():
         expected = reference(images)
@@ -148,7 +148,7 @@ def run(reference_path: Path, preset_name: str, views: int, height: int, width: 
         errors[f"pose_enc_iteration_{index}"] = relative_error(a, b)
     worst = max(errors["pose_enc"]["relative_to_max"], errors["depth"]["max_elementwise_relative"])
     return {
-        "preset": preset_name,
+        "architecture": architecture_name,
         "input": [1, views, 3, height, width],
         "parameters_compared": sum(t.numel() for k, t in ours.state_dict().items() if not k.startswith("gaussian_head.")),
         "errors": errors,
@@ -169,7 +169,7 @@ def run(reference_path: Path, preset_name: str, views: int, height: int, width: 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("reference", type=Path, help="checkout of facebookresearch/vggt (the folder holding vggt/)")
-    parser.add_argument("--preset", default="vggt-1b", choices=sorted(PRESETS))
+    parser.add_argument("--architecture", default="vggt-1b", choices=sorted(ARCHITECTURES))
     parser.add_argument("--views", type=int, default=2)
     parser.add_argument("--height", type=int, default=350)
     parser.add_argument("--width", type=int, default=518)
@@ -179,7 +179,7 @@ def main() -> int:
     if not (args.reference / "vggt" / "models" / "aggregator.py").is_file():
         parser.error(f"{args.reference} does not hold the vggt package (vggt/models/aggregator.py)")
     with tempfile.TemporaryDirectory(prefix="vggt-parity-") as workdir:
-        report = run(args.reference, args.preset, args.views, args.height, args.width, args.seed, Path(workdir))
+        report = run(args.reference, args.architecture, args.views, args.height, args.width, args.seed, Path(workdir))
     text = json.dumps(report, indent=2)
     print(text)
     if args.output:

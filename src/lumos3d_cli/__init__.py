@@ -24,9 +24,9 @@ _LAZY = {
     "load_model": "lumos3d_cli.model.loading",
     "prepare_images": "lumos3d_cli.model.preprocess",
     "PreparedImages": "lumos3d_cli.model.preprocess",
-    "PRESETS": "lumos3d_cli.model.presets",
-    "ModelPreset": "lumos3d_cli.model.presets",
-    "get_preset": "lumos3d_cli.model.presets",
+    "ARCHITECTURES": "lumos3d_cli.model.architectures",
+    "Architecture": "lumos3d_cli.model.architectures",
+    "get_architecture": "lumos3d_cli.model.architectures",
     "save_checkpoint": "lumos3d_cli.io.checkpoints",
     "summarize_checkpoint": "lumos3d_cli.io.checkpoints",
 }

@@ -5,18 +5,19 @@ import pathlib
 
 import pytest
 import torch
+from safetensors import safe_open
 from safetensors.torch import save_file
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.checkpoints import read_checkpoint, save_checkpoint, summarize_checkpoint
-from lumos3d_cli.model.lumos3d import build_model
+from lumos3d_cli.io.checkpoints import BUNDLED_MODELS, bundled_weights_path, read_checkpoint, save_checkpoint, summarize_checkpoint
+from lumos3d_cli.model.architectures import ARCHITECTURES, Architecture, PatchEmbedConfig
 from lumos3d_cli.model.loading import load_model
-from lumos3d_cli.model.presets import PRESETS, PatchEmbedConfig
+from lumos3d_cli.model.lumos3d import build_model
 
 # VGGT's key structure (DINOv2 patch embed with registers, QK-norm blocks, camera and DPT heads)
 # at a size that builds and runs in a fraction of a second.
 REDUCED = dataclasses.replace(
-    PRESETS["tiny"], name="reduced-vggt", image_size=56, sh_degree=2, gaussian_head_hidden=24,
+    ARCHITECTURES["tiny"], name="reduced-vggt", image_size=56, sh_degree=2, gaussian_head_hidden=24,
     patch_embed=PatchEmbedConfig(kind="dinov2", depth=2, num_heads=4),
 )
 IMAGES = torch.rand(1, 2, 3, 28, 42, generator=torch.Generator().manual_seed(0))
@@ -57,7 +58,7 @@ def _outputs(model):
 def test_our_format_round_trip(tmp_path, source, expected):
     path = save_checkpoint(source, tmp_path / "run" / "tiny.safetensors", {"steps": 10, "data": "test"})
     loaded = load_model(path)
-    assert loaded.preset == REDUCED and not loaded.training
+    assert loaded.architecture == REDUCED and not loaded.training
     assert loaded.provenance["steps"] == 10 and loaded.provenance["format"] == "lumos3d"
     # loaded weights stay trainable (fine-tuning), except DINOv2's unused mask token
     assert {n for n, p in loaded.named_parameters() if not p.requires_grad} == {"aggregator.patch_embed.mask_token"}
@@ -65,11 +66,29 @@ def test_our_format_round_trip(tmp_path, source, expected):
     assert torch.equal(actual.pose_enc, expected.pose_enc) and torch.equal(actual.depth, expected.depth)
     assert torch.equal(actual.gaussians[0].sh, expected.gaussians[0].sh)
     summary = summarize_checkpoint(path)
-    assert summary["format"] == "lumos3d" and summary["preset"] == "reduced-vggt"
+    assert summary["format"] == "lumos3d" and summary["architecture"] == "reduced-vggt"
     assert summary["parameters"] == sum(p.numel() for p in source.parameters())
     assert summary["provenance"] == {"steps": 10, "data": "test"} and summary["fresh_modules"] == []
-    with pytest.raises(InputError, match="carries its own preset"):
-        load_model(path, preset=REDUCED)
+    with pytest.raises(InputError, match="carries its own architecture"):
+        load_model(path, architecture=REDUCED)
+
+
+def _config(path) -> dict:
+    with safe_open(str(path), framework="pt") as handle:
+        return json.loads(handle.metadata()["lumos3d"])
+
+
+@pytest.mark.parametrize("mode", sorted(BUNDLED_MODELS))
+def test_format_version_1_names_the_architecture_preset_and_the_bundled_files_load(tmp_path, source, mode):
+    """The JSON key "preset" is a format fact (files written before the rename, the bundled weights
+    among them): read from the real bundled files, and still written, so every file stays readable."""
+    bundled = bundled_weights_path(BUNDLED_MODELS[mode])
+    config = _config(bundled)
+    assert config["format_version"] == 1 and "architecture" not in config
+    architecture = read_checkpoint(bundled).architecture
+    assert architecture == Architecture.from_dict(config["preset"]) == ARCHITECTURES["tiny"]
+    written = save_checkpoint(source, tmp_path / "new.safetensors")
+    assert Architecture.from_dict(_config(written)["preset"]) == REDUCED
 
 
 @pytest.mark.parametrize("suffix", [".pt", ".safetensors"])
@@ -81,7 +100,7 @@ def test_official_vggt_layout_loads_with_a_fresh_gaussian_head(tmp_path, caplog,
     else:
         save_file(state, str(path))
     with caplog.at_level(logging.INFO, logger="lumos3d_cli"):
-        loaded = load_model(tmp_path, preset=REDUCED)  # a folder holding model.* works too
+        loaded = load_model(tmp_path, architecture=REDUCED)  # a folder holding model.* works too
     assert "ignored 2 tensors" in caplog.text and "point_head, track_head" in caplog.text
     assert any(r.levelno == logging.WARNING and "gaussian_head" in r.getMessage() for r in caplog.records)
     assert loaded.provenance["format"] == "vggt"
@@ -95,8 +114,8 @@ def test_official_vggt_layout_loads_with_a_fresh_gaussian_head(tmp_path, caplog,
 def test_anysplat_layout_loads_everything_and_reads_the_sh_degree(tmp_path, source, expected):
     path = tmp_path / "model.safetensors"
     save_file(_anysplat_state(source), str(path))
-    loaded = load_model(path, preset=dataclasses.replace(REDUCED, sh_degree=4, gaussian_head_hidden=128))
-    assert loaded.preset.sh_degree == 2 and loaded.preset.gaussian_head_hidden == 24
+    loaded = load_model(path, architecture=dataclasses.replace(REDUCED, sh_degree=4, gaussian_head_hidden=128))
+    assert loaded.architecture.sh_degree == 2 and loaded.architecture.gaussian_head_hidden == 24
     actual = _outputs(loaded)
     assert torch.equal(actual.pose_enc, expected.pose_enc) and torch.equal(actual.depth, expected.depth)
     for name, tensor in expected.gaussians[0].tensors().items():
@@ -107,7 +126,7 @@ def test_anysplat_layout_loads_everything_and_reads_the_sh_degree(tmp_path, sour
 def test_half_precision_files_load_as_float32(tmp_path, source):
     path = tmp_path / "model.safetensors"
     save_file({k: v.to(torch.bfloat16) for k, v in _anysplat_state(source).items()}, str(path))
-    loaded = load_model(path, preset=REDUCED)
+    loaded = load_model(path, architecture=REDUCED)
     assert all(p.dtype == torch.float32 for p in loaded.parameters())
     assert summarize_checkpoint(path)["dtypes"] == {"BF16": len(source.state_dict())}
 
@@ -119,7 +138,7 @@ def test_mismatches_list_missing_unexpected_and_misshaped_keys(tmp_path, source)
     state["depth_head.norm.weight"] = torch.zeros(7)
     torch.save(state, tmp_path / "model.pt")
     with pytest.raises(InputError) as error:
-        load_model(tmp_path / "model.pt", preset=REDUCED)
+        load_model(tmp_path / "model.pt", architecture=REDUCED)
     message = str(error.value)
     assert "1 missing keys: aggregator.camera_token" in message
     assert "1 unexpected keys: aggregator.extra" in message
@@ -131,10 +150,10 @@ def test_long_key_lists_are_truncated(tmp_path, source):
     state.update({f"aggregator.bogus_{i:02d}": torch.zeros(1) for i in range(25)})
     torch.save(state, tmp_path / "model.pt")
     with pytest.raises(InputError, match=r"25 unexpected keys: .*bogus_09 \.\.\. and 15 more"):
-        load_model(tmp_path / "model.pt", preset=REDUCED)
+        load_model(tmp_path / "model.pt", architecture=REDUCED)
 
 
-def test_the_wrong_preset_for_an_official_file_is_a_shape_error(tmp_path, source):
+def test_the_wrong_architecture_for_an_official_file_is_a_shape_error(tmp_path, source):
     torch.save(_vggt_state(source), tmp_path / "model.pt")
     with pytest.raises(InputError, match="does not fit the model"):
         load_model(tmp_path / "model.pt")  # defaults to vggt-1b
@@ -199,7 +218,7 @@ def test_full_size_vggt_1b_official_layout_round_trip(tmp_path):
     state = {k: v for k, v in source.state_dict().items() if not k.startswith("gaussian_head.")}
     torch.save(state, tmp_path / "model.pt")
     loaded = load_model(tmp_path / "model.pt")
-    assert loaded.preset.name == "vggt-1b"
+    assert loaded.architecture.name == "vggt-1b"
     for key, value in state.items():
         assert torch.equal(loaded.state_dict()[key], value), key
     images = torch.rand(1, 1, 3, 28, 28)

@@ -4,13 +4,13 @@ import pytest
 import torch
 
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.model.architectures import ARCHITECTURES, Architecture, get_architecture
 from lumos3d_cli.model.lumos3d import Lumos3D
-from lumos3d_cli.model.presets import PRESETS, ModelPreset, get_preset
 
 
-def _meta_model(preset: ModelPreset) -> Lumos3D:
+def _meta_model(architecture: Architecture) -> Lumos3D:
     with torch.device("meta"):
-        return Lumos3D(preset)
+        return Lumos3D(architecture)
 
 
 def _counts(model: Lumos3D) -> dict[str, tuple[int, int]]:
@@ -24,7 +24,7 @@ def _counts(model: Lumos3D) -> dict[str, tuple[int, int]]:
 
 
 def test_vggt_1b_has_the_official_key_counts_and_sizes():
-    counts = _counts(_meta_model(PRESETS["vggt-1b"]))
+    counts = _counts(_meta_model(ARCHITECTURES["vggt-1b"]))
     # Numbers of the official VGGT-1B state dict (aggregator, camera and depth heads) and the
     # key counts of AnySplat's released model.safetensors (its Gaussian head at SH degree 4).
     assert counts["aggregator"] == (1210, 909_112_320)
@@ -34,7 +34,7 @@ def test_vggt_1b_has_the_official_key_counts_and_sizes():
 
 
 def test_vggt_1b_key_names_and_shapes_spot_checks():
-    state = _meta_model(PRESETS["vggt-1b"]).state_dict()
+    state = _meta_model(ARCHITECTURES["vggt-1b"]).state_dict()
     expected = {
         "aggregator.camera_token": (1, 2, 1, 1024),
         "aggregator.register_token": (1, 2, 4, 1024),
@@ -61,29 +61,29 @@ def test_vggt_1b_key_names_and_shapes_spot_checks():
     assert not any(k.startswith("aggregator.patch_embed.blocks.0.attn.q_norm") for k in state)  # DINO: no QK-norm
     assert "depth_head.scratch.refinenet4.resConfUnit1.conv1.weight" not in state
     assert "depth_head.resize_layers.2.weight" not in state
-    assert not list(_meta_model(PRESETS["vggt-1b"]).buffers())  # nothing but parameters is stored
+    assert not list(_meta_model(ARCHITECTURES["vggt-1b"]).buffers())  # nothing but parameters is stored
 
 
-@pytest.mark.parametrize("name", sorted(PRESETS))
-def test_every_preset_builds_and_round_trips_through_its_dict(name):
-    preset = get_preset(name)
-    assert ModelPreset.from_dict(preset.to_dict()) == preset
-    model = _meta_model(preset)
+@pytest.mark.parametrize("name", sorted(ARCHITECTURES))
+def test_every_architecture_builds_and_round_trips_through_its_dict(name):
+    architecture = get_architecture(name)
+    assert Architecture.from_dict(architecture.to_dict()) == architecture
+    model = _meta_model(architecture)
     assert sum(p.numel() for p in model.parameters()) > 0
-    assert preset.gaussian_channels == 9 + 3 * (preset.sh_degree + 1) ** 2
+    assert architecture.gaussian_channels == 9 + 3 * (architecture.sh_degree + 1) ** 2
 
 
 def test_tiny_is_small():
-    parameters = sum(p.numel() for p in _meta_model(PRESETS["tiny"]).parameters())
+    parameters = sum(p.numel() for p in _meta_model(ARCHITECTURES["tiny"]).parameters())
     assert 1_000_000 < parameters < 10_000_000
 
 
-def test_invalid_presets_and_names_are_refused():
+def test_invalid_architectures_and_names_are_refused():
     with pytest.raises(ValueError, match="divisible"):
-        dataclasses.replace(PRESETS["tiny"], num_heads=5)
+        dataclasses.replace(ARCHITECTURES["tiny"], num_heads=5)
     with pytest.raises(ValueError, match="intermediate_layers"):
-        dataclasses.replace(PRESETS["tiny"], intermediate_layers=(0, 1, 2, 9))
+        dataclasses.replace(ARCHITECTURES["tiny"], intermediate_layers=(0, 1, 2, 9))
     with pytest.raises(InputError, match="tiny"):
-        get_preset("huge")
-    with pytest.raises(ValueError, match="unknown preset fields"):
-        ModelPreset.from_dict({**PRESETS["tiny"].to_dict(), "colour": 3})
+        get_architecture("huge")
+    with pytest.raises(ValueError, match="unknown architecture fields"):
+        Architecture.from_dict({**ARCHITECTURES["tiny"].to_dict(), "colour": 3})

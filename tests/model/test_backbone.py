@@ -2,36 +2,36 @@ import dataclasses
 
 import torch
 
+from lumos3d_cli.model.architectures import ARCHITECTURES, PatchEmbedConfig
 from lumos3d_cli.model.backbone import Aggregator
 from lumos3d_cli.model.layers.vision_transformer import DinoVisionTransformer
-from lumos3d_cli.model.presets import PRESETS, PatchEmbedConfig
 
-PRESET = PRESETS["tiny"]
+ARCHITECTURE = ARCHITECTURES["tiny"]
 
 
 def test_views_after_the_first_are_interchangeable_but_the_first_is_special():
     torch.manual_seed(0)
-    aggregator = Aggregator(PRESET).eval()
+    aggregator = Aggregator(ARCHITECTURE).eval()
     with torch.no_grad():
         aggregator.camera_token.normal_()  # make the first-frame slot clearly different
         images = torch.rand(1, 4, 3, 28, 42)
-        out = aggregator(images, layers=[PRESET.depth - 1])[PRESET.depth - 1]
+        out = aggregator(images, layers=[ARCHITECTURE.depth - 1])[ARCHITECTURE.depth - 1]
         order = [0, 3, 1, 2]
-        permuted = aggregator(images[:, order], layers=[PRESET.depth - 1])[PRESET.depth - 1]
+        permuted = aggregator(images[:, order], layers=[ARCHITECTURE.depth - 1])[ARCHITECTURE.depth - 1]
         torch.testing.assert_close(permuted, out[:, order], atol=1e-5, rtol=1e-5)
-        swapped = aggregator(images[:, [1, 0, 2, 3]], layers=[PRESET.depth - 1])[PRESET.depth - 1]
+        swapped = aggregator(images[:, [1, 0, 2, 3]], layers=[ARCHITECTURE.depth - 1])[ARCHITECTURE.depth - 1]
     assert not torch.allclose(swapped[:, 1], out[:, 0], atol=1e-3)
 
 
 def test_frame_half_of_layer_zero_sees_only_its_own_frame():
-    aggregator = Aggregator(PRESET).eval()
+    aggregator = Aggregator(ARCHITECTURE).eval()
     images = torch.rand(1, 3, 3, 28, 28)
     changed = images.clone()
     changed[:, 2] = 1 - changed[:, 2]
     with torch.no_grad():
         a = aggregator(images, layers=[0])[0]
         b = aggregator(changed, layers=[0])[0]
-    channels = PRESET.embed_dim
+    channels = ARCHITECTURE.embed_dim
     torch.testing.assert_close(a[:, :2, :, :channels], b[:, :2, :, :channels])  # frame attention: per view
     assert not torch.allclose(a[:, :2, :, channels:], b[:, :2, :, channels:])  # global attention: across views
 
@@ -46,15 +46,15 @@ def test_dino_position_embedding_is_kept_at_its_grid_and_resampled_elsewhere():
 
 
 def test_gradient_checkpointing_gives_the_same_gradients():
-    preset = dataclasses.replace(PRESET, patch_embed=PatchEmbedConfig(kind="dinov2", depth=1, num_heads=4), image_size=56)
+    architecture = dataclasses.replace(ARCHITECTURE, patch_embed=PatchEmbedConfig(kind="dinov2", depth=1, num_heads=4), image_size=56)
     torch.manual_seed(1)
-    aggregator = Aggregator(preset)
+    aggregator = Aggregator(architecture)
     images = torch.rand(1, 2, 3, 28, 28)
     grads = []
     for enabled in (False, True):
         aggregator.zero_grad()
         aggregator.set_gradient_checkpointing(enabled)
-        aggregator(images, layers=[preset.depth - 1])[preset.depth - 1].square().mean().backward()
+        aggregator(images, layers=[architecture.depth - 1])[architecture.depth - 1].square().mean().backward()
         grads.append([p.grad.clone() for p in aggregator.parameters() if p.grad is not None])
     assert len(grads[0]) == len(grads[1]) > 0
     for a, b in zip(*grads):

@@ -4,14 +4,14 @@ import math
 import torch
 import torch.nn.functional as F
 
+from lumos3d_cli.model.architectures import ARCHITECTURES
 from lumos3d_cli.model.gaussian_adapter import activate_gaussians, sh_degree_weights, split_confidence
-from lumos3d_cli.model.presets import PRESETS
 
-PRESET = dataclasses.replace(PRESETS["tiny"], sh_degree=1)
+ARCHITECTURE = dataclasses.replace(ARCHITECTURES["tiny"], sh_degree=1)
 
 
 def _raw(n: int = 4) -> torch.Tensor:
-    return torch.randn(n, PRESET.gaussian_channels, generator=torch.Generator().manual_seed(0))
+    return torch.randn(n, ARCHITECTURE.gaussian_channels, generator=torch.Generator().manual_seed(0))
 
 
 def test_channel_layout_and_activations():
@@ -23,9 +23,9 @@ def test_channel_layout_and_activations():
     params, confidence = split_confidence(raw)
     assert params.shape == (4, 20) and torch.equal(confidence, raw[:, -1])
     scale = torch.tensor(2.0)
-    gaussians = activate_gaussians(torch.zeros(4, 3), params, scale, PRESET)
+    gaussians = activate_gaussians(torch.zeros(4, 3), params, scale, ARCHITECTURE)
     torch.testing.assert_close(gaussians.opacities[0], torch.sigmoid(torch.tensor(2.0)))
-    expected_scale = torch.tensor([PRESET.gaussian_scale_base * math.log(2.0), PRESET.gaussian_scale_max, PRESET.gaussian_scale_min]) * 2.0
+    expected_scale = torch.tensor([ARCHITECTURE.gaussian_scale_base * math.log(2.0), ARCHITECTURE.gaussian_scale_max, ARCHITECTURE.gaussian_scale_min]) * 2.0
     torch.testing.assert_close(gaussians.scales[0], expected_scale)
     torch.testing.assert_close(gaussians.quats[0], torch.tensor([0.8, 0.0, 0.0, 0.6]))  # wxyz
     weights = torch.tensor([1.0, 0.025, 0.025, 0.025])
@@ -37,7 +37,7 @@ def test_channel_layout_and_activations():
 def test_zero_quaternion_becomes_identity():
     raw = _raw(1)
     raw[0, 4:8] = 0.0
-    gaussians = activate_gaussians(torch.zeros(1, 3), split_confidence(raw)[0], torch.tensor(1.0), PRESET)
+    gaussians = activate_gaussians(torch.zeros(1, 3), split_confidence(raw)[0], torch.tensor(1.0), ARCHITECTURE)
     torch.testing.assert_close(gaussians.quats[0], torch.tensor([1.0, 0.0, 0.0, 0.0]))
 
 
@@ -49,7 +49,7 @@ def test_sh_degree_weights_follow_anysplat():
 
 def test_scale_is_proportional_to_scene_scale():
     params = split_confidence(_raw())[0]
-    a = activate_gaussians(torch.zeros(4, 3), params, torch.tensor(1.0), PRESET)
-    b = activate_gaussians(torch.zeros(4, 3), params, torch.tensor(50.0), PRESET)
+    a = activate_gaussians(torch.zeros(4, 3), params, torch.tensor(1.0), ARCHITECTURE)
+    b = activate_gaussians(torch.zeros(4, 3), params, torch.tensor(50.0), ARCHITECTURE)
     torch.testing.assert_close(b.scales, a.scales * 50)
     torch.testing.assert_close(F.normalize(a.quats, dim=1), a.quats)

@@ -2,6 +2,7 @@ import dataclasses
 
 import torch
 
+from lumos3d_cli.model.architectures import ARCHITECTURES
 from lumos3d_cli.model.backbone import Aggregator
 from lumos3d_cli.model.heads import dpt
 from lumos3d_cli.model.heads.camera import CameraHead
@@ -9,16 +10,15 @@ from lumos3d_cli.model.heads.dpt import DepthHead
 from lumos3d_cli.model.heads.fusion import ResidualConvUnit
 from lumos3d_cli.model.heads.gaussian import GaussianHead
 from lumos3d_cli.model.heads.uv_embedding import uv_embedding, uv_grid
-from lumos3d_cli.model.presets import PRESETS
 
-PRESET = PRESETS["tiny"]
+ARCHITECTURE = ARCHITECTURES["tiny"]
 
 
 def _tokens(batch: int, frames: int, height: int, width: int, seed: int = 0) -> dict[int, torch.Tensor]:
     generator = torch.Generator().manual_seed(seed)
-    patches = (height // PRESET.patch_size) * (width // PRESET.patch_size)
-    shape = (batch, frames, PRESET.patch_start_index + patches, 2 * PRESET.embed_dim)
-    return {layer: torch.randn(shape, generator=generator) for layer in range(PRESET.depth)}
+    patches = (height // ARCHITECTURE.patch_size) * (width // ARCHITECTURE.patch_size)
+    shape = (batch, frames, ARCHITECTURE.patch_start_index + patches, 2 * ARCHITECTURE.embed_dim)
+    return {layer: torch.randn(shape, generator=generator) for layer in range(ARCHITECTURE.depth)}
 
 
 def test_uv_embedding_matches_vggt_values():
@@ -42,17 +42,17 @@ def test_residual_unit_skip_adds_the_rectified_input():
 
 
 def test_camera_head_returns_every_refinement_with_non_negative_fov():
-    head = CameraHead(PRESET).eval()
-    encodings = head(_tokens(2, 3, 28, 42)[PRESET.depth - 1])
-    assert len(encodings) == PRESET.camera_iterations == 4
+    head = CameraHead(ARCHITECTURE).eval()
+    encodings = head(_tokens(2, 3, 28, 42)[ARCHITECTURE.depth - 1])
+    assert len(encodings) == ARCHITECTURE.camera_iterations == 4
     assert all(e.shape == (2, 3, 9) for e in encodings)
     assert all((e[..., 7:] >= 0).all() for e in encodings)
     assert not torch.equal(encodings[0], encodings[-1])
 
 
 def test_camera_head_feeds_back_a_detached_estimate():
-    head = CameraHead(PRESET)
-    encodings = head(_tokens(1, 2, 28, 28)[PRESET.depth - 1])
+    head = CameraHead(ARCHITECTURE)
+    encodings = head(_tokens(1, 2, 28, 28)[ARCHITECTURE.depth - 1])
     # estimate_k = estimate_0 + sum of updates computed from *detached* estimates, so every
     # iteration's translation and rotation depend on the empty pose token only through estimate_0
     grads = [torch.autograd.grad(e[..., :7].sum(), head.empty_pose_tokens, retain_graph=True)[0] for e in encodings]
@@ -62,7 +62,7 @@ def test_camera_head_feeds_back_a_detached_estimate():
 
 
 def test_depth_head_outputs_positive_depth_and_confidence_above_one():
-    head = DepthHead(PRESET).eval()
+    head = DepthHead(ARCHITECTURE).eval()
     images = torch.rand(1, 2, 3, 42, 28)
     depth, confidence = head(_tokens(1, 2, 42, 28), images)
     assert depth.shape == confidence.shape == (1, 2, 42, 28)
@@ -70,7 +70,7 @@ def test_depth_head_outputs_positive_depth_and_confidence_above_one():
 
 
 def test_frame_chunking_does_not_change_the_result(monkeypatch):
-    head = DepthHead(PRESET).eval()
+    head = DepthHead(ARCHITECTURE).eval()
     tokens, images = _tokens(1, 5, 28, 28), torch.rand(1, 5, 3, 28, 28)
     with torch.no_grad():
         whole = head(tokens, images)
@@ -81,8 +81,8 @@ def test_frame_chunking_does_not_change_the_result(monkeypatch):
 
 
 def test_gaussian_head_channels_and_rgb_shortcut():
-    preset = dataclasses.replace(PRESET, sh_degree=2)
-    head = GaussianHead(preset).eval()
+    architecture = dataclasses.replace(ARCHITECTURE, sh_degree=2)
+    head = GaussianHead(architecture).eval()
     tokens = _tokens(1, 2, 28, 56)
     images = torch.rand(1, 2, 3, 28, 56)
     with torch.no_grad():
@@ -96,8 +96,8 @@ def test_gaussian_head_channels_and_rgb_shortcut():
 
 
 def test_aggregator_layers_shapes():
-    aggregator = Aggregator(PRESET).eval()
+    aggregator = Aggregator(ARCHITECTURE).eval()
     with torch.no_grad():
         out = aggregator(torch.rand(2, 3, 3, 28, 42), layers=[1, 3])
     assert sorted(out) == [1, 3]
-    assert out[3].shape == (2, 3, PRESET.patch_start_index + 6, 2 * PRESET.embed_dim)
+    assert out[3].shape == (2, 3, ARCHITECTURE.patch_start_index + 6, 2 * ARCHITECTURE.embed_dim)

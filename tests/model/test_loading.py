@@ -20,7 +20,7 @@ def test_a_missing_bundled_model_is_an_error_naming_the_file(monkeypatch, tmp_pa
     assert str(tmp_path / "lumos3d-low-light.safetensors") in str(error.value)
 
 
-def test_a_preset_name_is_not_weights():
+def test_an_architecture_name_is_not_weights():
     with pytest.raises(InputError) as error:
         load_model("tiny")
     message = str(error.value)

@@ -47,7 +47,7 @@ def test_outputs_are_consistent(model):
     torch.testing.assert_close(output.pixel_gaussians[1].means, output.world_points[1].reshape(-1, 3))
     torch.testing.assert_close(output.scene_scale, output.depth.flatten(1).median(dim=1).values)
     assert output.image_size == (56, 42) and output.cameras(0).sizes == [(56, 42)] * 3
-    assert output.pixel_gaussians[0].sh_degree == model.preset.sh_degree
+    assert output.pixel_gaussians[0].sh_degree == model.architecture.sh_degree
 
 
 def test_scenes_of_a_batch_are_independent(model):
@@ -134,8 +134,8 @@ def test_build_model_says_its_weights_are_random(caplog):
 
 
 @pytest.mark.slow
-def test_thirty_two_views_at_the_tiny_preset_resolution(model):
-    size = model.preset.image_size
+def test_thirty_two_views_at_the_tiny_architecture_resolution(model):
+    size = model.architecture.image_size
     with torch.no_grad():
         _check(model(torch.rand(1, 32, 3, size, size)), 1, 32, size, size)
 
@@ -144,7 +144,7 @@ def test_fusion_does_not_depend_on_the_world_unit(model):
     generator = torch.Generator().manual_seed(6)
     views, height, width = 2, 14, 14
     points = torch.rand(views, height, width, 3, generator=generator, dtype=torch.float64) * 0.05
-    params = torch.randn(views, height, width, model.preset.gaussian_channels - 1, generator=generator, dtype=torch.float64)
+    params = torch.randn(views, height, width, model.architecture.gaussian_channels - 1, generator=generator, dtype=torch.float64)
     confidence = torch.randn(views, height, width, generator=generator, dtype=torch.float64)
     scale = torch.tensor(0.8, dtype=torch.float64)
     unit = 1000.0  # the same scene in millimetres instead of metres
@@ -177,12 +177,12 @@ def test_voxel_size_override_sets_the_fusion_grain(model):
     images = torch.rand(1, 2, 3, 28, 42, generator=torch.Generator().manual_seed(6))
     with torch.no_grad():
         fine = model(images, voxel_size=1e-9)
-        preset = model(images)
+        default = model(images)
         coarse = model(images, voxel_size=1e9)
     # Distinct points never share a voxel of a vanishing size; one huge voxel holds them all.
     assert fine.counts[0].voxels == fine.counts[0].pixels
     assert coarse.counts[0].voxels == 1
-    assert coarse.counts[0].voxels <= preset.counts[0].voxels <= fine.counts[0].voxels
+    assert coarse.counts[0].voxels <= default.counts[0].voxels <= fine.counts[0].voxels
 
 
 def test_rendering_the_model_output_reaches_the_weights(model):

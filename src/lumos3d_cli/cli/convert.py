@@ -9,8 +9,8 @@ import typer
 
 from lumos3d_cli.cli.console import print_json, say
 from lumos3d_cli.io.checkpoints import STORAGE_DTYPES, save_checkpoint, storage_dtype, summarize_checkpoint
+from lumos3d_cli.model.architectures import get_architecture
 from lumos3d_cli.model.loading import load_model
-from lumos3d_cli.model.presets import get_preset
 
 EXAMPLES = """
   lumos3d convert runs/low-light/final.safetensors -o lumos3d-low-light.safetensors --dtype float16
@@ -22,12 +22,12 @@ def convert_command(
     source: Path = typer.Argument(..., help="Checkpoint file or folder (ours, VGGT model.pt/.safetensors, AnySplat)."),
     output: Path = typer.Option(..., "--output", "-o", help="The .safetensors file to write."),
     dtype: str = typer.Option("float32", "--dtype", help=f"Storage precision: {', '.join(STORAGE_DTYPES)}."),
-    preset: str | None = typer.Option(None, "--preset", help="Model size of a foreign (VGGT/AnySplat) checkpoint."),
+    architecture: str | None = typer.Option(None, "--architecture", help="Model size of a foreign (VGGT/AnySplat) checkpoint: tiny, small, base or vggt-1b (default)."),
     as_json: bool = typer.Option(False, "--json", help="Print the written checkpoint's summary as JSON."),
 ) -> None:
     """Rewrite a checkpoint in lumos3d's format (e.g. float16 to halve it)."""
     storage_dtype(dtype)  # refuse a bad --dtype before the (possibly large) checkpoint is read
-    model = load_model(source, preset=get_preset(preset) if preset else None)
+    model = load_model(source, architecture=get_architecture(architecture) if architecture else None)
     provenance = {key: value for key, value in model.provenance.items() if key not in ("path", "format")}
     provenance["converted_from"] = {"file": Path(source).name, "format": model.provenance.get("format"), "dtype": dtype}
     save_checkpoint(model, output, provenance, dtype=dtype)
@@ -36,4 +36,4 @@ def convert_command(
         print_json(summary)
     else:
         size = output.stat().st_size / 2**20
-        say(f"wrote {output} ({summary.get('preset')}, {dtype}, {size:.1f} MiB)")
+        say(f"wrote {output} ({summary.get('architecture')}, {dtype}, {size:.1f} MiB)")

@@ -1,8 +1,11 @@
 """Model checkpoints: our format, and the official VGGT-1B and AnySplat layouts.
 
 Our format is one `.safetensors` file whose header metadata holds a JSON config under the key
-"lumos3d": {"format_version", "preset": {...every ModelPreset field...}, "provenance": {...}}.
-The tensors use the module names of `model.lumos3d.Lumos3D`.
+"lumos3d": {"format_version", "preset": {...every Architecture field...}, "provenance": {...}}.
+The key "preset" is a fact of format version 1 (written before the model size was called an
+architecture); it holds the architecture and keeps its name so that every file written so far,
+the bundled weights included, loads unchanged. The tensors use the module names of
+`model.lumos3d.Lumos3D`.
 
 Foreign layouts are recognised by their key names:
   VGGT     (`model.pt` state dict or `model.safetensors`): aggregator.*, camera_head.*,
@@ -29,7 +32,7 @@ from safetensors.torch import load_file, save_file
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import atomic_path
 from lumos3d_cli.io.state_dicts import listing, load_torch_state_dict
-from lumos3d_cli.model.presets import ModelPreset, get_preset
+from lumos3d_cli.model.architectures import Architecture, get_architecture
 
 if TYPE_CHECKING:
     from lumos3d_cli.model.lumos3d import Lumos3D
@@ -41,7 +44,8 @@ FORMAT_VGGT = "vggt"
 FORMAT_ANYSPLAT = "anysplat"
 METADATA_KEY = "lumos3d"
 FORMAT_VERSION = 1
-OFFICIAL_PRESET = "vggt-1b"
+ARCHITECTURE_KEY = "preset"  # format version 1's name for the architecture in the JSON config
+OFFICIAL_ARCHITECTURE = "vggt-1b"
 TORCH_SUFFIXES = (".pt", ".pth", ".bin")
 # Files looked for, in order, when a folder (e.g. a Hugging Face snapshot) is given.
 FOLDER_FILES = ("model.safetensors", "model.pt", "pytorch_model.bin")
@@ -59,7 +63,7 @@ class Checkpoint:
 
     path: Path
     format: str
-    preset: ModelPreset
+    architecture: Architecture
     tensors: dict[str, torch.Tensor]
     provenance: dict = field(default_factory=dict)
     ignored: list[str] = field(default_factory=list)
@@ -93,7 +97,7 @@ def save_checkpoint(model: Lumos3D, path: Path | str, provenance: dict | None = 
     if path.suffix != ".safetensors":
         raise InputError(f"{path}: checkpoints are written as .safetensors files")
     storage = storage_dtype(dtype)
-    config = {"format_version": FORMAT_VERSION, "preset": model.preset.to_dict(), "provenance": provenance or {}}
+    config = {"format_version": FORMAT_VERSION, ARCHITECTURE_KEY: model.architecture.to_dict(), "provenance": provenance or {}}
     tensors = {}
     for name, tensor in model.state_dict().items():
         tensor = tensor.detach().to("cpu", torch.float32 if tensor.is_floating_point() else tensor.dtype)
@@ -155,17 +159,17 @@ def _our_name(file_format: str, key: str) -> str | None:
     return key
 
 
-def _our_config(path: Path, metadata: dict[str, str]) -> tuple[ModelPreset, dict]:
+def _our_config(path: Path, metadata: dict[str, str]) -> tuple[Architecture, dict]:
     try:
         config = json.loads(metadata[METADATA_KEY])
         if config.get("format_version") != FORMAT_VERSION:
             raise InputError(f"{path}: checkpoint format version {config.get('format_version')} is not supported (expected {FORMAT_VERSION})")
-        return ModelPreset.from_dict(config["preset"]), config.get("provenance", {})
+        return Architecture.from_dict(config[ARCHITECTURE_KEY]), config.get("provenance", {})
     except (json.JSONDecodeError, KeyError, TypeError, ValueError) as error:
         raise InputError(f"{path}: the checkpoint's lumos3d config is damaged ({error})") from None
 
 
-def _anysplat_preset(path: Path, base: ModelPreset, shapes: dict[str, tuple[int, ...]]) -> ModelPreset:
+def _anysplat_architecture(path: Path, base: Architecture, shapes: dict[str, tuple[int, ...]]) -> Architecture:
     """`base` with the SH degree and head width read off the Gaussian head's output conv."""
     if _GAUSSIAN_OUTPUT not in shapes:
         raise InputError(f"{path}: AnySplat checkpoint without encoder.gaussian_param_head.scratch.output_conv2.2.weight")
@@ -182,33 +186,33 @@ class _Layout:
     """How a file's keys map onto our network (everything but the tensor data)."""
 
     format: str
-    preset: ModelPreset
+    architecture: Architecture
     provenance: dict
     names: dict[str, str]  # file key -> our parameter name
     ignored: list[str]
     fresh_modules: list[str]
 
 
-def _interpret(path: Path, shapes: dict[str, tuple[int, ...]], metadata: dict[str, str], preset: ModelPreset | None) -> _Layout:
+def _interpret(path: Path, shapes: dict[str, tuple[int, ...]], metadata: dict[str, str], architecture: Architecture | None) -> _Layout:
     file_format = _detect_format(path, list(shapes), metadata)
     names = {key: _our_name(file_format, key) for key in shapes}
     ignored = sorted(key for key, name in names.items() if name is None)
     names = {key: name for key, name in names.items() if name is not None}
     if file_format == FORMAT_LUMOS3D:
-        if preset is not None:
-            raise InputError(f"{path}: is a Lumos3D checkpoint and carries its own preset; do not pass one")
-        preset, provenance = _our_config(path, metadata)
-        return _Layout(file_format, preset, provenance, names, ignored, [])
-    preset = preset or get_preset(OFFICIAL_PRESET)
+        if architecture is not None:
+            raise InputError(f"{path}: is a Lumos3D checkpoint and carries its own architecture; do not pass one")
+        architecture, provenance = _our_config(path, metadata)
+        return _Layout(file_format, architecture, provenance, names, ignored, [])
+    architecture = architecture or get_architecture(OFFICIAL_ARCHITECTURE)
     provenance = {"source": f"{'VGGT' if file_format == FORMAT_VGGT else 'AnySplat'} checkpoint", "file": path.name}
     if file_format == FORMAT_ANYSPLAT:
-        preset = _anysplat_preset(path, preset, {names[k]: s for k, s in shapes.items() if k in names})
-        return _Layout(file_format, preset, provenance, names, ignored, [])
-    return _Layout(file_format, preset, provenance, names, ignored, ["gaussian_head"])
+        architecture = _anysplat_architecture(path, architecture, {names[k]: s for k, s in shapes.items() if k in names})
+        return _Layout(file_format, architecture, provenance, names, ignored, [])
+    return _Layout(file_format, architecture, provenance, names, ignored, ["gaussian_head"])
 
 
-def read_checkpoint(path: Path | str, preset: ModelPreset | None = None) -> Checkpoint:
-    """Read any supported checkpoint (file, or folder holding one). `preset` gives the network
+def read_checkpoint(path: Path | str, architecture: Architecture | None = None) -> Checkpoint:
+    """Read any supported checkpoint (file, or folder holding one). `architecture` gives the network
     size for foreign layouts (default vggt-1b); our files carry their own."""
     path = _resolve_file(Path(path))
     if path.suffix == ".safetensors":
@@ -219,7 +223,7 @@ def read_checkpoint(path: Path | str, preset: ModelPreset | None = None) -> Chec
             raise InputError(f"{path}: cannot read as safetensors ({error})") from None
     else:
         metadata, raw = {}, load_torch_state_dict(path)
-    layout = _interpret(path, {k: tuple(v.shape) for k, v in raw.items()}, metadata, preset)
+    layout = _interpret(path, {k: tuple(v.shape) for k, v in raw.items()}, metadata, architecture)
     tensors = {}
     for key, name in layout.names.items():
         tensor = raw[key]
@@ -227,7 +231,7 @@ def read_checkpoint(path: Path | str, preset: ModelPreset | None = None) -> Chec
     if layout.ignored:
         modules = ", ".join(sorted({k.split(".")[0] for k in layout.ignored}))
         logger.info("%s: ignored %d tensors not used by Lumos3D (%s)", path.name, len(layout.ignored), modules)
-    return Checkpoint(path, layout.format, layout.preset, tensors, layout.provenance, layout.ignored, layout.fresh_modules)
+    return Checkpoint(path, layout.format, layout.architecture, tensors, layout.provenance, layout.ignored, layout.fresh_modules)
 
 
 def _header(path: Path) -> tuple[dict[str, tuple[int, ...]], Counter, dict[str, str]]:
@@ -246,7 +250,7 @@ def _header(path: Path) -> tuple[dict[str, tuple[int, ...]], Counter, dict[str, 
 
 
 def summarize_checkpoint(path: Path | str) -> dict:
-    """Format, preset, parameter count, tensor names by module, dtypes and provenance (for
+    """Format, architecture, parameter count, tensor names by module, dtypes and provenance (for
     `lumos3d info`); reads only the header of safetensors files."""
     path = _resolve_file(Path(path))
     shapes, dtypes, metadata = _header(path)
@@ -259,10 +263,10 @@ def summarize_checkpoint(path: Path | str) -> dict:
         "path": str(path),
         "file_bytes": path.stat().st_size,
         "format": layout.format,
-        "preset": layout.preset.name,
-        "sh_degree": layout.preset.sh_degree,
-        "voxel_size": layout.preset.voxel_size,
-        "image_size": layout.preset.image_size,
+        "architecture": layout.architecture.name,
+        "sh_degree": layout.architecture.sh_degree,
+        "voxel_size": layout.architecture.voxel_size,
+        "image_size": layout.architecture.image_size,
         "parameters": parameters,
         "tensors": len(used),
         "modules": dict(sorted(modules.items())),

@@ -1,4 +1,5 @@
-"""COLMAP sparse models in text form: cameras.txt, images.txt, points3D.txt.
+"""COLMAP sparse models: cameras, images and points3D, read in text or binary form (binary
+through pycolmap), written in text form.
 
 COLMAP stores world->camera rotations as wxyz quaternions and uses the same pixel convention
 as `Cameras` (origin at the top-left pixel corner). Only the pinhole part of each camera model
@@ -12,12 +13,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pycolmap
 import torch
 
+from lumos3d_cli.checks import require_finite
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import write_bytes_atomic
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.image_files import natural_sort_key
+from lumos3d_cli.io.sparse_points import SparsePoints
 from lumos3d_cli.rotations import matrix_to_quaternion, quaternion_to_matrix
 
 logger = logging.getLogger(__name__)
@@ -68,19 +72,24 @@ def read_colmap_cameras(path: Path) -> dict[int, ColmapCamera]:
         try:
             camera_id, model, width, height = int(words[0]), words[1], int(words[2]), int(words[3])
             params = [float(v) for v in words[4:]]
-            if model in _SINGLE_FOCAL:
-                fx = fy = params[0]
-                cx, cy = params[1], params[2]
-            elif model in _DUAL_FOCAL:
-                fx, fy, cx, cy = params[:4]
-            else:
-                raise InputError(f"{path}: camera model {model} is not supported; undistort the images with COLMAP first")
+            cameras[camera_id] = _pinhole_camera(path, camera_id, model, width, height, params)
         except (IndexError, ValueError) as error:
             raise InputError(f"{path}: cannot parse camera line {number}: {line!r}") from error
-        if model not in _PINHOLE:
-            logger.warning("%s: camera %d (%s): distortion parameters are ignored", path, camera_id, model)
-        cameras[camera_id] = ColmapCamera(width, height, fx, fy, cx, cy, model)
     return cameras
+
+
+def _pinhole_camera(path: Path, camera_id: int, model: str, width: int, height: int, params: list[float]) -> ColmapCamera:
+    """The pinhole part of a COLMAP camera (IndexError for too few parameters)."""
+    if model in _SINGLE_FOCAL:
+        fx = fy = params[0]
+        cx, cy = params[1], params[2]
+    elif model in _DUAL_FOCAL:
+        fx, fy, cx, cy = params[:4]
+    else:
+        raise InputError(f"{path}: camera model {model} is not supported; undistort the images with COLMAP first")
+    if model not in _PINHOLE:
+        logger.warning("%s: camera %d (%s): distortion parameters are ignored", path, camera_id, model)
+    return ColmapCamera(width, height, fx, fy, cx, cy, model)
 
 
 @dataclass(frozen=True)
@@ -113,19 +122,56 @@ def read_colmap_images(path: Path) -> list[ColmapImage]:
     return images
 
 
+def is_colmap_model(folder: Path) -> bool:
+    """A folder with cameras and images of a COLMAP model, in text or binary form."""
+    return all((folder / f"{name}.txt").is_file() for name in ("cameras", "images")) or all(
+        (folder / f"{name}.bin").is_file() for name in ("cameras", "images"))
+
+
+def _read_reconstruction(folder: Path) -> pycolmap.Reconstruction:
+    """A text or binary model through pycolmap (InputError when COLMAP cannot read it)."""
+    try:
+        return pycolmap.Reconstruction(folder)
+    except Exception as error:  # pycolmap raises plain RuntimeError/ValueError for unreadable files
+        raise InputError(f"{folder}: not a readable COLMAP model ({str(error).splitlines()[0] if str(error) else type(error).__name__})") from error
+
+
+def _read_binary_views(folder: Path) -> tuple[dict[int, ColmapCamera], list[ColmapImage]]:
+    reconstruction = _read_reconstruction(folder)
+    cameras = {}
+    for camera_id, camera in reconstruction.cameras.items():
+        try:
+            cameras[camera_id] = _pinhole_camera(folder / "cameras.bin", camera_id, camera.model_name,
+                                                 camera.width, camera.height, [float(v) for v in camera.params])
+        except IndexError as error:
+            raise InputError(f"{folder / 'cameras.bin'}: camera {camera_id} has too few parameters") from error
+    views = []
+    for image_id, image in reconstruction.images.items():
+        if not image.has_pose:
+            continue
+        pose = image.cam_from_world()
+        x, y, z, w = (float(v) for v in pose.rotation.quat)  # Eigen's order: xyzw
+        views.append(ColmapImage(image_id, image.name, (w, x, y, z), tuple(float(v) for v in pose.translation), image.camera_id))
+    return cameras, views
+
+
 def read_colmap_model(folder: Path | str) -> Cameras:
-    """Read cameras.txt and images.txt from a sparse model folder; views sorted by image name."""
+    """Read the cameras of a sparse model folder (cameras.txt + images.txt, or cameras.bin +
+    images.bin); views sorted by image name."""
     folder = Path(folder)
-    for name in ("cameras.txt", "images.txt"):
-        if not (folder / name).is_file():
-            raise InputError(f"{folder}: no {name}; expected a COLMAP text model (use `colmap model_converter` for .bin)")
-    cameras = read_colmap_cameras(folder / "cameras.txt")
-    views = sorted(read_colmap_images(folder / "images.txt"), key=lambda view: natural_sort_key(view.name))
+    if not is_colmap_model(folder):
+        raise InputError(f"{folder}: no cameras.txt + images.txt (or cameras.bin + images.bin); expected a COLMAP model folder")
+    if (folder / "cameras.txt").is_file() and (folder / "images.txt").is_file():
+        cameras = read_colmap_cameras(folder / "cameras.txt")
+        views = read_colmap_images(folder / "images.txt")
+    else:
+        cameras, views = _read_binary_views(folder)
+    views = sorted(views, key=lambda view: natural_sort_key(view.name))
     if not views:
-        raise InputError(f"{folder / 'images.txt'}: no registered images")
+        raise InputError(f"{folder}: the model has no registered images")
     for view in views:
         if view.camera_id not in cameras:
-            raise InputError(f"{folder / 'images.txt'}: image {view.name} refers to unknown camera {view.camera_id}")
+            raise InputError(f"{folder}: image {view.name} refers to unknown camera {view.camera_id}")
     rotation = quaternion_to_matrix(torch.tensor([v.qvec for v in views], dtype=torch.float64))
     translation = torch.tensor([v.tvec for v in views], dtype=torch.float64)
     extrinsics = torch.cat([rotation, translation[:, :, None]], dim=2)
@@ -162,16 +208,69 @@ def read_colmap_points(path: Path | str) -> ColmapPoints:
     )
 
 
-def write_colmap_model(folder: Path | str, cameras: Cameras) -> None:
-    """Write cameras.txt (PINHOLE, one per view), images.txt and an empty points3D.txt."""
+def read_colmap_sparse_points(folder: Path | str, names: list[str]) -> SparsePoints:
+    """The points of a text or binary model with their observations; `view` indexes `names`
+    (image names, e.g. `read_colmap_model(folder).names`); observations of other images are
+    dropped."""
+    folder = Path(folder)
+    reconstruction = _read_reconstruction(folder)
+    view_of_image = {}
+    for image_id, image in reconstruction.images.items():
+        if image.name in names:
+            view_of_image[image_id] = names.index(image.name)
+    point_ids = sorted(reconstruction.points3D.keys())
+    position = {point_id: index for index, point_id in enumerate(point_ids)}
+    points = [reconstruction.points3D[point_id] for point_id in point_ids]
+    view, point, pixel = [], [], []
+    for image_id, index in view_of_image.items():
+        for observation in reconstruction.images[image_id].get_observation_points2D():
+            view.append(index)
+            point.append(position[observation.point3D_id])
+            pixel.append(observation.xy)
+    return SparsePoints(
+        torch.tensor(np.array([p.xyz for p in points], dtype=np.float64).reshape(-1, 3)),
+        torch.tensor(np.array([p.color for p in points], dtype=np.uint8).reshape(-1, 3)),
+        torch.tensor([p.error for p in points], dtype=torch.float64),
+        torch.tensor(view, dtype=torch.int64), torch.tensor(point, dtype=torch.int64),
+        torch.tensor(np.array(pixel, dtype=np.float64).reshape(-1, 2)),
+    )
+
+
+def _observation_lines(cameras: Cameras, points: SparsePoints | None) -> tuple[list[str], list[str]]:
+    """The POINTS2D line of each image and the points3D.txt data lines (tracks refer to the
+    position of each observation in its image's POINTS2D line)."""
+    if points is None:
+        return [""] * len(cameras), []
+    if len(points.view) and (int(points.view.min()) < 0 or int(points.view.max()) >= len(cameras)):
+        raise ValueError(f"sparse points observe view {int(points.view.max())} of {len(cameras)} cameras")
+    require_finite("sparse points", points.xyz)
+    image_words: list[list[str]] = [[] for _ in range(len(cameras))]
+    tracks: list[list[str]] = [[] for _ in range(len(points))]
+    for view, point, (u, v) in zip(points.view.tolist(), points.point.tolist(), points.pixel.tolist()):
+        tracks[point].append(f"{view + 1} {len(image_words[view])}")
+        image_words[view].append(f"{u!r} {v!r} {point + 1}")
+    point_lines = []
+    for index in range(len(points)):
+        x, y, z = points.xyz[index].tolist()
+        r, g, b = points.rgb[index].tolist()
+        point_lines.append(f"{index + 1} {x!r} {y!r} {z!r} {r} {g} {b} {float(points.error[index])!r} {' '.join(tracks[index])}".rstrip())
+    return [" ".join(words) for words in image_words], point_lines
+
+
+def write_colmap_model(folder: Path | str, cameras: Cameras, points: SparsePoints | None = None) -> None:
+    """Write cameras.txt (PINHOLE, one per view), images.txt and points3D.txt; `points` (their
+    `view` indexing `cameras`) fill points3D.txt with tracks and images.txt with 2D points, so
+    the model opens in COLMAP as a reconstruction; without them points3D.txt is empty."""
     folder = Path(folder)
     cameras.require_valid("cameras to save")
+    observations, point_lines = _observation_lines(cameras, points)
     k = cameras.intrinsics.double()
     camera_lines = ["# Camera list with one line of data per camera:", "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]",
                     f"# Number of cameras: {len(cameras)}"]
+    mean_observations = len(points.view) / len(cameras) if points is not None and len(cameras) else 0
     image_lines = ["# Image list with two lines of data per image:",
                    "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME", "#   POINTS2D[] as (X, Y, POINT3D_ID)",
-                   f"# Number of images: {len(cameras)}, mean observations per image: 0"]
+                   f"# Number of images: {len(cameras)}, mean observations per image: {mean_observations:g}"]
     quats = matrix_to_quaternion(cameras.extrinsics[:, :, :3].double())
     for i in range(len(cameras)):
         width, height = cameras.sizes[i]
@@ -180,10 +279,11 @@ def write_colmap_model(folder: Path | str, cameras: Cameras) -> None:
         q = " ".join(repr(float(v)) for v in quats[i])
         t = " ".join(repr(float(v)) for v in cameras.extrinsics[i, :, 3].double())
         name = cameras.names[i] or f"{i:05d}.png"
-        image_lines += [f"{i + 1} {q} {t} {i + 1} {name}", ""]
+        image_lines += [f"{i + 1} {q} {t} {i + 1} {name}", observations[i]]
+    track_length = len(points.view) / len(points) if points is not None and len(points) else 0
     points_lines = ["# 3D point list with one line of data per point:",
                     "#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)",
-                    "# Number of points: 0, mean track length: 0"]
+                    f"# Number of points: {len(point_lines)}, mean track length: {track_length:g}", *point_lines]
     write_bytes_atomic(folder / "cameras.txt", ("\n".join(camera_lines) + "\n").encode())
     write_bytes_atomic(folder / "images.txt", ("\n".join(image_lines) + "\n").encode())
     write_bytes_atomic(folder / "points3D.txt", ("\n".join(points_lines) + "\n").encode())

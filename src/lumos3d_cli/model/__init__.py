@@ -5,7 +5,7 @@
     prepared = model.prepare(images)                        # [V, 3, H, W] in [0, 1], any size
     output = model(prepared.images[None])                   # Lumos3DOutput
 
-The names below are imported on first use, so that `lumos3d_cli.model.presets` (needed by the
+The names below are imported on first use, so that `lumos3d_cli.model.architectures` (needed by the
 checkpoint reader) can be imported without pulling in the whole network.
 """
 
@@ -20,11 +20,11 @@ _EXPORTS = {
     "Lumos3DOutput": "lumos3d_cli.model.lumos3d",
     "PreparedImages": "lumos3d_cli.model.preprocess",
     "prepare_images": "lumos3d_cli.model.preprocess",
-    "DEFAULT_PRESET": "lumos3d_cli.model.presets",
-    "PRESETS": "lumos3d_cli.model.presets",
-    "ModelPreset": "lumos3d_cli.model.presets",
-    "PatchEmbedConfig": "lumos3d_cli.model.presets",
-    "get_preset": "lumos3d_cli.model.presets",
+    "DEFAULT_ARCHITECTURE": "lumos3d_cli.model.architectures",
+    "ARCHITECTURES": "lumos3d_cli.model.architectures",
+    "Architecture": "lumos3d_cli.model.architectures",
+    "PatchEmbedConfig": "lumos3d_cli.model.architectures",
+    "get_architecture": "lumos3d_cli.model.architectures",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -1,8 +1,8 @@
-"""Model presets: every size and setting of the network as plain data.
+"""Model architectures: every size and setting of the network as plain data.
 
-A preset fully determines the module tree (and so the checkpoint key names and shapes). The
-`vggt-1b` preset has exactly the dimensions of VGGT-1B, so its official checkpoint loads into it;
-the smaller presets keep the same key structure at reduced widths and depths.
+An architecture fully determines the module tree (and so the checkpoint key names and shapes). The
+`vggt-1b` architecture has exactly the dimensions of VGGT-1B, so its official checkpoint loads into it;
+the smaller architectures keep the same key structure at reduced widths and depths.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ class PatchEmbedConfig:
 
 
 @dataclass(frozen=True)
-class ModelPreset:
+class Architecture:
     """All hyper-parameters of one network size.
 
     Lengths (`voxel_size`, `gaussian_scale_*`) are relative to the scene scale, the median
@@ -88,7 +88,7 @@ class ModelPreset:
         }
         failed = [message for message, ok in checks.items() if not ok]
         if failed:
-            raise ValueError(f"preset '{self.name}': " + "; ".join(failed))
+            raise ValueError(f"architecture '{self.name}': " + "; ".join(failed))
 
     @property
     def patch_start_index(self) -> int:
@@ -107,23 +107,23 @@ class ModelPreset:
         return json.dumps(self.to_dict(), sort_keys=True)
 
     @staticmethod
-    def from_dict(values: dict) -> ModelPreset:
+    def from_dict(values: dict) -> Architecture:
         """Inverse of `to_dict`; ValueError on unknown or missing fields."""
         values = dict(values)
         patch_embed = PatchEmbedConfig(**values.pop("patch_embed"))
         for name in ("intermediate_layers", "dpt_out_channels"):
             if name in values:
                 values[name] = tuple(values[name])
-        known = {f.name for f in dataclasses.fields(ModelPreset)}
+        known = {f.name for f in dataclasses.fields(Architecture)}
         unknown = sorted(set(values) - known)
         if unknown:
-            raise ValueError(f"unknown preset fields: {', '.join(unknown)}")
-        return ModelPreset(patch_embed=patch_embed, **values)
+            raise ValueError(f"unknown architecture fields: {', '.join(unknown)}")
+        return Architecture(patch_embed=patch_embed, **values)
 
 
-PRESETS: dict[str, ModelPreset] = {
+ARCHITECTURES: dict[str, Architecture] = {
     # Small enough to train on two CPU cores: convolutional patch embed, 4+4 narrow blocks.
-    "tiny": ModelPreset(
+    "tiny": Architecture(
         name="tiny",
         image_size=224,
         patch_size=14,
@@ -142,7 +142,7 @@ PRESETS: dict[str, ModelPreset] = {
         sh_degree=1,
     ),
     # DINOv2 ViT-S/14-reg patch embed, 12+12 blocks at width 384.
-    "small": ModelPreset(
+    "small": Architecture(
         name="small",
         image_size=518,
         patch_size=14,
@@ -160,7 +160,7 @@ PRESETS: dict[str, ModelPreset] = {
         sh_degree=2,
     ),
     # DINOv2 ViT-B/14-reg patch embed, 12+12 blocks at width 768.
-    "base": ModelPreset(
+    "base": Architecture(
         name="base",
         image_size=518,
         patch_size=14,
@@ -178,7 +178,7 @@ PRESETS: dict[str, ModelPreset] = {
     ),
     # VGGT-1B exactly (DINOv2 ViT-L/14 with 4 registers, 24+24 blocks at 1024, 16 heads) with
     # AnySplat's Gaussian head (SH degree 4, 84 channels).
-    "vggt-1b": ModelPreset(
+    "vggt-1b": Architecture(
         name="vggt-1b",
         image_size=518,
         patch_size=14,
@@ -196,12 +196,12 @@ PRESETS: dict[str, ModelPreset] = {
     ),
 }
 
-DEFAULT_PRESET = "tiny"
+DEFAULT_ARCHITECTURE = "tiny"
 
 
-def get_preset(name: str) -> ModelPreset:
-    """The preset called `name`; InputError listing the known names otherwise."""
+def get_architecture(name: str) -> Architecture:
+    """The architecture called `name`; InputError listing the known names otherwise."""
     try:
-        return PRESETS[name]
+        return ARCHITECTURES[name]
     except KeyError:
-        raise InputError(f"unknown model preset '{name}'; choose one of: {', '.join(PRESETS)}") from None
+        raise InputError(f"unknown model architecture '{name}'; choose one of: {', '.join(ARCHITECTURES)}") from None

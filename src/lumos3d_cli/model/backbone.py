@@ -12,11 +12,11 @@ from collections.abc import Iterable
 import torch
 from torch import nn
 
+from lumos3d_cli.model.architectures import Architecture
 from lumos3d_cli.model.layers.block import Block, run_block
 from lumos3d_cli.model.layers.patch_embed import ConvPatchEmbed
 from lumos3d_cli.model.layers.rope import RotaryTables, patch_positions
 from lumos3d_cli.model.layers.vision_transformer import DinoVisionTransformer
-from lumos3d_cli.model.presets import ModelPreset
 
 # ImageNet statistics: the DINOv2 patch embed was trained on images normalised this way.
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
@@ -40,31 +40,31 @@ class Aggregator(nn.Module):
     frame block i output and the global block i output concatenated on channels.
     """
 
-    def __init__(self, preset: ModelPreset):
+    def __init__(self, architecture: Architecture):
         super().__init__()
-        self.patch_size = preset.patch_size
-        self.num_heads = preset.num_heads
-        self.rope_frequency = preset.rope_frequency
-        self.patch_start_index = preset.patch_start_index
-        dim = preset.embed_dim
-        if preset.patch_embed.kind == "dinov2":
+        self.patch_size = architecture.patch_size
+        self.num_heads = architecture.num_heads
+        self.rope_frequency = architecture.rope_frequency
+        self.patch_start_index = architecture.patch_start_index
+        dim = architecture.embed_dim
+        if architecture.patch_embed.kind == "dinov2":
             self.patch_embed = DinoVisionTransformer(
-                preset.image_size, preset.patch_size, dim, preset.patch_embed.depth, preset.patch_embed.num_heads,
-                preset.patch_embed.mlp_ratio, preset.num_register_tokens,
+                architecture.image_size, architecture.patch_size, dim, architecture.patch_embed.depth, architecture.patch_embed.num_heads,
+                architecture.patch_embed.mlp_ratio, architecture.num_register_tokens,
             )
         else:
-            self.patch_embed = ConvPatchEmbed(preset.patch_size, dim)
+            self.patch_embed = ConvPatchEmbed(architecture.patch_size, dim)
 
         def blocks() -> nn.ModuleList:
             return nn.ModuleList(
-                Block(dim, preset.num_heads, preset.mlp_ratio, preset.layer_scale_init, qk_norm=True)
-                for _ in range(preset.depth)
+                Block(dim, architecture.num_heads, architecture.mlp_ratio, architecture.layer_scale_init, qk_norm=True)
+                for _ in range(architecture.depth)
             )
 
         self.frame_blocks = blocks()
         self.global_blocks = blocks()
         self.camera_token = nn.Parameter(torch.randn(1, 2, 1, dim) * 1e-6)
-        self.register_token = nn.Parameter(torch.randn(1, 2, preset.num_register_tokens, dim) * 1e-6)
+        self.register_token = nn.Parameter(torch.randn(1, 2, architecture.num_register_tokens, dim) * 1e-6)
         self.gradient_checkpointing = False
 
     def set_gradient_checkpointing(self, enabled: bool) -> None:

@@ -14,8 +14,8 @@ import torch
 import torch.nn.functional as F
 
 from lumos3d_cli.io.gaussians import Gaussians, sh_coefficient_count
+from lumos3d_cli.model.architectures import Architecture
 from lumos3d_cli.model.pose_encoding import normalize_quaternion, xyzw_to_wxyz
-from lumos3d_cli.model.presets import ModelPreset
 
 OPACITY = slice(0, 1)
 SCALE = slice(1, 4)
@@ -35,20 +35,20 @@ def split_confidence(raw: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return raw[..., :-1], raw[..., -1]
 
 
-def activate_gaussians(means: torch.Tensor, params: torch.Tensor, scene_scale: torch.Tensor, preset: ModelPreset) -> Gaussians:
+def activate_gaussians(means: torch.Tensor, params: torch.Tensor, scene_scale: torch.Tensor, architecture: Architecture) -> Gaussians:
     """means [N, 3], raw parameters [N, C-1] (layout above, without the confidence), scene scale
     (scalar tensor, world units) -> Gaussians.
 
     opacity = sigmoid(logit); scale = scene_scale * clamp(base * softplus(raw), min, max) with the
-    preset's relative base/min/max; quaternion normalised (a zero quaternion becomes the identity);
+    architecture's relative base/min/max; quaternion normalised (a zero quaternion becomes the identity);
     SH scaled per degree.
     """
-    k = sh_coefficient_count(preset.sh_degree)
+    k = sh_coefficient_count(architecture.sh_degree)
     expected = SH_START + 3 * k
     if params.shape[-1] != expected:
-        raise ValueError(f"{params.shape[-1]} raw Gaussian channels, expected {expected} for SH degree {preset.sh_degree}")
-    relative_scale = (preset.gaussian_scale_base * F.softplus(params[:, SCALE])).clamp(
-        preset.gaussian_scale_min, preset.gaussian_scale_max
+        raise ValueError(f"{params.shape[-1]} raw Gaussian channels, expected {expected} for SH degree {architecture.sh_degree}")
+    relative_scale = (architecture.gaussian_scale_base * F.softplus(params[:, SCALE])).clamp(
+        architecture.gaussian_scale_min, architecture.gaussian_scale_max
     )
     sh = params[:, SH_START:].reshape(-1, 3, k).transpose(1, 2)  # [N, K, 3]
     return Gaussians(
@@ -56,5 +56,5 @@ def activate_gaussians(means: torch.Tensor, params: torch.Tensor, scene_scale: t
         quats=xyzw_to_wxyz(normalize_quaternion(params[:, ROTATION], identity_first=False)),
         scales=relative_scale * scene_scale,
         opacities=torch.sigmoid(params[:, 0]),
-        sh=sh * sh_degree_weights(preset.sh_degree, sh.dtype, sh.device)[None, :, None],
+        sh=sh * sh_degree_weights(architecture.sh_degree, sh.dtype, sh.device)[None, :, None],
     )

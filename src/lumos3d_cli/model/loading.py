@@ -1,7 +1,8 @@
 """`load_model`: a trained network from a checkpoint file or a bundled model's name.
 
-Inference never silently runs on random weights: a name that is not a bundled model (a preset
-name included: presets are architectures, not trained weights) is an error saying what to pass.
+Inference never silently runs on random weights: a name that is not a bundled model (an
+architecture's name included: an architecture is a network size, not trained weights) is an error
+saying what to pass.
 Random weights come only from `build_model`, which says so.
 """
 
@@ -15,17 +16,17 @@ import torch
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.checkpoints import BUNDLED_MODELS, FORMAT_VGGT, Checkpoint, bundled_weights_path, read_checkpoint
 from lumos3d_cli.io.state_dicts import check_tensors
+from lumos3d_cli.model.architectures import ARCHITECTURES, Architecture
 from lumos3d_cli.model.heads.gaussian import GaussianHead
 from lumos3d_cli.model.lumos3d import Lumos3D
-from lumos3d_cli.model.presets import PRESETS, ModelPreset
 
 logger = logging.getLogger(__name__)
 
 
-def _checkpoint_for(source: str | Path, preset: ModelPreset | None) -> Checkpoint:
+def _checkpoint_for(source: str | Path, architecture: Architecture | None) -> Checkpoint:
     path = Path(source)
     if path.exists():
-        return read_checkpoint(path, preset)
+        return read_checkpoint(path, architecture)
     bundled_names = ", ".join(f"'{mode}'" for mode in BUNDLED_MODELS)
     if isinstance(source, str) and source in BUNDLED_MODELS:
         bundled = bundled_weights_path(BUNDLED_MODELS[source])
@@ -33,9 +34,9 @@ def _checkpoint_for(source: str | Path, preset: ModelPreset | None) -> Checkpoin
             raise InputError(f"the bundled {source} model is missing from this installation ({bundled}); "
                              "reinstall lumos3d or pass a checkpoint file")
         return read_checkpoint(bundled)
-    if isinstance(source, str) and source in PRESETS:
+    if isinstance(source, str) and source in ARCHITECTURES:
         raise InputError(
-            f"'{source}' is a model preset (an architecture), not trained weights: pass a checkpoint file "
+            f"'{source}' is a model architecture (a network size), not trained weights: pass a checkpoint file "
             f"(ours, VGGT's model.pt/model.safetensors or AnySplat's model.safetensors) or a bundled model "
             f"({bundled_names}); build_model('{source}') gives random weights for experiments"
         )
@@ -49,9 +50,9 @@ def model_from_checkpoint(checkpoint: Checkpoint) -> Lumos3D:
     initialisation the checkpoint would overwrite; modules the file lacks are built for real.
     """
     with torch.device("meta"):
-        model = Lumos3D(checkpoint.preset)
+        model = Lumos3D(checkpoint.architecture)
     for name in checkpoint.fresh_modules:
-        setattr(model, name, GaussianHead(checkpoint.preset))
+        setattr(model, name, GaussianHead(checkpoint.architecture))
     fresh = tuple(f"{name}." for name in checkpoint.fresh_modules)
     expected = {key: tuple(t.shape) for key, t in model.state_dict().items() if not key.startswith(fresh)}
     check_tensors(expected, checkpoint.tensors, str(checkpoint.path))
@@ -65,11 +66,11 @@ def model_from_checkpoint(checkpoint: Checkpoint) -> Lumos3D:
     return model
 
 
-def load_model(source: str | Path, device: str | torch.device = "cpu", preset: ModelPreset | None = None) -> Lumos3D:
+def load_model(source: str | Path, device: str | torch.device = "cpu", architecture: Architecture | None = None) -> Lumos3D:
     """A network in eval mode on `device`, from a checkpoint path (file or folder) or the name of a
-    bundled model ('low-light', 'over-exposure'). `preset` sets the size of a foreign
+    bundled model ('low-light', 'over-exposure'). `architecture` sets the size of a foreign
     (VGGT/AnySplat) checkpoint; it defaults to vggt-1b and must not be given for our own files,
     which carry theirs."""
-    model = model_from_checkpoint(_checkpoint_for(source, preset))
-    logger.info("loaded preset '%s' from %s", model.preset.name, model.provenance.get("path"))
+    model = model_from_checkpoint(_checkpoint_for(source, architecture))
+    logger.info("loaded architecture '%s' from %s", model.architecture.name, model.provenance.get("path"))
     return model.to(device).eval()

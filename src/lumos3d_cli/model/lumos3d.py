@@ -12,6 +12,7 @@ from lumos3d_cli.checks import require_finite
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
+from lumos3d_cli.model.architectures import DEFAULT_ARCHITECTURE, Architecture, get_architecture
 from lumos3d_cli.model.backbone import Aggregator
 from lumos3d_cli.model.gaussian_adapter import activate_gaussians, split_confidence
 from lumos3d_cli.model.geometry import scene_scale, unproject_depth
@@ -20,7 +21,6 @@ from lumos3d_cli.model.heads.dpt import DepthHead
 from lumos3d_cli.model.heads.gaussian import GaussianHead
 from lumos3d_cli.model.pose_encoding import decode_pose
 from lumos3d_cli.model.preprocess import PreparedImages, prepare_images
-from lumos3d_cli.model.presets import DEFAULT_PRESET, ModelPreset, get_preset
 from lumos3d_cli.model.voxelize import voxelize
 
 logger = logging.getLogger(__name__)
@@ -77,35 +77,52 @@ class Lumos3DOutput:
         return Cameras(self.extrinsics[scene].detach(), self.intrinsics[scene].detach(), [self.image_size] * views)
 
 
+@dataclass
+class Lumos3DPrediction:
+    """What the heads predict for B scenes of V views of H x W pixels, before Gaussians are placed:
+    pose_enc_list (every camera refinement, [B, V, 9] each); extrinsics [B, V, 3, 4] world->camera
+    and intrinsics [B, V, 3, 3] (network pixels) decoded from the last; depth, depth_conf
+    [B, V, H, W]; params [B, V, H, W, K-1] raw Gaussian parameters (gaussian_adapter layout);
+    confidence [B, V, H, W] fusion logits."""
+
+    pose_enc_list: list[torch.Tensor]
+    extrinsics: torch.Tensor
+    intrinsics: torch.Tensor
+    depth: torch.Tensor
+    depth_conf: torch.Tensor
+    params: torch.Tensor
+    confidence: torch.Tensor
+
+
 class Lumos3D(nn.Module):
     """The network of the paper. Submodule names equal VGGT's (`aggregator`, `camera_head`,
     `depth_head`) plus `gaussian_head` (AnySplat's `gaussian_param_head`)."""
 
-    def __init__(self, preset: ModelPreset):
+    def __init__(self, architecture: Architecture):
         super().__init__()
-        self.preset = preset
-        self.aggregator = Aggregator(preset)
-        self.camera_head = CameraHead(preset)
-        self.depth_head = DepthHead(preset)
-        self.gaussian_head = GaussianHead(preset)
+        self.architecture = architecture
+        self.aggregator = Aggregator(architecture)
+        self.camera_head = CameraHead(architecture)
+        self.depth_head = DepthHead(architecture)
+        self.gaussian_head = GaussianHead(architecture)
         # Where the weights came from (set by `load_model`; `build_model` marks them random).
         self.provenance: dict = {}
 
     @property
     def token_layers(self) -> list[int]:
         """Aggregator layers the heads read: the DPT layers and the last (camera head)."""
-        return sorted(set(self.preset.intermediate_layers) | {self.preset.depth - 1})
+        return sorted(set(self.architecture.intermediate_layers) | {self.architecture.depth - 1})
 
     def set_gradient_checkpointing(self, enabled: bool) -> None:
         """Recompute aggregator blocks in the backward pass instead of storing activations."""
         self.aggregator.set_gradient_checkpointing(enabled)
 
     def prepare(self, images: torch.Tensor, mode: str = "resize") -> PreparedImages:
-        """Any-size images [..., 3, H, W] in [0, 1] -> this preset's network size (`prepare_images`)."""
-        return prepare_images(images, self.preset.image_size, self.preset.patch_size, mode)
+        """Any-size images [..., 3, H, W] in [0, 1] -> this architecture's network size (`prepare_images`)."""
+        return prepare_images(images, self.architecture.image_size, self.architecture.patch_size, mode)
 
     def _check_images(self, images: torch.Tensor) -> None:
-        patch = self.preset.patch_size
+        patch = self.architecture.patch_size
         if images.dim() != 5 or images.shape[2] != 3:
             raise InputError(f"model input must be [B, V, 3, H, W] images, got shape {tuple(images.shape)}")
         height, width = images.shape[-2:]
@@ -123,7 +140,7 @@ class Lumos3D(nn.Module):
         """One scene: points [V, H, W, 3], raw parameters [V, H, W, K-1], confidence [V, H, W],
         scene scale -> (pixel Gaussians, fused and pruned Gaussians, counts).
 
-        voxel_size overrides the preset's (relative to the scene scale); fuse_views [V] bool keeps
+        voxel_size overrides the architecture's (relative to the scene scale); fuse_views [V] bool keeps
         only those views' pixel Gaussians in the fused scene (the others still shaped the cameras
         and depth; evaluation's holdout protocol uses this)."""
         if fuse_views is not None:
@@ -132,51 +149,74 @@ class Lumos3D(nn.Module):
             points, params, confidence = points[fuse_views], params[fuse_views], confidence[fuse_views]
         points = points.reshape(-1, 3)
         params = params.reshape(points.shape[0], -1)
-        relative = self.preset.voxel_size if voxel_size is None else voxel_size
-        pixels = activate_gaussians(points, params, scale, self.preset)
+        relative = self.architecture.voxel_size if voxel_size is None else voxel_size
+        pixels = activate_gaussians(points, params, scale, self.architecture)
         fused = voxelize(points, params, confidence.reshape(-1), relative * scale)
-        voxels = activate_gaussians(fused.points, fused.features, scale, self.preset)
-        keep = voxels.opacities >= self.preset.opacity_threshold
+        voxels = activate_gaussians(fused.points, fused.features, scale, self.architecture)
+        keep = voxels.opacities >= self.architecture.opacity_threshold
         return pixels, voxels.select(keep), GaussianCounts(points.shape[0], len(fused), int((~keep).sum()))
 
-    def forward(
-        self, images: torch.Tensor, voxel_size: float | None = None, fuse_views: torch.Tensor | None = None
-    ) -> Lumos3DOutput:
-        """images [B, V, 3, H, W] in [0, 1], H and W multiples of the patch size -> Lumos3DOutput.
-        `voxel_size` and `fuse_views` [V] bool are passed to `fuse_scene`.
+    def predict(self, images: torch.Tensor) -> Lumos3DPrediction:
+        """The heads' predictions for images [B, V, 3, H, W] in [0, 1] (H and W multiples of the
+        patch size), before any Gaussian is placed: cameras, depth, raw Gaussian parameters.
 
-        The aggregator follows any enclosing autocast (e.g. bf16); the heads and all geometry run
-        in float32, as in VGGT.
+        The aggregator follows any enclosing autocast (e.g. bf16); the heads run in float32, as
+        in VGGT.
         """
         self._check_images(images)
-        batch, _, _, height, width = images.shape
+        height, width = images.shape[-2:]
         tokens = self.aggregator(images, self.token_layers)
         with torch.autocast(images.device.type, enabled=False):
             tokens = {layer: t.float() for layer, t in tokens.items()}
             images = images.float()
-            pose_enc_list = self.camera_head(tokens[self.preset.depth - 1])
+            pose_enc_list = self.camera_head(tokens[self.architecture.depth - 1])
             depth, depth_conf = self.depth_head(tokens, images)
             raw = self.gaussian_head(tokens, images)  # [B, V, K, H, W]
             del tokens  # the layer tokens are the largest tensors; free them before fusion
             extrinsics, intrinsics = decode_pose(pose_enc_list[-1], (height, width))
+            params, confidence = split_confidence(raw.permute(0, 1, 3, 4, 2))  # [B, V, H, W, K-1], [B, V, H, W]
+        return Lumos3DPrediction(pose_enc_list, extrinsics, intrinsics, depth, depth_conf, params, confidence)
+
+    def assemble(
+        self, prediction: Lumos3DPrediction, extrinsics: torch.Tensor | None = None,
+        intrinsics: torch.Tensor | None = None, depth: torch.Tensor | None = None,
+        voxel_size: float | None = None, fuse_views: torch.Tensor | None = None,
+    ) -> Lumos3DOutput:
+        """Place and fuse the Gaussians of `prediction`. By default they sit on the predicted depth
+        seen from the predicted cameras; a caller with better geometry (registered cameras
+        extrinsics [B, V, 3, 4] and intrinsics [B, V, 3, 3] in network pixels, depth [B, V, H, W]
+        aligned to them) passes it instead. `voxel_size` and `fuse_views` [V] bool are passed to
+        `fuse_scene`. Runs in float32."""
+        with torch.autocast(prediction.depth.device.type, enabled=False):
+            extrinsics = prediction.extrinsics if extrinsics is None else extrinsics.to(prediction.depth)
+            intrinsics = prediction.intrinsics if intrinsics is None else intrinsics.to(prediction.depth)
+            depth = prediction.depth if depth is None else depth.to(prediction.depth)
             # Stop-gradient cameras: rendering losses train depth and appearance, only camera
             # losses train the camera head. Otherwise the rendering loss pulls the predicted
             # field of view to a degenerate extreme (docs/model.md, "Geometry").
             world_points = unproject_depth(depth, extrinsics.detach(), intrinsics.detach())
             scales = scene_scale(depth)
-            params, confidence = split_confidence(raw.permute(0, 1, 3, 4, 2))  # [B, V, H, W, K-1], [B, V, H, W]
             scenes = [
-                self.fuse_scene(world_points[b], params[b], confidence[b], scales[b], voxel_size, fuse_views)
-                for b in range(batch)
+                self.fuse_scene(world_points[b], prediction.params[b], prediction.confidence[b], scales[b], voxel_size,
+                                fuse_views)
+                for b in range(depth.shape[0])
             ]
         pixel_gaussians, gaussians, counts = (list(column) for column in zip(*scenes))
         output = Lumos3DOutput(
-            pose_enc=pose_enc_list[-1], pose_enc_list=pose_enc_list, extrinsics=extrinsics, intrinsics=intrinsics,
-            depth=depth, depth_conf=depth_conf, world_points=world_points, pixel_confidence=confidence,
-            pixel_gaussians=pixel_gaussians, gaussians=gaussians, scene_scale=scales, counts=counts,
+            pose_enc=prediction.pose_enc_list[-1], pose_enc_list=prediction.pose_enc_list, extrinsics=extrinsics,
+            intrinsics=intrinsics, depth=depth, depth_conf=prediction.depth_conf, world_points=world_points,
+            pixel_confidence=prediction.confidence, pixel_gaussians=pixel_gaussians, gaussians=gaussians,
+            scene_scale=scales, counts=counts,
         )
         _require_finite_output(output)
         return output
+
+    def forward(
+        self, images: torch.Tensor, voxel_size: float | None = None, fuse_views: torch.Tensor | None = None
+    ) -> Lumos3DOutput:
+        """images [B, V, 3, H, W] in [0, 1], H and W multiples of the patch size -> Lumos3DOutput:
+        `predict`, then `assemble` on the predicted cameras and depth."""
+        return self.assemble(self.predict(images), voxel_size=voxel_size, fuse_views=fuse_views)
 
 
 def _require_finite_output(output: Lumos3DOutput) -> None:
@@ -189,16 +229,16 @@ def _require_finite_output(output: Lumos3DOutput) -> None:
         gaussians.require_finite(f"model output pixel_gaussians[{scene}]")
 
 
-def build_model(preset: str | ModelPreset = DEFAULT_PRESET, seed: int | None = None) -> Lumos3D:
+def build_model(architecture: str | Architecture = DEFAULT_ARCHITECTURE, seed: int | None = None) -> Lumos3D:
     """A network with **random** weights (for training, tests and benchmarks — not inference;
     use `load_model` for trained weights). `seed` makes the initialisation reproducible."""
-    preset = get_preset(preset) if isinstance(preset, str) else preset
+    architecture = get_architecture(architecture) if isinstance(architecture, str) else architecture
     if seed is None:
-        model = Lumos3D(preset)
+        model = Lumos3D(architecture)
     else:
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)
-            model = Lumos3D(preset)
+            model = Lumos3D(architecture)
     model.provenance = {"weights": "random", "seed": seed}
-    logger.info("built preset '%s' with random weights (untrained: not for inference)", preset.name)
+    logger.info("built architecture '%s' with random weights (untrained: not for inference)", architecture.name)
     return model

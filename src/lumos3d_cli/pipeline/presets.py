@@ -13,9 +13,9 @@ from lumos3d_cli.errors import InputError
 class RestorePreset:
     name: str
     max_views: int
-    resolution: float  # multiplier of the model preset's image size
+    resolution: float  # multiplier of the architecture's image size
     sh_degree: int | None  # None: the model's full degree
-    voxel_scale: float  # multiplier of the model preset's voxel size
+    voxel_scale: float  # multiplier of the architecture's voxel size
 
     def network_image_size(self, model_image_size: int, patch_size: int) -> int:
         """The longer network side: a patch multiple, at least one patch."""

@@ -96,11 +96,11 @@ def run_network(
     model: Lumos3D, images: torch.Tensor, preset: RestorePreset, fuse_views: torch.Tensor | None = None
 ):
     """images [V, 3, H, W] at input size -> (model output, PreparedImages)."""
-    size = preset.network_image_size(model.preset.image_size, model.preset.patch_size)
-    prepared = prepare_images(images, size, model.preset.patch_size)
+    size = preset.network_image_size(model.architecture.image_size, model.architecture.patch_size)
+    prepared = prepare_images(images, size, model.architecture.patch_size)
     device = next(model.parameters()).device
     with torch.no_grad():
-        output = model(prepared.images[None].to(device), voxel_size=model.preset.voxel_size * preset.voxel_scale,
+        output = model(prepared.images[None].to(device), voxel_size=model.architecture.voxel_size * preset.voxel_scale,
                        fuse_views=fuse_views.to(device) if fuse_views is not None else None)
     return output, prepared
 

@@ -117,7 +117,7 @@ class OptimConfig:
 class TrainConfig:
     stage: Literal["teacher", "student"]
     output: str
-    model: str = "tiny"  # preset name (random init) or checkpoint to start from
+    model: str = "tiny"  # architecture name (random init) or checkpoint to start from
     teacher: str | None = None  # frozen teacher checkpoint (student stage)
     # what the frozen teacher sees: the normal-light images (the paper's cross-illumination
     # distillation) or the student's own degraded input (the paper's ablation)

@@ -30,9 +30,9 @@ from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.checkpoints import save_checkpoint
 from lumos3d_cli.io.image_write import write_image
 from lumos3d_cli.losses.objective import StageBatch, TrainingObjective
+from lumos3d_cli.model.architectures import ARCHITECTURES
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DOutput, build_model
-from lumos3d_cli.model.presets import PRESETS
 from lumos3d_cli.render.render import render
 from lumos3d_cli.train.checkpointing import (
     TrainingState,
@@ -128,11 +128,11 @@ class Trainer:
 
     def _student(self) -> Lumos3D:
         source = self.config.model
-        if source in PRESETS:
+        if source in ARCHITECTURES:
             model = build_model(source, seed=self.config.seed)
         else:
             model = load_model(source)
-        patch = model.preset.patch_size
+        patch = model.architecture.patch_size
         data = self.config.data
         if data.width % patch or data.height % patch:
             raise InputError(f"data.width x data.height = {data.width}x{data.height} must be multiples of the patch size {patch}")

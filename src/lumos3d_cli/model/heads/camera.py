@@ -6,10 +6,10 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from lumos3d_cli.model.architectures import Architecture
 from lumos3d_cli.model.layers.block import Block
 from lumos3d_cli.model.layers.mlp import Mlp
 from lumos3d_cli.model.pose_encoding import POSE_ENCODING_SIZE
-from lumos3d_cli.model.presets import ModelPreset
 
 
 def activate_pose(raw: torch.Tensor) -> torch.Tensor:
@@ -27,12 +27,12 @@ class CameraHead(nn.Module):
     one-step correction (as in VGGT); the distillation loss supervises all iterations.
     """
 
-    def __init__(self, preset: ModelPreset):
+    def __init__(self, architecture: Architecture):
         super().__init__()
-        dim = 2 * preset.embed_dim
-        self.iterations = preset.camera_iterations
+        dim = 2 * architecture.embed_dim
+        self.iterations = architecture.camera_iterations
         self.trunk = nn.Sequential(
-            *(Block(dim, preset.camera_num_heads, preset.mlp_ratio, preset.layer_scale_init) for _ in range(preset.camera_trunk_depth))
+            *(Block(dim, architecture.camera_num_heads, architecture.mlp_ratio, architecture.layer_scale_init) for _ in range(architecture.camera_trunk_depth))
         )
         self.token_norm = nn.LayerNorm(dim)
         self.trunk_norm = nn.LayerNorm(dim)

@@ -8,9 +8,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from lumos3d_cli.model.architectures import Architecture
 from lumos3d_cli.model.heads.fusion import FusionScratch
 from lumos3d_cli.model.heads.uv_embedding import add_uv_embedding
-from lumos3d_cli.model.presets import ModelPreset
 
 # Frames decoded together; every operation is per frame, so this only bounds peak memory.
 FRAMES_PER_CHUNK = 8
@@ -28,13 +28,13 @@ class DPTHead(nn.Module):
     [N, features/2, 8h, 8w].
     """
 
-    def __init__(self, preset: ModelPreset):
+    def __init__(self, architecture: Architecture):
         super().__init__()
-        dim = 2 * preset.embed_dim
-        channels = preset.dpt_out_channels
-        self.patch_size = preset.patch_size
-        self.patch_start_index = preset.patch_start_index
-        self.layers = tuple(preset.intermediate_layers)
+        dim = 2 * architecture.embed_dim
+        channels = architecture.dpt_out_channels
+        self.patch_size = architecture.patch_size
+        self.patch_start_index = architecture.patch_start_index
+        self.layers = tuple(architecture.intermediate_layers)
         self.norm = nn.LayerNorm(dim)
         self.projects = nn.ModuleList(nn.Conv2d(dim, c, kernel_size=1) for c in channels)
         self.resize_layers = nn.ModuleList(
@@ -45,7 +45,7 @@ class DPTHead(nn.Module):
                 nn.Conv2d(channels[3], channels[3], kernel_size=3, stride=2, padding=1),
             )
         )
-        self.scratch = FusionScratch(channels, preset.dpt_features)
+        self.scratch = FusionScratch(channels, architecture.dpt_features)
 
     def fused_features(self, tokens: dict[int, torch.Tensor], frames: slice, image_hw: tuple[int, int]) -> torch.Tensor:
         """tokens {layer: [B, S, P, 2C]} -> [B*s, features/2, 8h, 8w] for the frames in `frames`."""
@@ -74,13 +74,13 @@ def decode_in_chunks(decode: Callable[[slice], torch.Tensor], batch: int, frames
 class DepthHead(DPTHead):
     """-> depth = exp(x) and confidence = 1 + exp(c), each [B, S, H, W]."""
 
-    def __init__(self, preset: ModelPreset):
-        super().__init__(preset)
-        half = preset.dpt_features // 2
+    def __init__(self, architecture: Architecture):
+        super().__init__(architecture)
+        half = architecture.dpt_features // 2
         self.scratch.output_conv2 = nn.Sequential(
-            nn.Conv2d(half, preset.depth_head_hidden, kernel_size=3, padding=1),
+            nn.Conv2d(half, architecture.depth_head_hidden, kernel_size=3, padding=1),
             nn.ReLU(),
-            nn.Conv2d(preset.depth_head_hidden, 2, kernel_size=1),
+            nn.Conv2d(architecture.depth_head_hidden, 2, kernel_size=1),
         )
 
     def decode(self, tokens: dict[int, torch.Tensor], images: torch.Tensor, frames: slice) -> torch.Tensor:

@@ -6,9 +6,9 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from lumos3d_cli.model.architectures import Architecture
 from lumos3d_cli.model.heads.dpt import DPTHead, decode_in_chunks
 from lumos3d_cli.model.heads.uv_embedding import add_uv_embedding
-from lumos3d_cli.model.presets import ModelPreset
 
 
 class GaussianHead(DPTHead):
@@ -18,14 +18,14 @@ class GaussianHead(DPTHead):
     that carries full-resolution colour detail past the 14-pixel patch grid.
     """
 
-    def __init__(self, preset: ModelPreset):
-        super().__init__(preset)
-        half = preset.dpt_features // 2
+    def __init__(self, architecture: Architecture):
+        super().__init__(architecture)
+        half = architecture.dpt_features // 2
         self.input_merger = nn.Sequential(nn.Conv2d(3, half, kernel_size=7, padding=3), nn.ReLU())
         self.scratch.output_conv2 = nn.Sequential(
-            nn.Conv2d(half, preset.gaussian_head_hidden, kernel_size=3, padding=1),
+            nn.Conv2d(half, architecture.gaussian_head_hidden, kernel_size=3, padding=1),
             nn.ReLU(),
-            nn.Conv2d(preset.gaussian_head_hidden, preset.gaussian_channels, kernel_size=1),
+            nn.Conv2d(architecture.gaussian_head_hidden, architecture.gaussian_channels, kernel_size=1),
         )
 
     def decode(self, tokens: dict[int, torch.Tensor], images: torch.Tensor, frames: slice) -> torch.Tensor:

@@ -1,0 +1,253 @@
+"""Structure-from-motion with pycolmap: SIFT features, matching, incremental mapping, on the CPU.
+
+The photos go in already brightened (SIFT finds few features in a dark photo); they are resized
+so that their long side is at most `long_side`, written as PNGs into a temporary folder, and
+registered there. Cameras, sparse points and observations come back in pixels of the photos.
+
+Choices, measured on LOM buu (25 views, 500x375) and the Strecha scenes (768x512) on 2 shared
+CPU cores (benchmarks/sfm.py; docs/performance.md, "Structure-from-motion"):
+- long side 512: the same rotation accuracy as full resolution on 768x512 photos, ~2x faster;
+- all CPU cores: 2 threads take ~0.6x the time of 1;
+- exhaustive matching up to EXHAUSTIVE_MATCHING_LIMIT views, then sequential matching (each view
+  with its next SEQUENTIAL_OVERLAP views in the given order, and quadratic strides beyond), which
+  needs no vocabulary tree and registers the same views of ordered captures;
+- one shared SIMPLE_PINHOLE camera (one focal length, principal point at the image centre, no
+  distortion) when the photos come from one camera: the renderer is a pinhole, and a single focal
+  length is better constrained than two.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pycolmap
+import torch
+
+from lumos3d_cli.checks import require_finite
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.sparse_points import SparsePoints
+from lumos3d_cli.io.cameras import Cameras
+
+logger = logging.getLogger(__name__)
+
+SFM_LONG_SIDE = 512
+EXHAUSTIVE_MATCHING_LIMIT = 40
+SEQUENTIAL_OVERLAP = 10
+# SIFT features per photo: brute-force matching costs grows with the square of this.
+MAX_FEATURES = 4096
+# Below this share of photos in the largest model, photos do not look like one scene.
+ONE_SCENE_SHARE = 0.5
+
+
+@dataclass
+class Registration:
+    """What structure-from-motion recovered from V photos (its largest model).
+
+    cameras: the registered views only, in input order, at the photos' resolution (world->camera,
+    OpenCV axes, as every `Cameras`); registered: bool [V]; points: the model's sparse points
+    (observations index the V photos); reprojection_error: mean over observations, in pixels of
+    the photos (nan when nothing registered); model_sizes: registered views per model found,
+    largest first; matching: "exhaustive" or "sequential"; sfm_size: (width, height) SfM ran at.
+    """
+
+    cameras: Cameras
+    registered: torch.Tensor
+    points: SparsePoints
+    reprojection_error: float
+    model_sizes: list[int]
+    matching: str
+    sfm_size: tuple[int, int]
+    seconds: float
+    stage_seconds: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def registered_count(self) -> int:
+        return int(self.registered.sum())
+
+    @property
+    def registered_indices(self) -> list[int]:
+        """Indices into the V photos of `cameras`' rows."""
+        return torch.nonzero(self.registered).flatten().tolist()
+
+    @property
+    def failed(self) -> bool:
+        """Fewer than two views registered: there are no usable cameras."""
+        return self.registered_count < 2
+
+    @property
+    def looks_like_one_scene(self) -> bool:
+        """False when SfM found several disconnected models or its largest holds under half the
+        photos: the photos probably do not show one scene (or overlap too little)."""
+        return len(self.model_sizes) <= 1 and self.registered_count >= ONE_SCENE_SHARE * len(self.registered)
+
+    def describe(self) -> str:
+        """One line for logs and warnings, e.g. 'registered 9 of 25 photos; 3 models (9, 4, 2 views)'."""
+        line = f"registered {self.registered_count} of {len(self.registered)} photos"
+        if not self.model_sizes:
+            return line + " (no model: too few features or matches; blank, dark or unrelated photos?)"
+        if len(self.model_sizes) > 1:
+            line += f"; {len(self.model_sizes)} disconnected models ({', '.join(map(str, self.model_sizes))} views)"
+        if not self.looks_like_one_scene:
+            line += "; the photos do not look like one scene"
+        return line
+
+
+def _to_uint8(image: torch.Tensor, width: int, height: int) -> np.ndarray:
+    """[3, H, W] float sRGB in [0, 1] -> [height, width, 3] uint8 BGR for OpenCV."""
+    pixels = (image.permute(1, 2, 0).float().clamp(0, 1).numpy() * 255.0 + 0.5).astype(np.uint8)
+    if (pixels.shape[1], pixels.shape[0]) != (width, height):
+        pixels = cv2.resize(pixels, (width, height), interpolation=cv2.INTER_AREA)
+    return np.ascontiguousarray(pixels[..., ::-1])
+
+
+def sfm_size(width: int, height: int, long_side: int | None) -> tuple[int, int]:
+    """(width, height) SfM runs at: the photo shrunk to `long_side` (never enlarged; None: as is)."""
+    if long_side is None or max(width, height) <= long_side:
+        return width, height
+    factor = long_side / max(width, height)
+    return max(1, round(width * factor)), max(1, round(height * factor))
+
+
+def _options(threads: int, max_features: int, shared_camera: bool, views: int):
+    reader = pycolmap.ImageReaderOptions()
+    reader.camera_model = "SIMPLE_PINHOLE"
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.num_threads = threads
+    extraction.sift.max_num_features = max_features
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = threads
+    mapping = pycolmap.IncrementalPipelineOptions()
+    mapping.num_threads = threads
+    mapping.random_seed = 0
+    # COLMAP drops models under 10 views by default; keep small ones to see how photos split.
+    mapping.min_model_size = 2 if views < 10 else 3
+    mode = pycolmap.CameraMode.SINGLE if shared_camera else pycolmap.CameraMode.PER_IMAGE
+    return reader, extraction, matching, mapping, mode
+
+
+def _read_model(
+    model: pycolmap.Reconstruction, views: int, names: Sequence[str], photo_size: tuple[int, int], size: tuple[int, int]
+) -> tuple[Cameras, torch.Tensor, SparsePoints, float]:
+    """The model's cameras, registered mask [V], points and mean error, in pixels of the photos."""
+    scale = torch.tensor([photo_size[0] / size[0], photo_size[1] / size[1]], dtype=torch.float64)
+    registered = torch.zeros(views, dtype=torch.bool)
+    extrinsics, intrinsics = {}, {}
+    view_of_image = {}
+    for image_id, image in model.images.items():
+        if not image.has_pose:
+            continue
+        index = int(Path(image.name).stem)  # files are named by input index
+        view_of_image[image_id] = index
+        registered[index] = True
+        extrinsics[index] = torch.from_numpy(image.cam_from_world().matrix()).double()
+        calibration = torch.from_numpy(model.cameras[image.camera_id].calibration_matrix()).double()
+        calibration[:2] *= scale[:, None]
+        intrinsics[index] = calibration
+    order = sorted(extrinsics)
+    cameras = Cameras(
+        torch.stack([extrinsics[i] for i in order]) if order else torch.zeros(0, 3, 4, dtype=torch.float64),
+        torch.stack([intrinsics[i] for i in order]) if order else torch.zeros(0, 3, 3, dtype=torch.float64),
+        [photo_size] * len(order), [names[i] for i in order],
+    )
+    point_ids = sorted(model.points3D.keys())
+    position = {point_id: i for i, point_id in enumerate(point_ids)}
+    xyz = np.array([model.points3D[p].xyz for p in point_ids], dtype=np.float64).reshape(-1, 3)
+    rgb = np.array([model.points3D[p].color for p in point_ids], dtype=np.uint8).reshape(-1, 3)
+    error = np.array([model.points3D[p].error for p in point_ids], dtype=np.float64)
+    view, point, pixel = [], [], []
+    for image_id, index in view_of_image.items():
+        for observation in model.images[image_id].get_observation_points2D():
+            view.append(index)
+            point.append(position[observation.point3D_id])
+            pixel.append(observation.xy)
+    pixels = torch.tensor(np.array(pixel, dtype=np.float64).reshape(-1, 2)) * scale
+    mean_scale = float(scale.mean())
+    points = SparsePoints(
+        torch.from_numpy(xyz), torch.from_numpy(rgb), torch.from_numpy(error) * mean_scale,
+        torch.tensor(view, dtype=torch.int64), torch.tensor(point, dtype=torch.int64), pixels,
+    )
+    return cameras, registered, points, model.compute_mean_reprojection_error() * mean_scale
+
+
+def register_photos(
+    images: torch.Tensor,
+    names: Sequence[str],
+    long_side: int | None = SFM_LONG_SIDE,
+    exhaustive_limit: int = EXHAUSTIVE_MATCHING_LIMIT,
+    shared_camera: bool = True,
+    threads: int | None = None,
+    max_features: int = MAX_FEATURES,
+) -> Registration:
+    """Register brightened photos [V, 3, H, W] (sRGB in [0, 1]) named `names` (file names).
+
+    Returns the largest model SfM found; a Registration with `failed` set (not an exception) when
+    fewer than two views register (blank, textureless or unrelated photos), so that a caller can
+    fall back to other cameras. `shared_camera`: the photos come from one camera with one focal
+    length (set it False for photos that were of different sizes before loading). `threads`:
+    CPU threads (None: all cores). InputError for fewer than 2 photos, a name count that does not
+    match, or non-finite pixels.
+    """
+    if images.dim() != 4 or images.shape[1] != 3:
+        raise InputError(f"structure-from-motion needs images [V, 3, H, W], got {tuple(images.shape)}")
+    views, _, height, width = images.shape
+    if views < 2:
+        raise InputError(f"structure-from-motion needs at least 2 photos of the scene, got {views}")
+    if len(names) != views:
+        raise InputError(f"{len(names)} names for {views} photos")
+    require_finite("photos for structure-from-motion", images)
+    size = sfm_size(width, height, long_side)
+    threads = threads or os.cpu_count() or 1
+    reader, extraction, matching_options, mapping, mode = _options(threads, max_features, shared_camera, views)
+    matching = "exhaustive" if views <= exhaustive_limit else "sequential"
+    stage_seconds = {}
+    started = time.perf_counter()
+    previous_level = pycolmap.logging.minloglevel
+    pycolmap.logging.minloglevel = 3  # COLMAP's progress and failures: we log what they mean
+    try:
+        with tempfile.TemporaryDirectory(prefix="lumos3d-sfm-") as work:
+            folder, database = Path(work) / "images", Path(work) / "database.db"
+            folder.mkdir()
+            files = [f"{index:05d}.png" for index in range(views)]
+            for index, file in enumerate(files):
+                cv2.imwrite(str(folder / file), _to_uint8(images[index], *size), [cv2.IMWRITE_PNG_COMPRESSION, 1])
+            pycolmap.set_random_seed(0)
+            pycolmap.extract_features(database, folder, files, camera_mode=mode, reader_options=reader,
+                                      extraction_options=extraction, device=pycolmap.Device.cpu)
+            stage_seconds["features"] = time.perf_counter() - started
+            if matching == "exhaustive":
+                pycolmap.match_exhaustive(database, matching_options=matching_options, device=pycolmap.Device.cpu)
+            else:
+                pairing = pycolmap.SequentialPairingOptions()
+                pairing.overlap = SEQUENTIAL_OVERLAP
+                pycolmap.match_sequential(database, matching_options=matching_options, pairing_options=pairing,
+                                          device=pycolmap.Device.cpu)
+            stage_seconds["matching"] = time.perf_counter() - started - stage_seconds["features"]
+            (Path(work) / "models").mkdir()
+            models = pycolmap.incremental_mapping(database, folder, Path(work) / "models", mapping)
+            stage_seconds["mapping"] = time.perf_counter() - started - stage_seconds["features"] - stage_seconds["matching"]
+            sizes = sorted((model.num_reg_images() for model in models.values()), reverse=True)
+            sizes = [s for s in sizes if s > 0]
+            if sizes:
+                largest = max(models.values(), key=lambda model: model.num_reg_images())
+                cameras, registered, points, error = _read_model(largest, views, names, (width, height), size)
+            else:
+                empty = torch.zeros(0, 3, 4, dtype=torch.float64)
+                cameras = Cameras(empty, torch.zeros(0, 3, 3, dtype=torch.float64), [], [])
+                registered, points, error = torch.zeros(views, dtype=torch.bool), SparsePoints.empty(), float("nan")
+    finally:
+        pycolmap.logging.minloglevel = previous_level
+    registration = Registration(cameras, registered, points, error, sizes, matching, size,
+                                time.perf_counter() - started, stage_seconds)
+    if len(cameras):
+        cameras.require_valid("structure-from-motion cameras")
+    logger.info("structure-from-motion: %s in %.1f s (%s matching at %dx%d; %d points, %.2f px)",
+                registration.describe(), registration.seconds, matching, *size, len(points), error)
+    return registration
