@@ -1,0 +1,108 @@
+"""Cameras the user already has (`--poses PATH`), matched to the photos by file stem.
+
+PATH is a transforms.json (nerfstudio / instant-ngp / LOM), a folder of LOM-style
+transforms_{train,val,test}.json, a COLMAP model folder (text or binary), or a scene folder
+holding one of those (transforms.json, sparse/0, colmap/). A pose of `photos/IMG_01.JPG` matches
+the photo `IMG_01.png`: only the stem counts, since restored or converted photos change suffix.
+
+Every photo needs a pose, and by default every pose needs a photo: a file with extra poses is
+most likely the file of another capture, so it is an error (`allow_extra_poses=True` accepts a
+file that covers a superset of the photos, e.g. the train/test split of a dataset).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from pathlib import Path
+
+import torch
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.camera_files import read_cameras
+from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.colmap import is_colmap_model, read_colmap_model
+from lumos3d_cli.io.transforms_json import read_transforms_json
+
+logger = logging.getLogger(__name__)
+
+# Aspect ratios that differ by more than this mean the photos were cropped, not resized.
+_ASPECT_TOLERANCE = 0.01
+
+
+def _listed(items: Sequence[str], limit: int = 5) -> str:
+    return ", ".join(items[:limit]) + (f" and {len(items) - limit} more" if len(items) > limit else "")
+
+
+def _read_pose_source(path: Path) -> Cameras:
+    """The cameras in PATH, whatever supported form it takes."""
+    if path.is_dir():
+        for folder in (path, path / "sparse" / "0", path / "colmap"):
+            if folder.is_dir() and is_colmap_model(folder):
+                return read_colmap_model(folder)
+        splits = sorted(path.glob("transforms_*.json"))
+        if splits and not (path / "transforms.json").is_file():
+            parts = [read_transforms_json(split, warn_on_distortion=False) for split in splits]
+            return Cameras(torch.cat([p.extrinsics for p in parts]), torch.cat([p.intrinsics for p in parts]),
+                           [s for p in parts for s in p.sizes], [n for p in parts for n in p.names])
+    return read_cameras(path)
+
+
+def read_given_poses(
+    path: Path | str, names: Sequence[str], sizes: Sequence[tuple[int, int]], allow_extra_poses: bool = False
+) -> Cameras:
+    """The cameras of the photos `names` (file names, one per photo) of `sizes` (width, height)
+    from PATH, in the photos' order, with intrinsics rescaled to the photos' sizes.
+
+    InputError naming the photos without a pose, the poses without a photo (unless
+    `allow_extra_poses`), two different poses of one stem (the same pose listed twice is fine), or a photo whose aspect ratio differs from its
+    pose's image (a cropped photo: its principal point is unknown).
+    """
+    path = Path(path)
+    if len(names) != len(sizes):
+        raise InputError(f"{len(names)} photo names for {len(sizes)} photo sizes")
+    if not path.exists():
+        raise InputError(f"--poses {path}: no such file or folder")
+    given = _read_pose_source(path)
+    stems = [Path(name).stem for name in given.names]
+    row_of_stem: dict[str, int] = {}
+    conflicting = []
+    for row, stem in enumerate(stems):
+        if stem not in row_of_stem:
+            row_of_stem[stem] = row
+            continue
+        # LOM lists a frame in two split files; the same pose twice is harmless, two poses are not.
+        first = row_of_stem[stem]
+        if not (torch.allclose(given.extrinsics[first], given.extrinsics[row], atol=1e-9)
+                and torch.allclose(given.intrinsics[first], given.intrinsics[row], atol=1e-9)):
+            conflicting.append(given.names[row])
+    if conflicting:
+        raise InputError(f"--poses {path}: differing poses for one photo ({_listed(conflicting)}); keep one pose per photo")
+    photo_stems = [Path(name).stem for name in names]
+    missing = [name for name, stem in zip(names, photo_stems) if stem not in row_of_stem]
+    if missing:
+        raise InputError(f"--poses {path}: no pose for {len(missing)} of {len(names)} photos ({_listed(missing)}); "
+                         "poses are matched to photos by file name without suffix")
+    extra = [given.names[row] for stem, row in row_of_stem.items() if stem not in set(photo_stems)]
+    if extra and not allow_extra_poses:
+        raise InputError(f"--poses {path}: {len(extra)} poses have no photo ({_listed(extra)}); "
+                         "pass the photos of every pose, or a camera file of these photos only")
+    rows = [row_of_stem[stem] for stem in photo_stems]
+    chosen = given[rows]
+    intrinsics = chosen.intrinsics.double().clone()
+    for view, ((width, height), (file_width, file_height)) in enumerate(zip(sizes, chosen.sizes)):
+        if (width, height) == (file_width, file_height):
+            continue
+        if abs((width / height) / (file_width / file_height) - 1) > _ASPECT_TOLERANCE:
+            raise InputError(f"--poses {path}: photo {names[view]} is {width}x{height} but its pose is for "
+                             f"{file_width}x{file_height} (another aspect ratio); pass uncropped photos")
+        intrinsics[view, 0] *= width / file_width
+        intrinsics[view, 1] *= height / file_height
+    cameras = Cameras(chosen.extrinsics.double(), intrinsics, list(sizes), list(names))
+    try:
+        cameras.require_valid(f"--poses {path}")
+    except ValueError as error:
+        raise InputError(str(error)) from error
+    if extra:
+        logger.info("--poses %s: %d poses without a photo are not used", path, len(extra))
+    return cameras
