@@ -7,7 +7,7 @@ import sys
 import typer
 
 from lumos3d_cli import __version__
-from lumos3d_cli.cli import convert, degrade, eval, info, render, restore, train
+from lumos3d_cli.cli import convert, degrade, eval, info, render, restore, train, view
 from lumos3d_cli.cli.console import configure_logging, state, stderr_console
 from lumos3d_cli.errors import InputError, RunError
 
@@ -57,6 +57,7 @@ app.command("train", epilog=train.EXAMPLES, rich_help_panel="Models", context_se
 app.command("render", epilog=render.EXAMPLES, rich_help_panel="Scenes")(render.render_command)
 app.command("info", epilog=info.EXAMPLES, rich_help_panel="Inspect")(info.info_command)
 app.command("convert", epilog=convert.EXAMPLES, rich_help_panel="Models")(convert.convert_command)
+app.command("view", epilog=view.EXAMPLES, rich_help_panel="Scenes")(view.view_command)
 
 
 _GLOBAL_FLAGS = ("--debug", "--quiet", "-q")

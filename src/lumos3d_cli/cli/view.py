@@ -1,0 +1,38 @@
+"""`lumos3d view`: turn a restored scene around in the browser (viser), until Ctrl-C."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from lumos3d_cli.cli.console import say
+from lumos3d_cli.viewer.server import DEFAULT_HOST, DEFAULT_PORT, RunningViewer, serve_scene
+from lumos3d_cli.viewer.splats import DEFAULT_MAX_SPLATS
+
+EXAMPLES = """
+  lumos3d view out/                       [dim]# a restore output folder: splats, cameras, photos, summary[/dim]
+  lumos3d view scene.ply --port 8090
+  lumos3d view out/ --host 0.0.0.0        [dim]# reachable from other machines on the network[/dim]
+"""
+
+# What a shell reports for a program ended by Ctrl-C (128 + SIGINT).
+EXIT_INTERRUPTED = 130
+
+
+def announce(viewer: RunningViewer) -> None:
+    """The URL on stdout (the command's result); the rest on stderr."""
+    typer.echo(viewer.url)
+    shown = f"{viewer.total:,} Gaussians" if viewer.shown == viewer.total else f"{viewer.shown:,} of {viewer.total:,} Gaussians"
+    say(f"viewer at [bold]{viewer.url}[/bold] ({shown}); open it in a browser, Ctrl-C to stop")
+
+
+def view_command(
+    path: Path = typer.Argument(..., help="A restore output folder or a Gaussian scene (.ply)."),
+    port: int = typer.Option(DEFAULT_PORT, "--port", help="Port to serve on (0: any free port)."),
+    host: str = typer.Option(DEFAULT_HOST, "--host", help="Address to listen on; 0.0.0.0 for every network interface."),
+    max_splats: int = typer.Option(DEFAULT_MAX_SPLATS, "--max-splats", help="Send at most this many Gaussians to the browser."),
+) -> None:
+    """Open a restored scene in an interactive 3D viewer in the browser (Ctrl-C stops it)."""
+    serve_scene(path, host, port, max_splats, on_ready=announce)
+    raise typer.Exit(EXIT_INTERRUPTED)

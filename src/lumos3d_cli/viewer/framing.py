@@ -1,0 +1,64 @@
+"""The viewer's coordinate frame: the scene centred and scaled to a fixed size, and its up.
+
+Scenes come in arbitrary units (a first-camera frame at unit depth, COLMAP units, metres). The
+browser stores splat covariances as float16, whose normal range starts at 6e-5: a splat of
+standard deviation 2 mm in a 1-unit scene (4e-6) would lose its shape. Scaling every scene to
+the same radius keeps covariances in range and the browser's near/far planes sensible."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.gaussians import Gaussians
+from lumos3d_cli.rotations import matrix_to_quaternion
+
+VIEWER_RADIUS = 10.0  # viewer units covering 90 % of the Gaussians' distance from the centre
+_RADIUS_QUANTILE = 0.9  # far stragglers (sky, floaters) must not shrink the scene to a dot
+_QUANTILE_SAMPLE = 200_000  # torch.quantile's input limit is 16M; a sample is plenty for a radius
+
+
+@dataclass(frozen=True)
+class ViewerFrame:
+    """x_viewer = (x_world - centre) * scale; up [3] is the world's up in viewer axes (unit)."""
+
+    centre: torch.Tensor  # [3] float64
+    scale: float
+    up: np.ndarray  # [3] float64
+
+    def points(self, xyz: torch.Tensor | np.ndarray) -> np.ndarray:
+        """World points [P, 3] -> viewer points [P, 3] float32."""
+        xyz = torch.as_tensor(np.asarray(xyz), dtype=torch.float64)
+        return ((xyz - self.centre) * self.scale).float().numpy()
+
+    def camera_poses(self, cameras: Cameras) -> tuple[np.ndarray, np.ndarray]:
+        """Viser poses of OpenCV cameras: wxyz [V, 4] (camera->world rotation), positions [V, 3]."""
+        camera_to_world = cameras.camera_to_world().double()
+        wxyz = matrix_to_quaternion(camera_to_world[:, :3, :3]).numpy()
+        return wxyz, self.points(camera_to_world[:, :3, 3])
+
+
+def camera_up(cameras: Cameras) -> np.ndarray:
+    """[3] the mean of the cameras' up directions (-y of OpenCV axes) in world coordinates."""
+    # Row 1 of world->camera R is the camera's y axis in world coordinates.
+    up = -cameras.extrinsics[:, 1, :3].double().mean(dim=0)
+    norm = float(up.norm())
+    return (up / norm).numpy() if norm > 1e-6 else np.array([0.0, -1.0, 0.0])
+
+
+def frame_scene(gaussians: Gaussians, cameras: Cameras | None) -> ViewerFrame:
+    """Centre on the Gaussians' median, scale their 90th-percentile radius to VIEWER_RADIUS; up
+    from the cameras, or -y (the first camera's up, where the world frame is that camera's)."""
+    up = camera_up(cameras) if cameras is not None and len(cameras) else np.array([0.0, -1.0, 0.0])
+    if len(gaussians) == 0:
+        centre = cameras.centers().double().mean(dim=0) if cameras is not None and len(cameras) else torch.zeros(3, dtype=torch.float64)
+        return ViewerFrame(centre, 1.0, up)
+    means = gaussians.means.detach().to("cpu", torch.float64)
+    if len(means) > _QUANTILE_SAMPLE:
+        means = means[torch.linspace(0, len(means) - 1, _QUANTILE_SAMPLE).long()]
+    centre = means.median(dim=0).values
+    radius = float(torch.quantile((means - centre).norm(dim=-1), _RADIUS_QUANTILE))
+    return ViewerFrame(centre, VIEWER_RADIUS / radius if radius > 0 else 1.0, up)

@@ -1,0 +1,74 @@
+"""Gaussians -> the arrays viser's splat renderer takes, subsampled to what a browser handles."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from lumos3d_cli.io.gaussians import Gaussians, sh_dc_to_rgb
+from lumos3d_cli.rotations import quaternion_to_matrix
+
+# The browser holds 32 bytes per splat on the GPU and sorts all of them by depth on the CPU
+# (a WebAssembly worker) whenever the view turns: a million splats is 32 MB of scene data and
+# keeps the sort well under a second on a laptop, about the size of a 3DGS capture.
+DEFAULT_MAX_SPLATS = 1_000_000
+
+
+@dataclass
+class SplatArrays:
+    """What `SceneApi.add_gaussian_splats` takes, in viewer coordinates.
+
+    centers [N, 3] float32; covariances [N, 3, 3] float32 (viser stores the upper triangle as
+    float16); rgbs [N, 3] float32 in [0, 1]; opacities [N, 1] float32 in [0, 1];
+    total: Gaussians in the scene before subsampling.
+    """
+
+    centers: np.ndarray
+    covariances: np.ndarray
+    rgbs: np.ndarray
+    opacities: np.ndarray
+    total: int
+
+    def __len__(self) -> int:
+        return self.centers.shape[0]
+
+
+def splat_importance(gaussians: Gaussians) -> torch.Tensor:
+    """[N] how much each Gaussian can cover on screen: opacity x the area of its two largest axes.
+
+    Keeping the largest values first drops faint and tiny splats, which change the picture the
+    least (the significance score of LightGaussian-style pruning, without rendering)."""
+    largest_two = gaussians.scales.sort(dim=-1).values[:, 1:]
+    return gaussians.opacities * largest_two.prod(dim=-1)
+
+
+def select_splats(gaussians: Gaussians, max_splats: int) -> Gaussians:
+    """At most `max_splats` Gaussians, the most important ones (all of them when they fit)."""
+    if max_splats < 1:
+        raise ValueError(f"max_splats {max_splats}: keep at least one splat")
+    if len(gaussians) <= max_splats:
+        return gaussians
+    return gaussians.select(torch.topk(splat_importance(gaussians), max_splats).indices)
+
+
+def covariances(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
+    """quats [N, 4] wxyz, scales [N, 3] (standard deviations) -> [N, 3, 3] R diag(s^2) R^T."""
+    rotations = quaternion_to_matrix(quats)
+    return rotations @ torch.diag_embed(scales.square()) @ rotations.transpose(-1, -2)
+
+
+def splat_arrays(gaussians: Gaussians, centre: torch.Tensor, scale: float, max_splats: int = DEFAULT_MAX_SPLATS) -> SplatArrays:
+    """Subsample (see `select_splats`) and move into the viewer frame x' = (x - centre) * scale.
+
+    viser draws one colour per splat, so view-dependent colour (SH degree > 0) is dropped and the
+    degree-0 colour 0.5 + C0 * f_dc is shown."""
+    shown = select_splats(gaussians, max_splats).map(lambda t: t.detach().to("cpu", torch.float64))
+    centers = (shown.means - centre.to(shown.means)) * scale
+    sigma = covariances(shown.quats, shown.scales * scale)
+    rgbs = sh_dc_to_rgb(shown.sh[:, 0, :]).clamp(0.0, 1.0)
+    return SplatArrays(
+        centers.float().numpy(), sigma.float().numpy(), rgbs.float().numpy(),
+        shown.opacities.clamp(0.0, 1.0)[:, None].float().numpy(), len(gaussians),
+    )
