@@ -54,8 +54,8 @@ class Registration:
     cameras: the registered views only, in input order, at the photos' resolution (world->camera,
     OpenCV axes, as every `Cameras`); registered: bool [V]; points: the model's sparse points
     (observations index the V photos); reprojection_error: mean over observations, in pixels of
-    the photos (nan when nothing registered); model_sizes: registered views per model found,
-    largest first; matching: "exhaustive" or "sequential"; sfm_size: (width, height) SfM ran at.
+    the photos (nan when nothing registered); model_sizes: views of the largest model, then the
+    views each disconnected further model adds (empty when none was found); matching: "exhaustive" or "sequential"; sfm_size: (width, height) SfM ran at.
     """
 
     cameras: Cameras
@@ -177,6 +177,22 @@ def _read_model(
     return cameras, registered, points, model.compute_mean_reprojection_error() * mean_scale
 
 
+def _registered_names(model: pycolmap.Reconstruction) -> set[str]:
+    return {image.name for image in model.images.values() if image.has_pose}
+
+
+def _model_sizes(models: list[pycolmap.Reconstruction]) -> list[int]:
+    """Registered views of the largest model, then of each further model the views it adds
+    (COLMAP's further models may re-register views of the first: those do not split the scene);
+    models that add fewer than 2 views are left out."""
+    models = sorted(models, key=lambda model: model.num_reg_images(), reverse=True)
+    if not models or models[0].num_reg_images() == 0:
+        return []
+    largest = _registered_names(models[0])
+    others = [len(_registered_names(model) - largest) for model in models[1:]]
+    return [len(largest)] + sorted((count for count in others if count >= 2), reverse=True)
+
+
 def register_photos(
     images: torch.Tensor,
     names: Sequence[str],
@@ -233,8 +249,7 @@ def register_photos(
             (Path(work) / "models").mkdir()
             models = pycolmap.incremental_mapping(database, folder, Path(work) / "models", mapping)
             stage_seconds["mapping"] = time.perf_counter() - started - stage_seconds["features"] - stage_seconds["matching"]
-            sizes = sorted((model.num_reg_images() for model in models.values()), reverse=True)
-            sizes = [s for s in sizes if s > 0]
+            sizes = _model_sizes(list(models.values()))
             if sizes:
                 largest = max(models.values(), key=lambda model: model.num_reg_images())
                 cameras, registered, points, error = _read_model(largest, views, names, (width, height), size)

@@ -1,0 +1,151 @@
+"""Structure-from-motion against independent ground truth: the Strecha scenes' benchmark cameras
+and LOM buu's dataset cameras. The fast tests use a few small photos; the full scenes are slow."""
+
+from pathlib import Path
+
+import pytest
+import torch
+import torch.nn.functional as F
+
+from lumos3d_cli.data.degradations import Degradation, apply_degradation, sample_parameters
+from lumos3d_cli.data.lom import lom_reference_extrinsics, read_lom_scene
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.eval.metrics import auto_gamma
+from lumos3d_cli.eval.pose_accuracy import pose_accuracy
+from lumos3d_cli.geometry.sfm import Registration, register_photos
+from lumos3d_cli.io.colmap import read_colmap_model
+from lumos3d_cli.io.images import load_images
+
+
+@pytest.fixture(scope="module")
+def buu_low(buu):
+    """buu's low-light photos brightened by the blind curve, their names and reference extrinsics."""
+    scene = read_lom_scene(buu, "low-light")
+    batch = load_images([scene.degraded[frame] for frame in scene.frames])
+    reference = lom_reference_extrinsics(scene)
+    return auto_gamma(batch.images), [p.name for p in batch.paths], torch.stack([reference[f] for f in scene.frames])
+
+
+def _strecha(shared_data: Path, name: str):
+    """Photos [V, 3, H, W] and ground-truth cameras in the photos' order."""
+    root = shared_data / "gt_cameras" / name
+    batch = load_images(root / "images")
+    truth = read_colmap_model(root / "sparse" / "0")
+    row = {n: i for i, n in enumerate(truth.names)}
+    return batch.images, [p.name for p in batch.paths], truth[[row[p.name] for p in batch.paths]]
+
+
+def _darkened_as_the_cli_does(images: torch.Tensor) -> torch.Tensor:
+    """`lumos3d degrade --mode low-light --noise --seed 0` (shared parameters, 8-bit PNGs)."""
+    degradation = Degradation("low-light", noise=True)
+    generator = torch.Generator().manual_seed(0)
+    parameters = sample_parameters(degradation, (), generator)
+    dark = torch.stack([apply_degradation(image, "low-light", parameters, generator) for image in images])
+    return (dark * 255).round() / 255
+
+
+def _registered_extrinsics(registration: Registration, reference: torch.Tensor):
+    rows = registration.registered_indices
+    return registration.cameras.extrinsics, reference[rows]
+
+
+def _assert_observations_reproject(registration: Registration, pixels_tolerance: float):
+    """The returned cameras, points and observations agree in the photos' pixels."""
+    row_of_view = {view: row for row, view in enumerate(registration.registered_indices)}
+    rows = torch.tensor([row_of_view[int(v)] for v in registration.points.view])
+    projected, depth = registration.cameras.project(registration.points.xyz)
+    assert (depth[rows, registration.points.point] > 0).all()
+    error = (projected[rows, registration.points.point] - registration.points.pixel).norm(dim=1)
+    assert float(error.mean()) < pixels_tolerance
+    assert registration.reprojection_error < pixels_tolerance
+
+
+def test_a_few_small_photos_register(buu_low):
+    images, names, reference = buu_low
+    views = [0, 1, 2, 3, 4, 5]
+    # One thread: COLMAP is deterministic then; with few photos its focal length can settle in a
+    # wrong minimum on some multi-threaded runs (spaced-out subsets of buu did, 25 views never).
+    registration = register_photos(images[views], [names[i] for i in views], long_side=256, threads=1)
+    assert registration.registered.all() and registration.looks_like_one_scene and not registration.failed
+    assert registration.cameras.sizes == [(500, 375)] * 6  # at the photos' resolution, not SfM's
+    assert registration.sfm_size == (256, 192)
+    assert registration.cameras.names == [names[i] for i in views]
+    accuracy = pose_accuracy(*_registered_extrinsics(registration, reference[views]))
+    assert accuracy.rotation_error_median < 2.0
+    assert float(registration.cameras.intrinsics[0, 0, 0]) == pytest.approx(735.4, rel=0.05)  # transforms' fl_x
+    _assert_observations_reproject(registration, 2.0)
+    assert len(registration.points) > 100 and registration.points.track_lengths().min() >= 2
+    assert registration.seconds > 0 and set(registration.stage_seconds) == {"features", "matching", "mapping"}
+
+
+def test_photos_of_two_scenes_are_flagged(buu_low, shared_data):
+    images, _, _ = buu_low
+    fountain, _, _ = _strecha(shared_data, "fountain-P11")
+    fountain = F.interpolate(fountain[:4], size=images.shape[-2:], mode="bilinear", antialias=True)
+    registration = register_photos(torch.cat([images[[0, 3, 6, 9]], fountain]), [f"{i}.png" for i in range(8)], long_side=320, threads=1)
+    assert not registration.looks_like_one_scene
+    assert registration.registered_count <= 4 and "do not look like one scene" in registration.describe()
+
+
+@pytest.mark.parametrize("photos", [
+    torch.full((4, 3, 120, 160), 0.5),  # blank
+    torch.rand(4, 3, 120, 160, generator=torch.Generator().manual_seed(0)),  # unrelated noise
+])
+def test_textureless_or_unrelated_photos_fail_without_an_exception(photos):
+    registration = register_photos(photos, [f"{i}.png" for i in range(4)])
+    assert registration.failed and registration.registered_count == 0
+    assert len(registration.cameras) == 0 and len(registration.points) == 0
+    assert "no model" in registration.describe()
+
+
+def test_two_photos_register_or_fail_cleanly(buu_low):
+    images, names, _ = buu_low
+    registration = register_photos(images[[0, 2]], names[:2], long_side=256)
+    assert registration.registered_count in (0, 2)
+    assert len(registration.cameras) == registration.registered_count
+
+
+def test_bad_input_is_an_input_error():
+    with pytest.raises(InputError, match="at least 2 photos"):
+        register_photos(torch.rand(1, 3, 32, 32), ["a.png"])
+    with pytest.raises(InputError, match="names"):
+        register_photos(torch.rand(3, 3, 32, 32), ["a.png"])
+    with pytest.raises(InputError):
+        register_photos(torch.rand(3, 32, 32), ["a.png"] * 3)
+    nan = torch.rand(2, 3, 32, 32)
+    nan[0, 0, 0, 0] = float("nan")
+    with pytest.raises(InputError):
+        register_photos(nan, ["a.png", "b.png"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("darkened", [False, True], ids=["as-given", "darkened-and-brightened"])
+def test_fountain_registers_every_view_within_a_degree(shared_data, darkened):
+    images, names, truth = _strecha(shared_data, "fountain-P11")
+    if darkened:
+        images = auto_gamma(_darkened_as_the_cli_does(images))
+    registration = register_photos(images, names)
+    assert registration.registered.all() and registration.looks_like_one_scene
+    accuracy = pose_accuracy(registration.cameras.extrinsics, truth.extrinsics)
+    assert accuracy.rotation_error_median <= 1.0
+    focal = registration.cameras.intrinsics[:, 0, 0]
+    assert torch.allclose(focal, truth.intrinsics[:, 0, 0], rtol=0.03)
+    _assert_observations_reproject(registration, 1.5)
+
+
+@pytest.mark.slow
+def test_buu_low_light_registers_all_views(buu_low):
+    images, names, reference = buu_low
+    registration = register_photos(images, names)
+    assert registration.registered.all() and registration.matching == "exhaustive"
+    accuracy = pose_accuracy(registration.cameras.extrinsics, reference)
+    assert accuracy.auc_30 >= 0.85 and accuracy.rotation_error_median < 1.0
+    _assert_observations_reproject(registration, 1.5)
+
+
+@pytest.mark.slow
+def test_sequential_matching_registers_an_ordered_capture(shared_data):
+    images, names, truth = _strecha(shared_data, "castle-P30")
+    registration = register_photos(images, names, exhaustive_limit=10)
+    assert registration.matching == "sequential" and registration.registered.all()
+    assert pose_accuracy(registration.cameras.extrinsics, truth.extrinsics).rotation_error_median <= 1.0
