@@ -8,6 +8,7 @@ import torch
 from lumos3d_cli.data.degradations import (
     Degradation,
     DegradationParameters,
+    ModeRanges,
     apply_degradation,
     degrade,
     sample_parameters,
@@ -45,28 +46,56 @@ def test_over_exposure_is_the_documented_formula():
 @pytest.mark.parametrize("mode", ["low-light", "over-exposure"])
 def test_deterministic_with_a_seed_and_within_ranges(mode):
     images = _images(4, 3, 3, 16, 16)
-    degradation = Degradation.for_mode(mode, noise=True)
+    degradation = Degradation(mode, noise=True, consistent_views=False)
     a, pa = degrade(images, degradation, torch.Generator().manual_seed(7))
     b, pb = degrade(images, degradation, torch.Generator().manual_seed(7))
     c, _ = degrade(images, degradation, torch.Generator().manual_seed(8))
     assert torch.equal(a, b) and torch.equal(pa.exposure, pb.exposure)
     assert not torch.equal(a, c)
     assert a.shape == images.shape and a.dtype == images.dtype
-    low, high = degradation.exposure_range
+    low, high = degradation.ranges(mode).exposure
     assert ((pa.exposure >= low) & (pa.exposure <= high)).all()
-    low, high = degradation.gamma_range
+    low, high = degradation.ranges(mode).gamma
     assert ((pa.gamma >= low) & (pa.gamma <= high)).all()
     assert pa.exposure.shape == (4, 3)
 
 
 def test_views_of_a_scene_can_share_parameters():
     images = _images(2, 5, 3, 8, 8)
-    out, parameters = degrade(images, Degradation.for_mode("low-light"), torch.Generator().manual_seed(0), consistent_views=True)
+    out, parameters = degrade(images, Degradation("low-light", consistent_views=True), torch.Generator().manual_seed(0))
     assert parameters.exposure.shape == (2, 1)
     # Same input view content -> same output within a scene.
     same = images[:, :1].expand(-1, 5, -1, -1, -1)
-    out, _ = degrade(same, Degradation.for_mode("low-light"), torch.Generator().manual_seed(0), consistent_views=True)
+    out, _ = degrade(same, Degradation("low-light", consistent_views=True), torch.Generator().manual_seed(0))
     assert torch.equal(out[0, 0], out[0, 4]) and not torch.equal(out[0, 0], out[1, 0])
+
+
+def test_mixed_draws_both_modes_each_with_its_own_ranges():
+    degradation = Degradation("mixed", low_light=ModeRanges(exposure=(0.02, 0.03)), over_exposure=ModeRanges(gamma=(2.5, 2.6)),
+                              consistent_views=False)
+    assert degradation.ranges("low-light") == ModeRanges(exposure=(0.02, 0.03), gamma=(1.3, 1.4))  # unset: documented
+    assert degradation.ranges("over-exposure") == ModeRanges(exposure=(5.0, 15.0), gamma=(2.5, 2.6))
+    images = _images(3, 3, 4, 4)
+    drawn = {"low-light": 0, "over-exposure": 0}
+    for seed in range(40):
+        out, parameters = degrade(images, degradation, torch.Generator().manual_seed(seed))
+        if ((parameters.exposure >= 0.02) & (parameters.exposure <= 0.03)).all():
+            drawn["low-light"] += 1
+            assert ((parameters.gamma >= 1.3) & (parameters.gamma <= 1.4)).all() and out.mean() < images.mean()
+        else:
+            drawn["over-exposure"] += 1
+            assert ((parameters.exposure >= 5.0) & (parameters.exposure <= 15.0)).all()
+            assert ((parameters.gamma >= 2.5) & (parameters.gamma <= 2.6)).all() and out.mean() > images.mean()
+    assert min(drawn.values()) >= 10
+
+
+def test_settings_are_checked():
+    with pytest.raises(ValueError, match="unknown degradation mode 'dusk'"):
+        Degradation("dusk")
+    with pytest.raises(ValueError, match="mixed takes its ranges from degrade.low_light"):
+        Degradation("mixed", exposure=(0.1, 0.2))
+    with pytest.raises(ValueError, match="unknown degradation mode 'mixed'"):
+        sample_parameters(Degradation("mixed"), (2,), torch.Generator())
 
 
 @pytest.mark.parametrize("mode", ["low-light", "over-exposure"])
@@ -74,7 +103,7 @@ def test_views_of_a_scene_can_share_parameters():
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64, torch.bfloat16])
 def test_black_and_saturated_frames_stay_finite(mode, fill, dtype):
     images = torch.full((2, 3, 8, 8), fill, dtype=dtype)
-    out, _ = degrade(images, Degradation.for_mode(mode, noise=True), torch.Generator().manual_seed(0))
+    out, _ = degrade(images, Degradation(mode, noise=True, consistent_views=False), torch.Generator().manual_seed(0))
     assert torch.isfinite(out).all() and out.min() >= 0 and out.max() <= 1
     if fill == 0.0 and mode == "low-light":
         assert out.float().mean() < 0.02  # only noise on black
@@ -84,7 +113,7 @@ def test_non_finite_input_is_refused():
     images = torch.zeros(1, 3, 4, 4)
     images[0, 0, 0, 0] = float("nan")
     with pytest.raises(NonFiniteError, match="images to degrade: 1 of 48"):
-        degrade(images, Degradation.for_mode("low-light"), torch.Generator())
+        degrade(images, Degradation("low-light", consistent_views=False), torch.Generator())
 
 
 def test_sensor_noise_variance_follows_the_model():
@@ -102,7 +131,7 @@ def test_sensor_noise_variance_follows_the_model():
 
 
 def test_sampled_noise_levels_follow_the_camera_model():
-    parameters = sample_parameters(Degradation.for_mode("low-light", noise=True), (20000,), torch.Generator().manual_seed(0))
+    parameters = sample_parameters(Degradation("low-light", noise=True), (20000,), torch.Generator().manual_seed(0))
     log_shot, log_read = parameters.shot.log(), parameters.read.log()
     assert log_shot.min() >= math.log(1e-4) and log_shot.max() <= math.log(1.2e-2)
     residual = log_read - (2.18 * log_shot + 1.2)
@@ -113,10 +142,10 @@ def test_over_exposure_statistics_resemble_lom(buu):
     """The synthetic over-exposure of buu's normal-light views should look like LOM's real ones."""
     high = _load_folder(buu / "high", "JPG")
     real = _load_folder(buu / "over_exp", "jpg")
-    degradation = Degradation.for_mode("over-exposure")
+    degradation = Degradation("over-exposure", consistent_views=False)
     means = []
     for seed in range(8):
-        synthetic, _ = degrade(high, degradation, torch.Generator().manual_seed(seed), consistent_views=False)
+        synthetic, _ = degrade(high, degradation, torch.Generator().manual_seed(seed))
         means.append(synthetic.mean().item())
     assert real.mean().item() == pytest.approx(0.914, abs=0.01)
     assert np.mean(means) == pytest.approx(real.mean().item(), abs=0.04)
@@ -132,10 +161,10 @@ def test_over_exposure_statistics_resemble_lom(buu):
 def test_low_light_synthesis_is_in_the_range_of_lom(buu):
     high = _load_folder(buu / "high", "JPG")
     real = _load_folder(buu / "low", "JPG")
-    degradation = Degradation.for_mode("low-light")
+    degradation = Degradation("low-light")
     darkest = apply_degradation(high, "low-light", DegradationParameters(torch.tensor(0.05), torch.tensor(1.4)), torch.Generator())
     brightest = apply_degradation(high, "low-light", DegradationParameters(torch.tensor(0.1), torch.tensor(1.3)), torch.Generator())
     assert darkest.mean() < brightest.mean() < real.mean() * 1.2
     assert real.mean().item() == pytest.approx(0.091, abs=0.005)
     assert 0.02 < darkest.mean().item() and brightest.mean().item() > 0.06
-    assert degradation.exposure_range == (0.05, 0.1) and degradation.gamma_range == (1.3, 1.4)
+    assert degradation.ranges("low-light") == ModeRanges(exposure=(0.05, 0.1), gamma=(1.3, 1.4))

@@ -13,6 +13,7 @@ from lumos3d_cli.io.checkpoints import BUNDLED_MODELS, bundled_weights_path, rea
 from lumos3d_cli.model.architectures import ARCHITECTURES, Architecture, PatchEmbedConfig
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import build_model
+from lumos3d_cli.typed_config import from_dict
 
 # VGGT's key structure (DINOv2 patch embed with registers, QK-norm blocks, camera and DPT heads)
 # at a size that builds and runs in a fraction of a second.
@@ -86,9 +87,9 @@ def test_format_version_1_names_the_architecture_preset_and_the_bundled_files_lo
     config = _config(bundled)
     assert config["format_version"] == 1 and "architecture" not in config
     architecture = read_checkpoint(bundled).architecture
-    assert architecture == Architecture.from_dict(config["preset"]) == ARCHITECTURES["tiny"]
+    assert architecture == from_dict(Architecture, config["preset"]) == ARCHITECTURES["tiny"]
     written = save_checkpoint(source, tmp_path / "new.safetensors")
-    assert Architecture.from_dict(_config(written)["preset"]) == REDUCED
+    assert from_dict(Architecture, _config(written)["preset"]) == REDUCED
 
 
 @pytest.mark.parametrize("suffix", [".pt", ".safetensors"])
@@ -202,6 +203,10 @@ def test_damaged_config_and_unknown_sh_layouts_are_refused(tmp_path, source):
         read_checkpoint(path)
     save_file({k: v.contiguous() for k, v in source.state_dict().items()}, str(path), metadata={"lumos3d": json.dumps({"format_version": 99})})
     with pytest.raises(InputError, match="format version 99"):
+        read_checkpoint(path)
+    save_file({k: v.contiguous() for k, v in source.state_dict().items()}, str(path),
+              metadata={"lumos3d": json.dumps({"format_version": 1, "preset": {"name": "x", "depth": "deep"}})})
+    with pytest.raises(InputError, match="config is damaged .*'preset.depth': expected an integer"):
         read_checkpoint(path)
     state = _anysplat_state(source)
     state["encoder.gaussian_param_head.scratch.output_conv2.2.weight"] = torch.zeros(50, 24, 1, 1)

@@ -116,21 +116,6 @@ def test_the_teacher_sees_the_configured_images(tiny_config, teacher_input):
     assert torch.equal(seen["teacher"], expected)
 
 
-def test_mixed_mode_draws_both_modes_with_their_own_ranges(tiny_config):
-    teacher = _trainer(tiny_config(name="teacher", optim__steps=1)).run()
-    config = tiny_config(stage="student", name="mixed", model=str(teacher.final_checkpoint),
-                         teacher=str(teacher.final_checkpoint),
-                         degrade__mode="mixed", degrade__low_light={"exposure": [0.02, 0.03]},
-                         degrade__over_exposure={"gamma": [2.5, 2.6]})
-    trainer = _trainer(config)
-    drawn = {d.mode: d for d in (trainer._degradation(trainer._generator(step)) for step in range(40))}
-    assert set(drawn) == {"low-light", "over-exposure"}
-    assert drawn["low-light"].exposure_range == (0.02, 0.03)
-    assert drawn["low-light"].gamma_range == (1.3, 1.4)  # unset: the mode's documented range
-    assert drawn["over-exposure"].exposure_range == (5.0, 15.0)
-    assert drawn["over-exposure"].gamma_range == (2.5, 2.6)
-
-
 def _torchrun() -> str:
     return str(Path(sys.executable).with_name("torchrun"))
 

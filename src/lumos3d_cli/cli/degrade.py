@@ -58,7 +58,7 @@ def degrade_command(
         raise InputError(f"--bit-depth {bit_depth}: use 8 or 16")
     paths = list_images(inputs)
     single_file = _check_output(paths, output)
-    degradation = Degradation.for_mode(mode, noise=noise)
+    degradation = Degradation(mode, noise=noise)
     generator = torch.Generator().manual_seed(seed)
     shared = None if per_image else sample_parameters(degradation, (), generator)
     started = time.perf_counter()

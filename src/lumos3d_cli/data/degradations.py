@@ -18,7 +18,7 @@ log(shot) ~ U(log 1e-4, log 1.2e-2) and log(read) = 2.18 log(shot) + 1.2 + N(0, 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import torch
@@ -26,7 +26,6 @@ import torch
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
 
-Mode = Literal["low-light", "over-exposure"]
 MODES: tuple[str, ...] = ("low-light", "over-exposure")
 
 
@@ -40,24 +39,67 @@ class SensorNoise:
     read_jitter: float = 0.26
 
 
+SENSOR_NOISE = SensorNoise()
+
+
+@dataclass(frozen=True)
+class ModeRanges:
+    """Exposure and gamma ranges of one mode (None: the mode's documented range)."""
+
+    exposure: tuple[float, float] | None = None
+    gamma: tuple[float, float] | None = None
+
+
+DOCUMENTED_RANGES = {
+    "low-light": ModeRanges(exposure=(0.05, 0.1), gamma=(1.3, 1.4)),
+    "over-exposure": ModeRanges(exposure=(5.0, 15.0), gamma=(1.5, 2.0)),
+}
+
+
 @dataclass(frozen=True)
 class Degradation:
-    """What to synthesise: the mode, its parameter ranges, optional sensor noise."""
+    """What to synthesise: the settings of `lumos3d degrade` and of the training config's
+    `degrade` section (built from YAML by `typed_config.from_dict`).
 
-    mode: Mode = "low-light"
-    exposure_range: tuple[float, float] = (0.05, 0.1)
-    gamma_range: tuple[float, float] = (1.3, 1.4)
-    noise: SensorNoise | None = None
+    `mixed` draws low-light or over-exposure with equal probability per call of `degrade`, with
+    the ranges of `low_light` and `over_exposure`; the single modes use `exposure` and `gamma`.
+    `consistent_views` shares one draw among the views of a scene (one camera setting);
+    `white_balance` is the per-channel linear gain range of `white_balance_shift`.
+    """
 
-    @staticmethod
-    def for_mode(mode: str, noise: bool = False) -> Degradation:
-        """The documented defaults of `mode`."""
-        sensor = SensorNoise() if noise else None
-        if mode == "low-light":
-            return Degradation("low-light", (0.05, 0.1), (1.3, 1.4), sensor)
-        if mode == "over-exposure":
-            return Degradation("over-exposure", (5.0, 15.0), (1.5, 2.0), sensor)
-        raise ValueError(f"unknown degradation mode {mode!r}; use one of {', '.join(MODES)}")
+    mode: Literal["low-light", "over-exposure", "mixed"] = "low-light"
+    exposure: tuple[float, float] | None = None  # None: the mode's documented range
+    gamma: tuple[float, float] | None = None
+    low_light: ModeRanges = field(default_factory=ModeRanges)
+    over_exposure: ModeRanges = field(default_factory=ModeRanges)
+    noise: bool = False
+    consistent_views: bool = True
+    white_balance: tuple[float, float] = (1.0, 1.0)
+
+    def __post_init__(self) -> None:
+        if self.mode not in (*MODES, "mixed"):
+            raise ValueError(f"unknown degradation mode {self.mode!r}; use one of {', '.join(MODES)} or mixed")
+        if self.mode == "mixed" and (self.exposure is not None or self.gamma is not None):
+            raise ValueError("degrade.mode=mixed takes its ranges from degrade.low_light and degrade.over_exposure; "
+                             "remove degrade.exposure and degrade.gamma")
+
+    def ranges(self, mode: str) -> ModeRanges:
+        """The exposure and gamma ranges drawn for the single mode `mode`, documented ranges
+        filling what is not configured."""
+        if mode not in MODES:
+            raise ValueError(f"unknown degradation mode {mode!r}; use one of {', '.join(MODES)}")
+        if self.mode == "mixed":
+            configured = self.low_light if mode == "low-light" else self.over_exposure
+        else:
+            configured = ModeRanges(self.exposure, self.gamma)
+        documented = DOCUMENTED_RANGES[mode]
+        return ModeRanges(configured.exposure or documented.exposure, configured.gamma or documented.gamma)
+
+    def pick_mode(self, generator: torch.Generator) -> str:
+        """The single mode of one draw: `mode`, or for `mixed` a fair coin from `generator`."""
+        if self.mode != "mixed":
+            return self.mode
+        return "low-light" if torch.rand((), generator=generator).item() < 0.5 else "over-exposure"
 
 
 @dataclass
@@ -80,14 +122,16 @@ def _uniform(shape, low: float, high: float, generator: torch.Generator) -> torc
 
 
 def sample_parameters(
-    degradation: Degradation, shape: tuple[int, ...], generator: torch.Generator
+    degradation: Degradation, shape: tuple[int, ...], generator: torch.Generator, mode: str | None = None
 ) -> DegradationParameters:
-    """Draw parameters of `shape` (one per image, or fewer dims to share them across images)."""
-    exposure = _uniform(shape, *degradation.exposure_range, generator)
-    gamma = _uniform(shape, *degradation.gamma_range, generator)
-    if degradation.noise is None:
+    """Draw parameters of `shape` (one per image, or fewer dims to share them across images) for
+    the single mode `mode` (default: the degradation's own, which must then not be mixed)."""
+    ranges = degradation.ranges(mode or degradation.mode)
+    exposure = _uniform(shape, *ranges.exposure, generator)
+    gamma = _uniform(shape, *ranges.gamma, generator)
+    if not degradation.noise:
         return DegradationParameters(exposure, gamma)
-    noise = degradation.noise
+    noise = SENSOR_NOISE
     log_shot = _uniform(shape, *(math.log(v) for v in noise.shot_range), generator)
     jitter = noise.read_jitter * torch.randn(shape, generator=generator, device=generator.device, dtype=torch.float64)
     log_read = noise.read_slope * log_shot + noise.read_intercept + jitter
@@ -122,23 +166,22 @@ def apply_degradation(
 
 
 def degrade(
-    images: torch.Tensor,
-    degradation: Degradation,
-    generator: torch.Generator,
-    consistent_views: bool = False,
+    images: torch.Tensor, degradation: Degradation, generator: torch.Generator
 ) -> tuple[torch.Tensor, DegradationParameters]:
     """Degrade sRGB images [..., 3, H, W] in [0, 1]; returns (images, parameters [...]).
 
-    Parameters are drawn per image, or per scene when `consistent_views` is set (then images are
-    [B, V, 3, H, W] and the V views of a scene share them, as one camera setting would). All
-    randomness comes from `generator`, so a seed fixes the result.
+    One mode is picked per call (`Degradation.pick_mode`). Parameters are drawn per image, or per
+    scene with `degradation.consistent_views` (then images are [B, V, 3, H, W] and the V views of
+    a scene share them, as one camera setting would). All randomness comes from `generator`, so a
+    seed fixes the result.
     """
     batch_shape = tuple(images.shape[:-3])
-    if consistent_views and images.dim() != 5:
+    if degradation.consistent_views and images.dim() != 5:
         raise ValueError(f"consistent_views needs [B, V, 3, H, W] images, got {tuple(images.shape)}")
-    draw_shape = batch_shape[:1] + (1,) if consistent_views else batch_shape
-    parameters = sample_parameters(degradation, draw_shape, generator)
-    return apply_degradation(images, degradation.mode, parameters, generator), parameters
+    mode = degradation.pick_mode(generator)
+    draw_shape = batch_shape[:1] + (1,) if degradation.consistent_views else batch_shape
+    parameters = sample_parameters(degradation, draw_shape, generator, mode)
+    return apply_degradation(images, mode, parameters, generator), parameters
 
 
 def white_balance_shift(images: torch.Tensor, gain_range: tuple[float, float], generator: torch.Generator) -> torch.Tensor:

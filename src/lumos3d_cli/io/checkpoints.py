@@ -33,6 +33,7 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import atomic_path
 from lumos3d_cli.io.state_dicts import listing, load_torch_state_dict
 from lumos3d_cli.model.architectures import Architecture, get_architecture
+from lumos3d_cli.typed_config import from_dict, to_dict
 
 if TYPE_CHECKING:
     from lumos3d_cli.model.lumos3d import Lumos3D
@@ -97,7 +98,7 @@ def save_checkpoint(model: Lumos3D, path: Path | str, provenance: dict | None = 
     if path.suffix != ".safetensors":
         raise InputError(f"{path}: checkpoints are written as .safetensors files")
     storage = storage_dtype(dtype)
-    config = {"format_version": FORMAT_VERSION, ARCHITECTURE_KEY: model.architecture.to_dict(), "provenance": provenance or {}}
+    config = {"format_version": FORMAT_VERSION, ARCHITECTURE_KEY: to_dict(model.architecture), "provenance": provenance or {}}
     tensors = {}
     for name, tensor in model.state_dict().items():
         tensor = tensor.detach().to("cpu", torch.float32 if tensor.is_floating_point() else tensor.dtype)
@@ -162,10 +163,14 @@ def _our_name(file_format: str, key: str) -> str | None:
 def _our_config(path: Path, metadata: dict[str, str]) -> tuple[Architecture, dict]:
     try:
         config = json.loads(metadata[METADATA_KEY])
-        if config.get("format_version") != FORMAT_VERSION:
-            raise InputError(f"{path}: checkpoint format version {config.get('format_version')} is not supported (expected {FORMAT_VERSION})")
-        return Architecture.from_dict(config[ARCHITECTURE_KEY]), config.get("provenance", {})
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as error:
+        version = config.get("format_version")
+    except (json.JSONDecodeError, AttributeError) as error:
+        raise InputError(f"{path}: the checkpoint's lumos3d config is damaged ({error})") from None
+    if version != FORMAT_VERSION:
+        raise InputError(f"{path}: checkpoint format version {version} is not supported (expected {FORMAT_VERSION})")
+    try:
+        return from_dict(Architecture, config[ARCHITECTURE_KEY], ARCHITECTURE_KEY), config.get("provenance", {})
+    except (KeyError, InputError) as error:
         raise InputError(f"{path}: the checkpoint's lumos3d config is damaged ({error})") from None
 
 

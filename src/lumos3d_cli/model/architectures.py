@@ -2,13 +2,12 @@
 
 An architecture fully determines the module tree (and so the checkpoint key names and shapes). The
 `vggt-1b` architecture has exactly the dimensions of VGGT-1B, so its official checkpoint loads into it;
-the smaller architectures keep the same key structure at reduced widths and depths.
+the smaller architectures keep the same key structure at reduced widths and depths. Checkpoints
+store an architecture as JSON through `typed_config` (`to_dict` / `from_dict`), like every config.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import json
 from dataclasses import dataclass
 
 from lumos3d_cli.errors import InputError
@@ -99,26 +98,6 @@ class Architecture:
     def gaussian_channels(self) -> int:
         """Raw Gaussian-head channels: opacity 1, scale 3, quaternion 4, SH 3*(d+1)^2, confidence 1."""
         return 1 + 3 + 4 + 3 * (self.sh_degree + 1) ** 2 + 1
-
-    def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
-
-    def to_json(self) -> str:
-        return json.dumps(self.to_dict(), sort_keys=True)
-
-    @staticmethod
-    def from_dict(values: dict) -> Architecture:
-        """Inverse of `to_dict`; ValueError on unknown or missing fields."""
-        values = dict(values)
-        patch_embed = PatchEmbedConfig(**values.pop("patch_embed"))
-        for name in ("intermediate_layers", "dpt_out_channels"):
-            if name in values:
-                values[name] = tuple(values[name])
-        known = {f.name for f in dataclasses.fields(Architecture)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"unknown architecture fields: {', '.join(unknown)}")
-        return Architecture(patch_embed=patch_embed, **values)
 
 
 ARCHITECTURES: dict[str, Architecture] = {

@@ -74,7 +74,7 @@ def latest_checkpoint(output: Path) -> Path | None:
 def load_training_checkpoint(folder: Path, model: Lumos3D) -> TrainingState:
     """Load the weights into `model` (same architecture) and return the rest of the state."""
     checkpoint = read_checkpoint(folder / MODEL_FILE)
-    if checkpoint.architecture.to_dict() != model.architecture.to_dict():
+    if checkpoint.architecture != model.architecture:
         raise InputError(f"{folder}: checkpoint architecture '{checkpoint.architecture.name}' differs from the configured model")
     model.load_state_dict(checkpoint.tensors)
     values = torch.load(folder / STATE_FILE, map_location="cpu", weights_only=True)

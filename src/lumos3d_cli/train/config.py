@@ -14,8 +14,9 @@ from typing import Literal
 
 import yaml
 
+from lumos3d_cli.data.degradations import Degradation
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.train.typed_config import apply_override, from_dict, to_dict
+from lumos3d_cli.typed_config import apply_override, from_dict, to_dict
 
 
 @dataclass
@@ -39,43 +40,6 @@ class DataConfig:
             raise ValueError(f"data.views={self.views} must be at least 1")
         if not 0 < self.crop_scale[0] <= self.crop_scale[1] <= 1:
             raise ValueError(f"data.crop_scale={self.crop_scale} must satisfy 0 < low <= high <= 1")
-
-
-@dataclass
-class ModeRanges:
-    """Exposure and gamma ranges of one degradation mode (None: the mode's documented range)."""
-
-    exposure: tuple[float, float] | None = None
-    gamma: tuple[float, float] | None = None
-
-
-@dataclass
-class DegradeConfig:
-    """On-the-fly degradation of the normal-light images (student stage).
-
-    `mixed` draws low-light or over-exposure with equal probability per step, with the ranges of
-    `low_light` and `over_exposure`; the single modes use `exposure` and `gamma`.
-    """
-
-    mode: Literal["low-light", "over-exposure", "mixed"] = "low-light"
-    exposure: tuple[float, float] | None = None  # None: the mode's documented range
-    gamma: tuple[float, float] | None = None
-    low_light: ModeRanges = field(default_factory=ModeRanges)
-    over_exposure: ModeRanges = field(default_factory=ModeRanges)
-    noise: bool = False
-    consistent_views: bool = True
-    white_balance: tuple[float, float] = (1.0, 1.0)  # per-channel linear gain range (colour temperature)
-
-    def __post_init__(self) -> None:
-        if self.mode == "mixed" and (self.exposure is not None or self.gamma is not None):
-            raise ValueError("degrade.mode=mixed takes its ranges from degrade.low_light and degrade.over_exposure; "
-                             "remove degrade.exposure and degrade.gamma")
-
-    def ranges(self, mode: str) -> ModeRanges:
-        """The configured ranges of a single mode drawn in this config."""
-        if self.mode != "mixed":
-            return ModeRanges(self.exposure, self.gamma)
-        return self.low_light if mode == "low-light" else self.over_exposure
 
 
 @dataclass
@@ -123,7 +87,7 @@ class TrainConfig:
     # distillation) or the student's own degraded input (the paper's ablation)
     teacher_input: Literal["normal-light", "degraded"] = "normal-light"
     data: DataConfig = field(default_factory=DataConfig)
-    degrade: DegradeConfig = field(default_factory=DegradeConfig)
+    degrade: Degradation = field(default_factory=Degradation)  # data.degradations, student stage
     loss: LossConfig = field(default_factory=LossConfig)
     optim: OptimConfig = field(default_factory=OptimConfig)
     batch_size: int = 1  # scenes per step per process

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 from torch.nn.parallel import DistributedDataParallel
 
-from lumos3d_cli.data.degradations import Degradation, degrade, white_balance_shift
+from lumos3d_cli.data.degradations import degrade, white_balance_shift
 from lumos3d_cli.data.multiview_dataset import MultiViewDataset
 from lumos3d_cli.data.scene_records import scan_dl3dv, scan_scene_folders
 from lumos3d_cli.errors import InputError, NonFiniteError, RunError
@@ -182,22 +182,13 @@ class Trainer:
         seed = int(np.random.SeedSequence([self.config.seed, step, self.context.rank]).generate_state(1)[0])
         return torch.Generator().manual_seed(seed)
 
-    def _degradation(self, generator: torch.Generator) -> Degradation:
-        settings = self.config.degrade
-        mode = settings.mode
-        if mode == "mixed":
-            mode = "low-light" if torch.rand((), generator=generator).item() < 0.5 else "over-exposure"
-        base = Degradation.for_mode(mode, noise=settings.noise)
-        ranges = settings.ranges(mode)
-        return Degradation(mode, ranges.exposure or base.exposure_range, ranges.gamma or base.gamma_range, base.noise)
-
     def inputs_and_targets(self, batch: dict[str, torch.Tensor], step: int) -> tuple[torch.Tensor, torch.Tensor]:
         """(network input, normal-light targets), both [B, V, 3, H, W]."""
         generator = self._generator(step)
         targets = white_balance_shift(batch["images"].cpu(), self.config.degrade.white_balance, generator)
         if self.config.stage == "teacher":
             return targets.to(self.device), targets.to(self.device)
-        degraded, _ = degrade(targets, self._degradation(generator), generator, self.config.degrade.consistent_views)
+        degraded, _ = degrade(targets, self.config.degrade, generator)
         return degraded.to(self.device), targets.to(self.device)
 
     # -- one step -------------------------------------------------------------------------------

@@ -1,5 +1,7 @@
-"""Build typed dataclasses from plain dicts (parsed YAML), strictly: unknown keys and values of
-the wrong type are errors that name the key. The one config mechanism of the project."""
+"""Build typed dataclasses from plain dicts (parsed YAML or JSON), strictly: unknown keys and
+values of the wrong type are errors that name the key. The one config mechanism of the project:
+the training config, the degradation settings and the model architecture (as stored in
+checkpoints) are all built with `from_dict` and written with `to_dict`."""
 
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ import pytest
 import yaml
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.train.typed_config import apply_override, from_dict, to_dict
+from lumos3d_cli.typed_config import apply_override, from_dict, to_dict
 
 
 @dataclass
