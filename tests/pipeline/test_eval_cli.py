@@ -8,7 +8,7 @@ from assertions import expect_input_error
 
 def test_eval_on_buu_writes_the_report(run_cli, buu, tmp_path, random_checkpoint):
     result = run_cli("eval", buu.parent, "--scenes", "buu", "--checkpoint", random_checkpoint, "--out", tmp_path / "report",
-                     "--max-views", 5)
+                     "--max-views", 5, "--geometry", "network")
     assert result.code == 0, result.err
     assert "gamma" in result.out and "18.65" in result.out and "mean" in result.out
     report = json.loads((tmp_path / "report" / "metrics.json").read_text())
@@ -22,12 +22,12 @@ def test_eval_on_buu_writes_the_report(run_cli, buu, tmp_path, random_checkpoint
     assert sheet is not None and sheet.shape[0] > 3 * 200
     cameras = report["cameras"]["buu"]
     assert cameras["pairs"] == 10 and 0 <= cameras["auc_30"] <= 1 and 0 <= cameras["rotation_error_median"] <= 180
-    assert "buu cameras (5 views, 10 pairs)" in result.out
+    assert "buu cameras (network, 5 views, 10 pairs)" in result.out
 
 
 def test_holdout_over_exposure(run_cli, buu, tmp_path, random_checkpoint):
     result = run_cli("eval", buu, "--mode", "over-exposure", "--protocol", "holdout", "--checkpoint", random_checkpoint,
-                     "--out", tmp_path / "report", "--max-views", 5, "--json")
+                     "--out", tmp_path / "report", "--max-views", 5, "--geometry", "network", "--json")
     assert result.code == 0, result.err
     report = json.loads(result.out)
     assert report["protocol"] == "holdout" and report["mode"] == "over-exposure"
@@ -41,7 +41,8 @@ def test_eval_bad_inputs(run_cli, lom_copy, tmp_path, random_checkpoint):
     expect_input_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out),
                   "test frame '13' has no normal-light photo in high/")
     cv2.imwrite(str(lom_copy / "high" / "13.JPG"), np.zeros((100, 120, 3), np.uint8))
-    expect_input_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out, "--max-views", 4),
+    expect_input_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out, "--max-views", 4,
+                                 "--geometry", "network"),
                   "images have different sizes")
     expect_input_error(run_cli("eval", lom_copy.parent, "--scenes", "bike", "--checkpoint", random_checkpoint, "--out", out),
                   "no LOM scene(s) bike")
@@ -54,6 +55,6 @@ def test_eval_bad_inputs(run_cli, lom_copy, tmp_path, random_checkpoint):
 def test_cameras_are_not_scored_without_reference_poses(run_cli, lom_copy, tmp_path, random_checkpoint):
     (lom_copy / "transforms_train.json").unlink()  # the test frames keep theirs, the other views lose them
     result = run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", tmp_path / "report",
-                     "--max-views", 4, "--json")
+                     "--max-views", 4, "--geometry", "network", "--json")
     assert result.code == 0, result.err
     assert json.loads(result.out)["cameras"] == {}

@@ -11,8 +11,9 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.camera_files import read_cameras
 from lumos3d_cli.io.colmap import read_colmap_model
 from lumos3d_cli.io.images import read_image
-from lumos3d_cli.pipeline import restore as restore_module
-from lumos3d_cli.pipeline.restore import even_subset, resolve_checkpoint
+from lumos3d_cli.pipeline import model_loading
+from lumos3d_cli.pipeline.model_loading import resolve_checkpoint
+from lumos3d_cli.pipeline.network_pass import even_subset
 from assertions import expect_input_error
 
 
@@ -27,14 +28,15 @@ def _copy(buu, tmp_path, names, folder="low"):
 def test_restore_writes_every_output(run_cli, buu, tmp_path, random_checkpoint):
     photos = _copy(buu, tmp_path, ["1.JPG", "2.JPG", "3.JPG"])
     out = tmp_path / "out" / "scene.ply"
-    result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--reference", buu / "high", "--json")
+    result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--reference", buu / "high",
+                     "--geometry", "network", "--json")
     assert result.code == 0, result.err
     summary = json.loads(result.out)
     ply = PlyData.read(str(out))
     vertex = ply["vertex"]
     assert vertex.count == summary["gaussians"]["kept"] > 0
     assert all(np.isfinite(vertex[p.name]).all() for p in vertex.properties)
-    assert summary["gaussians"]["pixel"] == 3 * 224 * 168 and summary["views_used"] == 3
+    assert summary["gaussians"]["pixel"] == 3 * 224 * 168 and len(summary["network_views"]) == 3
     cameras = read_cameras(out.parent / "cameras.json")
     colmap = read_colmap_model(out.parent / "colmap")
     assert cameras.sizes == [(500, 375)] * 3 and cameras.names == ["1.JPG", "2.JPG", "3.JPG"]
@@ -46,29 +48,30 @@ def test_restore_writes_every_output(run_cli, buu, tmp_path, random_checkpoint):
     glb = trimesh.load(str(out.parent / "preview.glb"))
     assert any(isinstance(g, trimesh.PointCloud) for g in glb.geometry.values())
     assert summary["metrics"]["mean"]["psnr"] > 0 and summary["metrics"]["mean"]["lpips"] is None
-    assert "no --lpips-weights" in summary["metrics"]["lpips_note"]
+    assert "no LPIPS trunk weights" in summary["metrics"]["lpips_note"]
     assert len(summary["checkpoint"]["sha256"]) == 64 and set(summary["seconds"]) >= {"load", "network", "render", "write"}
+    assert summary["geometry"]["source"] == "network" and summary["input_paths"] == [str(photos / n) for n in ("1.JPG", "2.JPG", "3.JPG")]
 
 
 def test_one_view_and_high_bit_depth_outputs(run_cli, buu, tmp_path, random_checkpoint):
     photos = _copy(buu, tmp_path, ["5.JPG"])
     for output_format, suffix in (("png16", ".png"), ("exr", ".exr")):
         out = tmp_path / output_format / "scene.ply"
-        result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--output-format", output_format, "--quiet")
+        result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--output-format", output_format,
+                         "--quiet")
         assert result.code == 0, result.err
         written = read_image(out.parent / "restored" / f"5{suffix}")
         assert written.pixels.shape == (375, 500, 3) and written.pixels.dtype == np.float32
         assert (written.bit_depth, written.encoding) == ((16, "srgb") if output_format == "png16" else (16, "linear"))
 
 
-def test_many_views_are_subsampled_evenly(run_cli, buu, tmp_path, random_checkpoint):
+def test_network_geometry_restores_only_the_views_the_network_saw(run_cli, buu, tmp_path, random_checkpoint):
     result = run_cli("restore", buu / "low", "-o", tmp_path / "o" / "scene.ply", "--checkpoint", random_checkpoint,
-                     "--preset", "fast", "--max-views", 3, "--json")
+                     "--preset", "fast", "--max-views", 3, "--geometry", "network", "--json")
     assert result.code == 0, result.err
-    assert json.loads(result.out)["views"] == ["1.JPG", "13.JPG", "25.JPG"]
-    assert "the network sees 3 of them" in result.err
-    assert 5 in even_subset(10, 4, required=[5]) and len(even_subset(10, 4, required=[5])) == 4
-    assert len(even_subset(10, 4, required=[1, 2])) == 4
+    summary = json.loads(result.out)
+    assert summary["views"] == summary["network_views"] == ["1.JPG", "13.JPG", "25.JPG"]
+    assert "22 view(s) have no camera and are not restored" in result.err
 
 
 def test_restore_bad_inputs_leave_nothing(run_cli, buu, tmp_path, random_checkpoint):
@@ -84,16 +87,29 @@ def test_restore_bad_inputs_leave_nothing(run_cli, buu, tmp_path, random_checkpo
     expect_input_error(run_cli("restore", photos, "-o", tmp_path / "o.obj", "--checkpoint", random_checkpoint), "must end in .ply")
     expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", tmp_path / "none.safetensors"), "none.safetensors: no such")
     expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--preset", "ultra"), "--preset 'ultra'")
+    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "colmap"),
+                       "--geometry 'colmap': use one of auto, network, sfm")
+    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--device", "tpu"),
+                       "--device 'tpu': use cpu or cuda")
     small = tmp_path / "small"
     small.mkdir()
     for name in ("1", "2"):
         cv2.imwrite(str(small / f"{name}.png"), np.zeros((10, 10, 3), np.uint8))
-    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--reference", small),
+    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--reference", small,
+                               "--geometry", "network"),
                   "images are 10x10, the inputs 500x375")
     assert not (tmp_path / "out").exists()
 
 
 def test_missing_bundled_model_is_named(monkeypatch, tmp_path):
-    monkeypatch.setattr(restore_module, "bundled_weights_path", lambda name: tmp_path / f"{name}.safetensors")
-    with pytest.raises(InputError, match="no bundled over-exposure model .*pass --checkpoint"):
+    monkeypatch.setattr(model_loading, "bundled_weights_path", lambda name: tmp_path / f"{name}.safetensors")
+    with pytest.raises(InputError, match="mode over-exposure: no bundled model .*give a checkpoint"):
         resolve_checkpoint(None, "over-exposure")
+
+
+def test_even_subset_keeps_required_views():
+    assert 5 in even_subset(10, 4, required=[5]) and len(even_subset(10, 4, required=[5])) == 4
+    assert len(even_subset(10, 4, required=[1, 2])) == 4
+    assert even_subset(3, 8) == [0, 1, 2]
+    with pytest.raises(InputError, match="max_views 2: 3 views must go through the network"):
+        even_subset(10, 2, required=[1, 2, 3])

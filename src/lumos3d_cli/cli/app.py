@@ -61,6 +61,15 @@ app.command("view", epilog=view.EXAMPLES, rich_help_panel="Scenes")(view.view_co
 
 
 _GLOBAL_FLAGS = ("--debug", "--quiet", "-q")
+# Library parameters whose command-line name is not "--" + the parameter with dashes.
+_ARGUMENT_NAMES = {"photos": "PHOTOS", "root": "ROOT", "output": "-o"}
+
+
+def _for_command_line(error: InputError) -> str:
+    """The error's message naming the command-line option or argument of its library parameter."""
+    if error.parameter is None:
+        return str(error)
+    return error.with_option(_ARGUMENT_NAMES.get(error.parameter, "--" + error.parameter.replace("_", "-")))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -81,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as error:
         if debug:
             raise
-        stderr_console().print(f"[bold red]error:[/bold red] {error}", highlight=False)
+        stderr_console().print(f"[bold red]error:[/bold red] {_for_command_line(error)}", highlight=False)
         return 2
     except RunError as error:
         if debug:

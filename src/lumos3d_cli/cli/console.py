@@ -57,3 +57,18 @@ def say(message: str) -> None:
     """A human-readable line on stderr unless --quiet."""
     if not state.quiet:
         stderr_console().print(message)
+
+
+class ProgressBars:
+    """A job's progress (pipeline.progress.JobProgress) drawn as rich progress bars, one per stage."""
+
+    def __init__(self, progress: Progress):
+        self._progress = progress
+        self._tasks: dict[str, int] = {}
+
+    def start(self, stage: str, total: int) -> None:
+        self._tasks[stage] = self._progress.add_task(stage, total=total)
+
+    def advance(self, stage: str, steps: int = 1) -> None:
+        if stage in self._tasks:
+            self._progress.advance(self._tasks[stage], steps)

@@ -1,20 +1,20 @@
 """The evaluation protocol on LOM-layout scenes.
 
 context: all views of the scene (capped by max_views, always including the test frames) go
-through the network; the scene is rendered at the predicted cameras of the test frames, at the
-photos' resolution (500x375 for LOM), and compared with `high/`.
+through the network; the scene is rendered at the cameras of the test frames (from the geometry
+source: structure-from-motion over every frame, or the network), at the photos' resolution
+(500x375 for LOM), and compared with `high/`.
 holdout: the same forward pass, but the test frames' pixel Gaussians are left out of the fused
 scene, so the test views are novel views of a scene built from the others.
 The blind auto-gamma baseline is scored on the same frames. When the scene's transforms files
-give every view used a camera, the predicted cameras of those views are scored too
-(eval/pose_accuracy.py).
+give every view with a camera a reference, those cameras are scored too (eval/pose_accuracy.py).
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 
@@ -26,7 +26,7 @@ from lumos3d_cli.io.images import load_images
 from lumos3d_cli.model.lumos3d import Lumos3D
 from lumos3d_cli.pipeline.presets import RestorePreset
 from lumos3d_cli.pipeline.quality import QualityMeter
-from lumos3d_cli.pipeline.restore import even_subset, input_cameras, render_at, run_network, scene_gaussians
+from lumos3d_cli.pipeline.restore import build_scene, render_views
 
 logger = logging.getLogger(__name__)
 
@@ -51,6 +51,7 @@ class SceneEvaluation:
     baseline_images: torch.Tensor
     references: torch.Tensor
     pose: PoseAccuracy | None = None
+    geometry: dict = field(default_factory=dict)
 
 
 def _pose_accuracy(scene: LomScene, frames: list[str], predicted: torch.Tensor) -> PoseAccuracy | None:
@@ -74,14 +75,16 @@ def _load_same_size(paths, what: str) -> torch.Tensor:
 
 
 def evaluate_lom_scene(
-    scene: LomScene, model: Lumos3D, preset: RestorePreset, protocol: str, max_views: int, meter: QualityMeter
+    scene: LomScene, model: Lumos3D, preset: RestorePreset, protocol: str, max_views: int, meter: QualityMeter,
+    geometry: str = "auto",
 ) -> SceneEvaluation:
+    """One scene under `protocol` with cameras from `geometry` (see pipeline.restore.build_scene);
+    every frame of the scene takes part in the registration, `max_views` of them (always the test
+    frames) go through the network."""
     if protocol not in PROTOCOLS:
-        raise InputError(f"--protocol {protocol!r}: use one of {', '.join(PROTOCOLS)}")
+        raise InputError(f"{protocol!r}: use one of {', '.join(PROTOCOLS)}", parameter="protocol")
     started = time.perf_counter()
-    test_positions = [scene.frames.index(frame) for frame in scene.test]
-    selected = even_subset(len(scene.frames), max_views, required=test_positions)
-    frames = [scene.frames[i] for i in selected]
+    frames = list(scene.frames)
     images = _load_same_size([scene.degraded[f] for f in frames], f"{scene.root} ({scene.mode})")
     references = _load_same_size([scene.reference[f] for f in scene.test], f"{scene.root / 'high'}")
     if references.shape[-2:] != images.shape[-2:]:
@@ -89,20 +92,20 @@ def evaluate_lom_scene(
             f"{scene.root}: high/ photos are {references.shape[-1]}x{references.shape[-2]} but the degraded ones "
             f"{images.shape[-1]}x{images.shape[-2]}; they must match"
         )
-    is_test = torch.tensor([f in scene.test for f in frames])
-    fuse_views = ~is_test if protocol == "holdout" else None
-    if fuse_views is not None and not bool(fuse_views.any()):
+    test_positions = [frames.index(frame) for frame in scene.test]
+    fuse_views = [frame not in scene.test for frame in frames] if protocol == "holdout" else None
+    if fuse_views is not None and not any(fuse_views):
         raise InputError(f"{scene.root}: the holdout protocol needs views besides the test frames")
-    output, prepared = run_network(model, images, preset, fuse_views)
-    cameras = input_cameras(output, prepared, frames)
-    order = [frames.index(f) for f in scene.test]
-    gaussians = scene_gaussians(output)
-    renders = render_at(gaussians, cameras[order], preset.sh_degree)
-    inputs = images[order]
+    built = build_scene(images, frames, model, preset, geometry, None, max_views, scene.mode, None,
+                        required_views=test_positions, fuse_views=fuse_views)
+    cameras = built.geometry.cameras
+    renders = render_views(built.gaussians, cameras[[cameras.names.index(f) for f in scene.test]], preset.sh_degree)
+    inputs = images[test_positions]
     baseline_images = auto_gamma(inputs)
-    pose = _pose_accuracy(scene, frames, output.extrinsics[0].detach().double().cpu())
+    used = [frames[i] for i in built.selected] if built.geometry.source == "network" else list(cameras.names)
+    pose = _pose_accuracy(scene, used, cameras[[cameras.names.index(f) for f in used]].extrinsics.double())
     return SceneEvaluation(
-        scene.name, protocol, len(frames), list(scene.test), meter.measure(renders, references),
+        scene.name, protocol, len(built.selected), list(scene.test), meter.measure(renders, references),
         meter.measure(baseline_images, references), time.perf_counter() - started, inputs, renders, baseline_images,
-        references, pose,
+        references, pose, built.geometry.summary(),
     )

@@ -34,4 +34,4 @@ def get_restore_preset(name: str) -> RestorePreset:
     try:
         return RESTORE_PRESETS[name]
     except KeyError:
-        raise InputError(f"--preset {name!r}: use one of {', '.join(RESTORE_PRESETS)}") from None
+        raise InputError(f"{name!r}: use one of {', '.join(RESTORE_PRESETS)}", parameter="preset") from None

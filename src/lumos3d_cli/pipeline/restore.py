@@ -1,28 +1,35 @@
-"""Restore a scene from degraded photos in one forward pass: select views, prepare them for the
-network, predict cameras, depth and fused Gaussians, and render every input view back at the
-input's full resolution."""
+"""The restore job: degraded photos -> registered cameras, one forward pass of the network, fused
+Gaussians, and every input view rendered back at its own camera and the photos' resolution.
+
+`restore` runs the whole job from files (what `lumos3d restore` does); `restore_scene` runs it on
+loaded images and a loaded model; `pipeline.restore_outputs.write_restored_scene` writes it."""
 
 from __future__ import annotations
 
-import hashlib
 import logging
+import resource
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from collections.abc import Sequence
 
 import torch
 
+from lumos3d_cli.data.degradations import MODES
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.cameras import Cameras
-from lumos3d_cli.io.checkpoints import BUNDLED_MODELS, bundled_weights_path
+from lumos3d_cli.io.file_digest import file_sha256
 from lumos3d_cli.io.gaussians import Gaussians
-from lumos3d_cli.io.images import ImageBatch
-from lumos3d_cli.model.loading import load_model
+from lumos3d_cli.io.image_files import list_images
+from lumos3d_cli.io.images import ImageBatch, load_images
 from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D
-from lumos3d_cli.model.preprocess import prepare_images
-from lumos3d_cli.pipeline.presets import RestorePreset
+from lumos3d_cli.pipeline.model_loading import load_restoration_model, resolve_checkpoint
+from lumos3d_cli.pipeline.network_pass import even_subset, run_network
+from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, RestorePreset, get_restore_preset
+from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
+from lumos3d_cli.pipeline.quality import QualityMeter, load_references, mean_metrics
 from lumos3d_cli.pipeline.sampling_filter import apply_sampling_filter
+from lumos3d_cli.pipeline.scene_geometry import SceneGeometry, check_geometry_source, place_views, register_views
 from lumos3d_cli.render.render import render
 
 logger = logging.getLogger(__name__)
@@ -30,136 +37,193 @@ logger = logging.getLogger(__name__)
 
 @dataclass
 class RestoredScene:
-    """gaussians: the fused scene (world = first selected view's camera frame); cameras at the
-    input resolution; restored [V, 3, H, W] renders at the input cameras; inputs [V, 3, H, W];
-    selected: indices into the input batch; timings in seconds per stage."""
+    """One restored scene.
+
+    gaussians: the fused scene (world frame of the geometry source); cameras: one per restored
+    view at the photos' resolution; restored [V, 3, H, W] renders at those cameras; inputs
+    [V, 3, H, W] the photos; names of the views; selected: indices (into the inputs) of the views
+    the network saw; geometry: where the cameras came from and how well depth agrees;
+    metrics/references when reference photos were given; timings in seconds per stage.
+    """
 
     gaussians: Gaussians
     cameras: Cameras
     restored: torch.Tensor
     inputs: torch.Tensor
+    names: list[str]
+    input_paths: list[Path]
     selected: list[int]
     counts: GaussianCounts
     network_size: tuple[int, int]
+    geometry: SceneGeometry
+    preset: str
+    mode: str
+    device: str = "cpu"
+    checkpoint: dict = field(default_factory=dict)
+    metrics: dict | None = None
+    references: torch.Tensor | None = None
     timings: dict[str, float] = field(default_factory=dict)
 
-
-def resolve_checkpoint(checkpoint: Path | str | None, mode: str) -> Path:
-    """The given checkpoint, or the bundled model of `mode` (InputError naming what is missing)."""
-    if checkpoint is not None:
-        path = Path(checkpoint)
-        if not path.exists():
-            raise InputError(f"--checkpoint {path}: no such file or folder")
-        return path
-    path = bundled_weights_path(BUNDLED_MODELS[mode])
-    if not path.is_file():
-        raise InputError(f"no bundled {mode} model ({path.name} is missing from the package); pass --checkpoint PATH")
-    return path
-
-
-def file_sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    files = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
-    for item in files:
-        with open(item, "rb") as handle:
-            for block in iter(lambda: handle.read(1 << 20), b""):
-                digest.update(block)
-    return digest.hexdigest()
+    def summary(self, scene_path: Path | str | None = None) -> dict:
+        """The JSON summary of the run (summary.json)."""
+        return {
+            "scene": str(scene_path) if scene_path is not None else None,
+            "inputs": len(self.input_paths), "views": self.names, "input_paths": [str(p) for p in self.input_paths],
+            "network_views": [self.input_paths[i].name for i in self.selected],
+            "network_size": list(self.network_size), "preset": self.preset, "mode": self.mode, "device": self.device,
+            "checkpoint": self.checkpoint, "geometry": self.geometry.summary(),
+            "gaussians": {"pixel": self.counts.pixels, "voxels": self.counts.voxels,
+                          "pruned": self.counts.pruned, "kept": len(self.gaussians)},
+            "seconds": {name: round(value, 3) for name, value in self.timings.items()},
+            "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+            "metrics": self.metrics,
+        }
 
 
-def load_restoration_model(checkpoint: Path, device: str) -> Lumos3D:
-    if device == "cuda" and not torch.cuda.is_available():
-        raise InputError("--device cuda: CUDA is not available on this machine; use --device cpu")
-    return load_model(checkpoint, device=device)
-
-
-def even_subset(count: int, limit: int, required: list[int] = ()) -> list[int]:
-    """`limit` indices of range(count) spread evenly, always including `required`."""
-    if count <= limit:
-        return list(range(count))
-    required = sorted(set(required))
-    if len(required) > limit:
-        raise InputError(f"{len(required)} required views exceed the limit of {limit}; raise --max-views")
-    chosen = set(required)
-    for position in torch.linspace(0, count - 1, limit).round().long().tolist():
-        if len(chosen) >= limit:
-            break
-        chosen.add(position)
-    for index in range(count):  # rounding can leave gaps when many are required
-        if len(chosen) >= limit:
-            break
-        chosen.add(index)
-    return sorted(chosen)
-
-
-def run_network(
-    model: Lumos3D, images: torch.Tensor, preset: RestorePreset, fuse_views: torch.Tensor | None = None
-):
-    """images [V, 3, H, W] at input size -> (model output, PreparedImages)."""
-    size = preset.network_image_size(model.architecture.image_size, model.architecture.patch_size)
-    prepared = prepare_images(images, size, model.architecture.patch_size)
-    device = next(model.parameters()).device
-    with torch.no_grad():
-        output = model(prepared.images[None].to(device), voxel_size=model.architecture.voxel_size * preset.voxel_scale,
-                       fuse_views=fuse_views.to(device) if fuse_views is not None else None)
-    return output, prepared
-
-
-def scene_gaussians(output) -> Gaussians:
-    """The fused Gaussians of the (single) scene on the CPU, with the network's pixel grid baked
-    in (`apply_sampling_filter`) so that they render well at any resolution."""
-    cameras = output.cameras(0)
-    network_cameras = Cameras(cameras.extrinsics.cpu(), cameras.intrinsics.cpu(), cameras.sizes)
-    return apply_sampling_filter(output.gaussians[0].detach().to(device="cpu"), network_cameras)
-
-
-def input_cameras(output, prepared, names: list[str]) -> Cameras:
-    """The predicted cameras mapped back to the input images' pixels."""
-    intrinsics = prepared.intrinsics_to_original(output.intrinsics[0].detach().double().cpu())
-    return Cameras(output.extrinsics[0].detach().double().cpu(), intrinsics, [prepared.original_size] * len(names), names)
-
-
-def render_at(gaussians: Gaussians, cameras: Cameras, sh_degree: int | None, on_view: Callable[[], None] | None = None) -> torch.Tensor:
+def render_views(gaussians: Gaussians, cameras: Cameras, sh_degree: int | None,
+                 progress: JobProgress | None = None) -> torch.Tensor:
     """[V, 3, H, W] renders, one view at a time (bounded memory at full resolution)."""
     degree = gaussians.sh_degree if sh_degree is None else min(sh_degree, gaussians.sh_degree)
     views = []
     for index in range(len(cameras)):
         with torch.no_grad():
             views.append(render(gaussians, cameras[index], sh_degree=degree).images[0].cpu())
-        if on_view is not None:
-            on_view()
+        if progress is not None:
+            progress.advance("render views")
     return torch.stack(views)
 
 
-def restore_scene(
-    batch: ImageBatch, model: Lumos3D, preset: RestorePreset, max_views: int | None = None,
-    on_stage: Callable[[str], None] | None = None, on_view: Callable[[], None] | None = None,
-) -> RestoredScene:
-    """The whole job on one scene. `max_views` (default: the preset's) caps the views that go
-    through the network; they are chosen evenly and every input is still rendered."""
+def _limit_sh(gaussians: Gaussians, sh_degree: int | None) -> Gaussians:
+    if sh_degree is None or sh_degree >= gaussians.sh_degree:
+        return gaussians
+    return Gaussians(gaussians.means, gaussians.quats, gaussians.scales, gaussians.opacities,
+                     gaussians.sh[:, : (sh_degree + 1) ** 2].contiguous())
+
+
+@dataclass
+class BuiltScene:
+    """The scene before rendering: fused Gaussians, the geometry (cameras of every view that has
+    one), the views the network saw (indices into the photos), counts, the network image size
+    (width, height) and seconds per stage."""
+
+    gaussians: Gaussians
+    geometry: SceneGeometry
+    selected: list[int]
+    counts: GaussianCounts
+    network_size: tuple[int, int]
+    timings: dict[str, float]
+
+
+def build_scene(
+    images: torch.Tensor, names: list[str], model: Lumos3D, preset: RestorePreset, geometry: str = "auto",
+    poses: Path | str | None = None, max_views: int | None = None, mode: str = "low-light",
+    progress: JobProgress | None = None, required_views: Sequence[int] = (), fuse_views: Sequence[bool] | None = None,
+) -> BuiltScene:
+    """photos [V, 3, H, W] named `names` -> cameras and fused Gaussians.
+
+    geometry: "network" (the network's cameras and depth), "sfm" (structure-from-motion on the
+    brightened photos, the network's depth aligned to its points), "auto" (sfm when it registers
+    most views, else network with a warning); `poses` (transforms.json or COLMAP model) gives the
+    cameras instead. `max_views` (default: the preset's) caps the views that go through the
+    network, which always include `required_views` and the views only the network can place.
+    `fuse_views` [V] bool (evaluation's holdout) keeps only those views' Gaussians.
+    """
+    progress = progress or SilentProgress()
+    check_geometry_source(geometry)
     timings: dict[str, float] = {}
+    registration = register_views(images, names, geometry, poses, mode, progress)
+    timings.update(registration.seconds)
     limit = max_views or preset.max_views
-    selected = even_subset(len(batch.paths), limit)
-    if len(selected) < len(batch.paths):
-        logger.warning("%d views given; the network sees %d of them, chosen evenly (raise --max-views to use more)",
-                       len(batch.paths), len(selected))
+    selected = even_subset(len(names), limit, required=[*required_views, *registration.views_needing_network()])
+    if len(selected) < len(names):
+        logger.info("%d views given; the network sees %d of them, chosen evenly (raise max_views to use more)",
+                    len(names), len(selected))
+    progress.start("network", 1)
     started = time.perf_counter()
-    if on_stage:
-        on_stage("network")
-    output, prepared = run_network(model, batch.images[selected], preset)
+    network = run_network(model, images[selected], preset)
     timings["network"] = time.perf_counter() - started
-    gaussians = scene_gaussians(output)
-    if preset.sh_degree is not None and preset.sh_degree < gaussians.sh_degree:
-        gaussians = Gaussians(gaussians.means, gaussians.quats, gaussians.scales, gaussians.opacities,
-                              gaussians.sh[:, : (preset.sh_degree + 1) ** 2].contiguous())
-    names = [batch.paths[i].name for i in selected]
-    cameras = input_cameras(output, prepared, names)
-    if on_stage:
-        on_stage("render")
+    progress.advance("network")
     started = time.perf_counter()
-    restored = render_at(gaussians, cameras, preset.sh_degree, on_view)
-    timings["render"] = time.perf_counter() - started
+    scene_geometry = place_views(registration, network, selected, names)
+    keep = None if fuse_views is None else torch.tensor([bool(fuse_views[i]) for i in selected])
+    if keep is not None and not bool(keep.any()):
+        raise InputError("selects none of the network's views", parameter="fuse_views")
+    with torch.no_grad():
+        output = model.assemble(
+            network.prediction, scene_geometry.network_extrinsics[None], scene_geometry.network_intrinsics[None],
+            scene_geometry.depth[None], voxel_size=model.architecture.voxel_size * preset.voxel_scale, fuse_views=keep,
+        )
+    network_cameras = Cameras(scene_geometry.network_extrinsics.float(), scene_geometry.network_intrinsics.float(),
+                              [network.network_size] * len(selected))
+    gaussians = apply_sampling_filter(output.gaussians[0].detach().to(device="cpu"), network_cameras)
+    timings["fuse"] = time.perf_counter() - started
+    return BuiltScene(_limit_sh(gaussians, preset.sh_degree), scene_geometry, selected, output.counts[0],
+                      network.network_size, timings)
+
+
+def restore_scene(
+    batch: ImageBatch, model: Lumos3D, preset: RestorePreset, geometry: str = "auto", poses: Path | str | None = None,
+    max_views: int | None = None, mode: str = "low-light", progress: JobProgress | None = None,
+) -> RestoredScene:
+    """The job on loaded photos and a loaded model (`build_scene`), then every view that has a
+    camera rendered at it, at the photos' resolution."""
+    progress = progress or SilentProgress()
+    names = [path.name for path in batch.paths]
+    built = build_scene(batch.images, names, model, preset, geometry, poses, max_views, mode, progress)
+    cameras = built.geometry.cameras
+    missing = [name for name in names if name not in cameras.names]
+    if missing:
+        logger.warning("%d view(s) have no camera and are not restored (the network did not see them; raise "
+                       "max_views or use structure-from-motion): %s", len(missing), ", ".join(missing))
+    progress.start("render views", len(cameras))
+    started = time.perf_counter()
+    restored = render_views(built.gaussians, cameras, preset.sh_degree, progress)
+    timings = built.timings | {"render": time.perf_counter() - started}
+    rendered = [names.index(name) for name in cameras.names]
     return RestoredScene(
-        gaussians, cameras, restored, batch.images[selected], selected, output.counts[0],
-        prepared.network_size, timings,
+        built.gaussians, cameras, restored, batch.images[rendered], list(cameras.names), list(batch.paths),
+        built.selected, built.counts, built.network_size, built.geometry, preset.name, mode, timings=timings,
     )
+
+
+def restore(
+    photos: Path | str | Sequence[Path | str], mode: str = "low-light", checkpoint: Path | str | None = None,
+    preset: str = DEFAULT_RESTORE_PRESET, geometry: str = "auto", poses: Path | str | None = None,
+    max_views: int | None = None, device: str = "cpu", reference: Path | str | None = None,
+    lpips_weights: Path | str | None = None, progress: JobProgress | None = None,
+) -> RestoredScene:
+    """The whole restore job from files: photos (a folder or files: photos, camera RAW, EXR),
+    the bundled model of `mode` or `checkpoint`, and optionally reference photos of the same
+    views (same file stems) for PSNR/SSIM/LPIPS. Write the result with `write_restored_scene`."""
+    progress = progress or SilentProgress()
+    started = time.perf_counter()
+    if mode not in MODES:
+        raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
+    if max_views is not None and max_views < 1:
+        raise InputError(f"{max_views}: use at least 1", parameter="max_views")
+    settings = get_restore_preset(preset)
+    check_geometry_source(geometry)
+    weights = resolve_checkpoint(checkpoint, mode)
+    meter = QualityMeter.create(lpips_weights) if reference is not None else None
+    timings: dict[str, float] = {}
+    stage_started = time.perf_counter()
+    paths = list_images(photos)
+    progress.start("load images", len(paths))
+    batch = load_images(paths, progress=lambda _: progress.advance("load images"))
+    timings["load"] = time.perf_counter() - stage_started
+    stage_started = time.perf_counter()
+    model = load_restoration_model(weights, device)
+    timings["load_model"] = time.perf_counter() - stage_started
+    scene = restore_scene(batch, model, settings, geometry, poses, max_views, mode, progress)
+    scene.device = device
+    scene.checkpoint = {"name": weights.name, "sha256": file_sha256(weights)}
+    if reference is not None:
+        stage_started = time.perf_counter()
+        scene.references = load_references(reference, scene.names, batch.size)
+        per_view = meter.measure(scene.restored, scene.references)
+        scene.metrics = {"views": dict(zip(scene.names, per_view)), "mean": mean_metrics(per_view),
+                         "lpips_note": meter.lpips_note}
+        timings["metrics"] = time.perf_counter() - stage_started
+    scene.timings = timings | scene.timings
+    scene.timings["total"] = time.perf_counter() - started
+    return scene

@@ -1,0 +1,81 @@
+"""Write a restored scene to disk: the `.ply`, the cameras (transforms.json and a COLMAP model),
+the restored views, a contact sheet, a point preview and summary.json — all or nothing."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.eval.contact_sheet import contact_sheet
+from lumos3d_cli.io.atomic import atomic_directory
+from lumos3d_cli.io.colmap import write_colmap_model
+from lumos3d_cli.io.colour import srgb_to_linear
+from lumos3d_cli.io.image_write import write_exr, write_image
+from lumos3d_cli.io.ply import write_ply
+from lumos3d_cli.io.preview_glb import write_preview_glb
+from lumos3d_cli.io.transforms_json import write_transforms_json
+from lumos3d_cli.pipeline.restore import RestoredScene
+
+# output format -> (file suffix, bit depth; 0 for linear EXR)
+VIEW_FORMATS = {"png": (".png", 8), "png16": (".png", 16), "exr": (".exr", 0)}
+
+
+def check_view_format(output_format: str) -> None:
+    if output_format not in VIEW_FORMATS:
+        raise InputError(f"{output_format!r}: use one of {', '.join(VIEW_FORMATS)}", parameter="output_format")
+
+
+def write_view(path: Path, image: torch.Tensor, output_format: str) -> None:
+    """image [3, H, W] sRGB -> an 8/16-bit PNG, or a linear half-float EXR."""
+    pixels = image.permute(1, 2, 0).numpy()
+    if output_format == "exr":
+        write_exr(path, srgb_to_linear(np.clip(pixels, 0, 1)))
+    else:
+        write_image(path, pixels, bit_depth=VIEW_FORMATS[output_format][1])
+
+
+def scene_contact_sheet(scene: RestoredScene) -> np.ndarray:
+    """One row per input view: input | restored (with PSNR/SSIM when references were given) |
+    reference. RGB uint8."""
+    rows = []
+    per_view = scene.metrics["views"] if scene.metrics is not None else None
+    for index, name in enumerate(scene.names):
+        label = "restored"
+        if per_view is not None:
+            label = f"restored  PSNR {per_view[name]['psnr']:.2f}  SSIM {per_view[name]['ssim']:.3f}"
+        row = [(scene.inputs[index], f"input {name}"), (scene.restored[index], label)]
+        if scene.references is not None:
+            row.append((scene.references[index], "reference"))
+        rows.append(row)
+    return contact_sheet(rows)
+
+
+def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_format: str = "png") -> dict:
+    """Write every output of `scene` beside `scene_path` (a `.ply`) and return the summary
+    written to summary.json. The files appear together when all are written (io.atomic)."""
+    scene_path = Path(scene_path)
+    if scene_path.suffix.lower() != ".ply":
+        raise InputError(f"{scene_path}: the scene file must end in .ply", parameter="output")
+    check_view_format(output_format)
+    suffix = VIEW_FORMATS[output_format][0]
+    started = time.perf_counter()
+    with atomic_directory(scene_path.parent) as staging:
+        write_ply(staging / scene_path.name, scene.gaussians)
+        write_transforms_json(staging / "cameras.json", scene.cameras)
+        write_colmap_model(staging / "colmap", scene.cameras, scene.geometry.points)
+        (staging / "restored").mkdir()
+        for name, image in zip(scene.names, scene.restored):
+            write_view(staging / "restored" / f"{Path(name).stem}{suffix}", image, output_format)
+        write_image(staging / "contact_sheet.png", scene_contact_sheet(scene).astype(np.float32) / 255)
+        write_preview_glb(staging / "preview.glb", scene.gaussians, scene.cameras)
+        scene.timings["write"] = time.perf_counter() - started
+        if "total" in scene.timings:
+            scene.timings["total"] += scene.timings["write"]
+        summary = scene.summary(scene_path)
+        (staging / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary

@@ -1,0 +1,239 @@
+"""Where a restored scene's cameras and depth come from.
+
+Sources: "network" (the network's own cameras and depth: one forward pass, nothing else), "sfm"
+(structure-from-motion with pycolmap on the photos after a blind brightening curve; the network's
+depth aligned to its sparse points), "auto" (sfm when it registers most views, else network with
+a warning), and given poses (a transforms.json or COLMAP model: cameras known, structure-from-
+motion — when it works — only supplies the points the depth is aligned to).
+
+`register_views` runs before the network (so that views without a camera can be sent through the
+network), `place_views` after it.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import torch
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.eval.metrics import auto_gamma
+from lumos3d_cli.geometry.consistency import depth_consistency
+from lumos3d_cli.geometry.depth_alignment import MIN_POINTS, align_depth
+from lumos3d_cli.geometry.given_poses import read_given_poses
+from lumos3d_cli.geometry.sfm import Registration, register_photos
+from lumos3d_cli.geometry.similarity import fill_unregistered_views, fit_camera_similarity
+from lumos3d_cli.io.sparse_points import SparsePoints
+from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.pipeline.network_pass import NetworkPass
+from lumos3d_cli.pipeline.progress import JobProgress
+
+logger = logging.getLogger(__name__)
+
+GEOMETRY_SOURCES = ("auto", "network", "sfm")
+# "Most views": auto uses structure-from-motion when it registers more than this share.
+AUTO_MIN_REGISTERED_SHARE = 0.5
+BRIGHTENING = "auto-gamma (blind tone curve to a mean of 0.45)"
+
+
+def check_geometry_source(geometry: str) -> None:
+    if geometry not in GEOMETRY_SOURCES:
+        raise InputError(f"{geometry!r}: use one of {', '.join(GEOMETRY_SOURCES)}", parameter="geometry")
+
+
+@dataclass
+class ViewRegistration:
+    """Cameras known before the network runs: `source` ("sfm", "poses" or "network"), the
+    cameras of the views that have one (photo resolution; `known` [V] bool says which), and the
+    structure-from-motion result behind them (None when it did not run)."""
+
+    requested: str
+    source: str
+    known: torch.Tensor
+    cameras: Cameras | None
+    sfm: Registration | None
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    def views_needing_network(self) -> list[int]:
+        """Views the network must see because only it can place them."""
+        if self.source == "network":
+            return []
+        return [int(i) for i in torch.nonzero(~self.known).flatten()]
+
+
+def _structure_from_motion(images: torch.Tensor, names: list[str], progress: JobProgress) -> Registration:
+    progress.start("structure from motion", 1)
+    # The photos are dark (or washed out); SIFT finds far more features after a tone curve.
+    registration = register_photos(auto_gamma(images), names)
+    progress.advance("structure from motion")
+    if not registration.failed and not registration.looks_like_one_scene:
+        logger.warning("the photos may not show one scene: %s", registration.describe())
+    return registration
+
+
+def register_views(
+    images: torch.Tensor, names: list[str], geometry: str, poses: Path | str | None, mode: str, progress: JobProgress,
+) -> ViewRegistration:
+    """images [V, 3, H, W] (the photos) -> the cameras known before the network runs."""
+    check_geometry_source(geometry)
+    count = len(names)
+    size = (int(images.shape[-1]), int(images.shape[-2]))
+    started = time.perf_counter()
+    if poses is not None:
+        given = read_given_poses(poses, names, [size] * count)
+        sfm = _structure_from_motion(images, names, progress) if geometry != "network" and count > 1 else None
+        return ViewRegistration(geometry, "poses", torch.ones(count, dtype=torch.bool), given, sfm,
+                                {"sfm": time.perf_counter() - started})
+    if geometry == "network":
+        return ViewRegistration(geometry, "network", torch.zeros(count, dtype=torch.bool), None, None)
+    if count < 2:
+        if geometry == "sfm":
+            raise InputError("sfm: structure-from-motion needs at least two photos; use geometry network",
+                             parameter="geometry")
+        return ViewRegistration(geometry, "network", torch.zeros(count, dtype=torch.bool), None, None)
+    registration = _structure_from_motion(images, names, progress)
+    seconds = {"sfm": time.perf_counter() - started}
+    if registration.registered_count > AUTO_MIN_REGISTERED_SHARE * count:
+        return ViewRegistration(geometry, "sfm", registration.registered.clone(), registration.cameras, registration,
+                                seconds)
+    if geometry == "sfm":
+        raise InputError(f"sfm: structure-from-motion {registration.describe()}; use geometry network or give poses",
+                         parameter="geometry")
+    logger.warning("structure-from-motion %s; using the network's cameras instead", registration.describe())
+    return ViewRegistration(geometry, "network", torch.zeros(count, dtype=torch.bool), None, registration, seconds)
+
+
+@dataclass
+class SceneGeometry:
+    """The cameras and depth a scene is built from.
+
+    cameras: one per view that can be rendered (photo resolution, names set); network_extrinsics
+    [S, 3, 4], network_intrinsics [S, 3, 3] (network pixels) and depth [S, h, w] of the S views
+    the network saw, in the scene's frame; points: the sparse structure (empty without SfM);
+    `report` the figures summary.json records.
+    """
+
+    source: str
+    cameras: Cameras
+    network_extrinsics: torch.Tensor
+    network_intrinsics: torch.Tensor
+    depth: torch.Tensor
+    points: SparsePoints
+    report: dict
+
+    def summary(self) -> dict:
+        return {"source": self.source, **self.report}
+
+
+def _network_geometry(registration: ViewRegistration, network: NetworkPass, names: list[str]) -> SceneGeometry:
+    cameras = network.network_cameras(names)
+    prediction = network.prediction
+    report = {"requested": registration.requested, "registered_views": 0, "brightening": None}
+    if registration.sfm is not None:
+        report["sfm_attempt"] = registration.sfm.describe()
+    return SceneGeometry("network", cameras, prediction.extrinsics[0].double().cpu(),
+                         prediction.intrinsics[0].double().cpu(), prediction.depth[0].cpu(), SparsePoints.empty(),
+                         report)
+
+
+def _points_in_frame(registration: ViewRegistration) -> SparsePoints:
+    """The sparse points in the frame of the registration's cameras: SfM's own, or carried onto
+    the given poses by the similarity between SfM's cameras and the given ones."""
+    sfm = registration.sfm
+    if sfm is None or sfm.failed:
+        return SparsePoints.empty()
+    if registration.source != "poses":
+        return sfm.points
+    similarity = fit_camera_similarity(sfm.cameras, registration.cameras[sfm.registered_indices])
+    return replace(sfm.points, xyz=similarity.apply(sfm.points.xyz))
+
+
+def _points_of_views(points: SparsePoints, views: list[int]) -> SparsePoints:
+    """The observations of `views` (indices into the photos), re-indexed to positions in `views`."""
+    position = torch.full((int(points.view.max()) + 1 if len(points.view) else 1,), -1, dtype=torch.int64)
+    known = [v for v in views if v < position.shape[0]]
+    position[known] = torch.tensor([views.index(v) for v in known], dtype=torch.int64)
+    keep = position[points.view] >= 0 if len(points.view) else torch.zeros(0, dtype=torch.bool)
+    return replace(points, view=position[points.view[keep]], point=points.point[keep], pixel=points.pixel[keep])
+
+
+def _aligned_depth(
+    network: NetworkPass, selected: list[int], network_cameras: Cameras, points: SparsePoints, selected_names: list[str],
+    selected_cameras: Cameras,
+) -> tuple[torch.Tensor, dict]:
+    """The network's depth [S, h, w] of the selected views in the registered frame, and how it was
+    aligned: per view to the sparse points it observes, or — with no points (given poses where
+    structure-from-motion failed) — by the scale of the similarity between the network's cameras
+    and the registered ones."""
+    depth = network.prediction.depth[0].detach().cpu().double()
+    if len(points) >= MIN_POINTS:
+        try:
+            alignment = align_depth(depth, network_cameras, _points_of_views(points, selected))
+        except InputError as error:
+            logger.warning("%s; the depth is scaled by the camera similarity instead", error)
+        else:
+            return alignment.depth, {
+                "form": alignment.form, "fitted_views": int(alignment.fitted.sum()), "views": len(selected),
+                "median_relative_residual": round(alignment.median_residual(), 4),
+                "points_per_view": alignment.points.tolist(),
+            }
+    similarity = fit_camera_similarity(network.network_cameras(selected_names), selected_cameras)
+    return depth * similarity.scale, {"form": "camera similarity scale", "scale": similarity.scale, "views": len(selected)}
+
+
+def place_views(registration: ViewRegistration, network: NetworkPass, selected: list[int], names: list[str]) -> SceneGeometry:
+    """Combine the registration with the network pass over the `selected` views (indices into
+    `names`): every view gets a camera in one frame, and the network's depth of the selected views
+    is aligned to the sparse points."""
+    selected_names = [names[i] for i in selected]
+    if registration.source == "network":
+        return _network_geometry(registration, network, selected_names)
+    known = registration.known
+    row_of_view = {view: row for row, view in enumerate(torch.nonzero(known).flatten().tolist())}
+    known_selected = known[selected]
+    selected_rows = [row_of_view[view] for view in selected if bool(known[view])]
+    if bool(known_selected.all()):
+        selected_cameras = registration.cameras[selected_rows]
+    else:
+        if len(selected_rows) < 2:
+            raise InputError(f"only {len(selected_rows)} of the network's views were registered; 2 are needed to place "
+                             "the others", parameter="geometry")
+        # The network's cameras of views SfM could not place, carried into the SfM frame by the
+        # similarity between the network's and SfM's cameras of the views both placed.
+        selected_cameras = fill_unregistered_views(registration.cameras[selected_rows], known_selected,
+                                                   network.network_cameras(selected_names))
+        unplaced = [names[view] for view in selected if not bool(known[view])]
+        logger.warning("%d view(s) not registered by structure-from-motion were placed with the network's cameras: %s",
+                       len(unplaced), ", ".join(unplaced))
+    position_of_view = {view: position for position, view in enumerate(selected)}
+    parts = []
+    for view in range(len(names)):
+        if view in position_of_view:
+            parts.append(selected_cameras[position_of_view[view]])
+        elif bool(known[view]):
+            parts.append(registration.cameras[row_of_view[view]])
+    cameras = Cameras.concatenate(parts)
+    cameras = Cameras(cameras.extrinsics.double(), cameras.intrinsics.double(), cameras.sizes,
+                      [name for view, name in enumerate(names) if view in position_of_view or bool(known[view])])
+    network_cameras = network.to_network(selected_cameras)
+    points = _points_in_frame(registration)
+    depth, alignment_report = _aligned_depth(network, selected, network_cameras, points, selected_names, selected_cameras)
+    consistency = depth_consistency(depth, network_cameras) if len(selected) > 1 else None
+    sfm = registration.sfm
+    report = {
+        "requested": registration.requested,
+        "registered_views": int(known.sum()) if registration.source == "sfm" else None,
+        "views": len(names),
+        "brightening": BRIGHTENING if sfm is not None else None,
+        "reprojection_error_px": sfm.reprojection_error if sfm is not None else None,
+        "sparse_points": len(points),
+        "models": sfm.model_sizes if sfm is not None else None,
+        "matching": sfm.matching if sfm is not None else None,
+        "depth_alignment": alignment_report,
+        "depth_consistency": round(consistency.share, 4) if consistency is not None else None,
+    }
+    return SceneGeometry(registration.source, cameras, network_cameras.extrinsics, network_cameras.intrinsics,
+                         depth, points, report)
