@@ -18,9 +18,10 @@ from lumos3d_cli.eval.metrics import auto_gamma
 from lumos3d_cli.io.image_files import list_images
 from lumos3d_cli.io.image_write import write_image
 from lumos3d_cli.io.images import load_images
-from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, get_restore_preset
-from lumos3d_cli.pipeline.model_loading import load_restoration_model, resolve_checkpoint
+from lumos3d_cli.model.bundled_models import resolve_checkpoint
+from lumos3d_cli.pipeline.model_loading import load_restoration_model
 from lumos3d_cli.pipeline.network_pass import even_subset
+from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, get_restore_preset
 from lumos3d_cli.pipeline.restore import restore_scene
 
 

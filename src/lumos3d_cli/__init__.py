@@ -1,10 +1,11 @@
 """lumos3d: single-forward 3D scene restoration from unposed low-light or over-exposed photos.
 
-The network API is re-exported here and imported on first use, so that importing the package
-(and `lumos3d --help`) stays fast:
+The public API — the jobs, data in and out, the network — is re-exported here and imported on
+first use, so that importing the package (and `lumos3d --help`) stays fast:
 
     import lumos3d_cli
-    model = lumos3d_cli.load_model("model.safetensors")
+    scene = lumos3d_cli.restore("dark_photos/")              # the whole job, as `lumos3d restore`
+    lumos3d_cli.write_restored_scene(scene, "out/scene.ply")
 """
 
 from importlib import import_module
@@ -15,8 +16,24 @@ try:
 except PackageNotFoundError:  # running from a source tree without installation
     __version__ = "0.0.0+unknown"
 
-# public name -> module that defines it
+# public name -> module that defines it (the package's one export table)
 _LAZY = {
+    # the jobs
+    "restore": "lumos3d_cli.pipeline.restore",
+    "restore_scene": "lumos3d_cli.pipeline.restore",
+    "RestoredScene": "lumos3d_cli.pipeline.restore",
+    "write_restored_scene": "lumos3d_cli.pipeline.restore_outputs",
+    "evaluate_lom": "lumos3d_cli.pipeline.evaluation",
+    "write_eval_report": "lumos3d_cli.pipeline.evaluation",
+    # data in and out
+    "load_images": "lumos3d_cli.io.images",
+    "read_ply": "lumos3d_cli.io.ply",
+    "write_ply": "lumos3d_cli.io.ply",
+    "read_cameras": "lumos3d_cli.io.camera_files",
+    "Cameras": "lumos3d_cli.io.cameras",
+    "Gaussians": "lumos3d_cli.io.gaussians",
+    "render": "lumos3d_cli.render.render",
+    # the network
     "build_model": "lumos3d_cli.model.lumos3d",
     "Lumos3D": "lumos3d_cli.model.lumos3d",
     "Lumos3DOutput": "lumos3d_cli.model.lumos3d",
@@ -24,11 +41,12 @@ _LAZY = {
     "load_model": "lumos3d_cli.model.loading",
     "prepare_images": "lumos3d_cli.model.preprocess",
     "PreparedImages": "lumos3d_cli.model.preprocess",
+    "DEFAULT_ARCHITECTURE": "lumos3d_cli.model.architectures",
     "ARCHITECTURES": "lumos3d_cli.model.architectures",
     "Architecture": "lumos3d_cli.model.architectures",
     "get_architecture": "lumos3d_cli.model.architectures",
-    "save_checkpoint": "lumos3d_cli.io.checkpoints",
-    "summarize_checkpoint": "lumos3d_cli.io.checkpoints",
+    "save_checkpoint": "lumos3d_cli.model.checkpoints",
+    "summarize_checkpoint": "lumos3d_cli.model.checkpoints",
 }
 
 __all__ = ["__version__", *_LAZY]

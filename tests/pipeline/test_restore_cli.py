@@ -5,16 +5,16 @@ import cv2
 import numpy as np
 import pytest
 import trimesh
+from assertions import expect_input_error
 from plyfile import PlyData
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.camera_files import read_cameras
 from lumos3d_cli.io.colmap import read_colmap_model
 from lumos3d_cli.io.images import read_image
-from lumos3d_cli.pipeline import model_loading
-from lumos3d_cli.pipeline.model_loading import resolve_checkpoint
+from lumos3d_cli.model import bundled_models
+from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.pipeline.network_pass import even_subset
-from assertions import expect_input_error
 
 
 def _copy(buu, tmp_path, names, folder="low"):
@@ -102,7 +102,7 @@ def test_restore_bad_inputs_leave_nothing(run_cli, buu, tmp_path, random_checkpo
 
 
 def test_missing_bundled_model_is_named(monkeypatch, tmp_path):
-    monkeypatch.setattr(model_loading, "bundled_weights_path", lambda name: tmp_path / f"{name}.safetensors")
+    monkeypatch.setattr(bundled_models, "bundled_weights_path", lambda name: tmp_path / f"{name}.safetensors")
     with pytest.raises(InputError, match="mode over-exposure: no bundled model .*give a checkpoint"):
         resolve_checkpoint(None, "over-exposure")
 

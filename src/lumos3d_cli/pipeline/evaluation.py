@@ -17,10 +17,11 @@ from lumos3d_cli.data.lom import find_lom_scenes
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.eval.contact_sheet import contact_sheet
 from lumos3d_cli.io.atomic import atomic_directory
-from lumos3d_cli.io.image_write import write_image
 from lumos3d_cli.io.file_digest import file_sha256
+from lumos3d_cli.io.image_write import write_image
+from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.pipeline.lom_eval import PROTOCOLS, SceneEvaluation, evaluate_lom_scene
-from lumos3d_cli.pipeline.model_loading import load_restoration_model, resolve_checkpoint
+from lumos3d_cli.pipeline.model_loading import load_restoration_model
 from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, get_restore_preset
 from lumos3d_cli.pipeline.quality import QualityMeter, mean_metrics
 from lumos3d_cli.pipeline.scene_geometry import check_geometry_source

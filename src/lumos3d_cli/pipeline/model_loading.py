@@ -1,4 +1,4 @@
-"""The model a job runs: the bundled model of its mode or a checkpoint, on a device that exists."""
+"""The model a job runs, on a device that exists (which weights: model.bundled_models.resolve_checkpoint)."""
 
 from __future__ import annotations
 
@@ -7,25 +7,10 @@ from pathlib import Path
 import torch
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.checkpoints import BUNDLED_MODELS, bundled_weights_path
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import Lumos3D
 
 DEVICES = ("cpu", "cuda")
-
-
-def resolve_checkpoint(checkpoint: Path | str | None, mode: str) -> Path:
-    """The given checkpoint, or the bundled model of `mode` (InputError naming what is missing)."""
-    if checkpoint is not None:
-        path = Path(checkpoint)
-        if not path.exists():
-            raise InputError(f"{path}: no such file or folder", parameter="checkpoint")
-        return path
-    path = bundled_weights_path(BUNDLED_MODELS[mode])
-    if not path.is_file():
-        raise InputError(f"{mode}: no bundled model ({path.name} is missing from the package); give a checkpoint",
-                         parameter="mode")
-    return path
 
 
 def load_restoration_model(checkpoint: Path, device: str) -> Lumos3D:

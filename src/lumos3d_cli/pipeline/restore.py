@@ -9,9 +9,9 @@ from __future__ import annotations
 import logging
 import resource
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from collections.abc import Sequence
 
 import torch
 
@@ -22,8 +22,9 @@ from lumos3d_cli.io.file_digest import file_sha256
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.io.image_files import list_images
 from lumos3d_cli.io.images import ImageBatch, load_images
+from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D
-from lumos3d_cli.pipeline.model_loading import load_restoration_model, resolve_checkpoint
+from lumos3d_cli.pipeline.model_loading import load_restoration_model
 from lumos3d_cli.pipeline.network_pass import even_subset, run_network
 from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, RestorePreset, get_restore_preset
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress

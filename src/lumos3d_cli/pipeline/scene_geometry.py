@@ -26,8 +26,8 @@ from lumos3d_cli.geometry.depth_alignment import MIN_POINTS, align_depth
 from lumos3d_cli.geometry.given_poses import read_given_poses
 from lumos3d_cli.geometry.sfm import Registration, register_photos
 from lumos3d_cli.geometry.similarity import fill_unregistered_views, fit_camera_similarity
-from lumos3d_cli.io.sparse_points import SparsePoints
 from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.sparse_points import SparsePoints
 from lumos3d_cli.pipeline.network_pass import NetworkPass
 from lumos3d_cli.pipeline.progress import JobProgress
 

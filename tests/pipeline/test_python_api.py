@@ -1,0 +1,38 @@
+"""The package's Python API does what the command line does, without the CLI."""
+
+import json
+import shutil
+
+import lumos3d_cli
+import pytest
+from plyfile import PlyData
+
+from lumos3d_cli.errors import InputError
+
+
+def test_every_exported_name_resolves():
+    for name in lumos3d_cli.__all__:
+        assert getattr(lumos3d_cli, name) is not None, name
+
+
+def test_restore_and_write_without_the_cli(buu, tmp_path, random_checkpoint):
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for name in ("4.JPG", "5.JPG"):
+        shutil.copy(buu / "low" / name, photos / name)
+    scene = lumos3d_cli.restore(photos, checkpoint=random_checkpoint, geometry="network", reference=buu / "high")
+    assert scene.names == ["4.JPG", "5.JPG"] and scene.restored.shape == (2, 3, 375, 500)
+    assert scene.metrics["mean"]["psnr"] > 0 and scene.geometry.source == "network"
+    summary = lumos3d_cli.write_restored_scene(scene, tmp_path / "out" / "scene.ply")
+    assert json.loads((tmp_path / "out" / "summary.json").read_text()) == json.loads(json.dumps(summary))
+    assert PlyData.read(str(tmp_path / "out" / "scene.ply"))["vertex"].count == len(scene.gaussians)
+    assert sorted(p.name for p in (tmp_path / "out" / "restored").iterdir()) == ["4.png", "5.png"]
+
+
+def test_library_errors_name_parameters_not_flags(buu, random_checkpoint):
+    with pytest.raises(InputError) as caught:
+        lumos3d_cli.restore(buu / "low", checkpoint=random_checkpoint, preset="ultra")
+    assert caught.value.parameter == "preset" and str(caught.value).startswith("preset 'ultra'")
+    assert "--" not in str(caught.value)
+    with pytest.raises(InputError, match="^geometry 'colmap': use one of auto, network, sfm$"):
+        lumos3d_cli.restore(buu / "low", checkpoint=random_checkpoint, geometry="colmap")
