@@ -135,18 +135,22 @@ class Lumos3D(nn.Module):
 
     def fuse_scene(
         self, points: torch.Tensor, params: torch.Tensor, confidence: torch.Tensor, scale: torch.Tensor,
-        voxel_size: float | None = None, fuse_views: torch.Tensor | None = None,
+        voxel_size: float | None = None, fuse_views: torch.Tensor | None = None, fuse_pixels: torch.Tensor | None = None,
     ) -> tuple[Gaussians, Gaussians, GaussianCounts]:
         """One scene: points [V, H, W, 3], raw parameters [V, H, W, K-1], confidence [V, H, W],
         scene scale -> (pixel Gaussians, fused and pruned Gaussians, counts).
 
         voxel_size overrides the architecture's (relative to the scene scale); fuse_views [V] bool keeps
         only those views' pixel Gaussians in the fused scene (the others still shaped the cameras
-        and depth; evaluation's holdout protocol uses this)."""
-        if fuse_views is not None:
-            if not bool(fuse_views.any()):
-                raise ValueError("fuse_views selects no view")
-            points, params, confidence = points[fuse_views], params[fuse_views], confidence[fuse_views]
+        and depth; evaluation's holdout protocol uses this); fuse_pixels [V, H, W] bool keeps only
+        those pixels (e.g. the ones whose depth other views confirm)."""
+        mask = None if fuse_views is None else fuse_views[:, None, None].expand(points.shape[:3])
+        if fuse_pixels is not None:
+            mask = fuse_pixels if mask is None else mask & fuse_pixels
+        if mask is not None:
+            if not bool(mask.any()):
+                raise ValueError("fuse_views / fuse_pixels select no pixel")
+            points, params, confidence = points[mask], params[mask], confidence[mask]
         points = points.reshape(-1, 3)
         params = params.reshape(points.shape[0], -1)
         relative = self.architecture.voxel_size if voxel_size is None else voxel_size
@@ -180,13 +184,13 @@ class Lumos3D(nn.Module):
     def assemble(
         self, prediction: Lumos3DPrediction, extrinsics: torch.Tensor | None = None,
         intrinsics: torch.Tensor | None = None, depth: torch.Tensor | None = None,
-        voxel_size: float | None = None, fuse_views: torch.Tensor | None = None,
+        voxel_size: float | None = None, fuse_views: torch.Tensor | None = None, fuse_pixels: torch.Tensor | None = None,
     ) -> Lumos3DOutput:
         """Place and fuse the Gaussians of `prediction`. By default they sit on the predicted depth
         seen from the predicted cameras; a caller with better geometry (registered cameras
         extrinsics [B, V, 3, 4] and intrinsics [B, V, 3, 3] in network pixels, depth [B, V, H, W]
-        aligned to them) passes it instead. `voxel_size` and `fuse_views` [V] bool are passed to
-        `fuse_scene`. Runs in float32."""
+        aligned to them) passes it instead. `voxel_size`, `fuse_views` [V] and `fuse_pixels`
+        [B, V, H, W] (bool) are passed to `fuse_scene`. Runs in float32."""
         with torch.autocast(prediction.depth.device.type, enabled=False):
             extrinsics = prediction.extrinsics if extrinsics is None else extrinsics.to(prediction.depth)
             intrinsics = prediction.intrinsics if intrinsics is None else intrinsics.to(prediction.depth)
@@ -198,7 +202,7 @@ class Lumos3D(nn.Module):
             scales = scene_scale(depth)
             scenes = [
                 self.fuse_scene(world_points[b], prediction.params[b], prediction.confidence[b], scales[b], voxel_size,
-                                fuse_views)
+                                fuse_views, None if fuse_pixels is None else fuse_pixels[b])
                 for b in range(depth.shape[0])
             ]
         pixel_gaussians, gaussians, counts = (list(column) for column in zip(*scenes))

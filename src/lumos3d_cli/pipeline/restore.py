@@ -153,6 +153,7 @@ def build_scene(
         output = model.assemble(
             network.prediction, scene_geometry.network_extrinsics[None], scene_geometry.network_intrinsics[None],
             scene_geometry.depth[None], voxel_size=model.architecture.voxel_size * preset.voxel_scale, fuse_views=keep,
+            fuse_pixels=None if scene_geometry.fuse_pixels is None else scene_geometry.fuse_pixels[None],
         )
     network_cameras = Cameras(scene_geometry.network_extrinsics.float(), scene_geometry.network_intrinsics.float(),
                               [network.network_size] * len(selected))

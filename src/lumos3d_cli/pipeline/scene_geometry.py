@@ -21,6 +21,7 @@ import torch
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.eval.metrics import auto_gamma
+from lumos3d_cli.geometry.confirmed_depth import confirmed_pixels
 from lumos3d_cli.geometry.consistency import depth_consistency
 from lumos3d_cli.geometry.depth_alignment import MIN_POINTS, align_depth
 from lumos3d_cli.geometry.given_poses import read_given_poses
@@ -113,7 +114,8 @@ class SceneGeometry:
     cameras: one per view that can be rendered (photo resolution, names set); network_extrinsics
     [S, 3, 4], network_intrinsics [S, 3, 3] (network pixels) and depth [S, h, w] of the S views
     the network saw, in the scene's frame; points: the sparse structure (empty without SfM);
-    `report` the figures summary.json records.
+    `report` the figures summary.json records; fuse_pixels [S, h, w] bool: the pixels whose depth
+    the neighbouring views do not contradict (None: all).
     """
 
     source: str
@@ -123,6 +125,7 @@ class SceneGeometry:
     depth: torch.Tensor
     points: SparsePoints
     report: dict
+    fuse_pixels: torch.Tensor | None = None
 
     def summary(self) -> dict:
         return {"source": self.source, **self.report}
@@ -222,6 +225,7 @@ def place_views(registration: ViewRegistration, network: NetworkPass, selected: 
     points = _points_in_frame(registration)
     depth, alignment_report = _aligned_depth(network, selected, network_cameras, points, selected_names, selected_cameras)
     consistency = depth_consistency(depth, network_cameras) if len(selected) > 1 else None
+    fuse_pixels = confirmed_pixels(depth, network_cameras)
     sfm = registration.sfm
     report = {
         "requested": registration.requested,
@@ -234,6 +238,7 @@ def place_views(registration: ViewRegistration, network: NetworkPass, selected: 
         "matching": sfm.matching if sfm is not None else None,
         "depth_alignment": alignment_report,
         "depth_consistency": round(consistency.share, 4) if consistency is not None else None,
+        "pixels_kept": round(float(fuse_pixels.float().mean()), 4),
     }
     return SceneGeometry(registration.source, cameras, network_cameras.extrinsics, network_cameras.intrinsics,
-                         depth, points, report)
+                         depth, points, report, fuse_pixels)

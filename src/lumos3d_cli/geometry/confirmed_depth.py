@@ -1,0 +1,70 @@
+"""Which pixels' depth the neighbouring views confirm: the geometric consistency check of
+multi-view stereo fusion (as in COLMAP's and MVSNet's depth fusion), used to keep a view's
+Gaussians out of the scene where its depth contradicts what its neighbours see.
+
+A pixel of view v, unprojected with its depth and projected into a neighbour n, is
+- confirmed when its depth there agrees with n's depth within `tolerance` (relative);
+- contradicted when it lies clearly in front of n's surface (depth below (1 - tolerance) of it):
+  n sees through that point, so it is not there (a floater that would be pasted over n's view);
+- unknown when it falls outside n's image or behind n's surface (occluded from n).
+A pixel is kept unless a neighbour contradicts it and none confirms it.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.model.geometry import unproject_depth
+
+DEFAULT_TOLERANCE = 0.05
+DEFAULT_NEIGHBOURS = 4
+
+
+def neighbours_by_distance(cameras: Cameras, count: int) -> torch.Tensor:
+    """[V, min(count, V-1)] int64: each camera's nearest other cameras by centre distance."""
+    centres = cameras.centers().double()
+    distances = torch.cdist(centres, centres)
+    distances.fill_diagonal_(float("inf"))
+    return distances.argsort(dim=1)[:, : min(count, len(cameras) - 1)]
+
+
+def _compare(depth: torch.Tensor, cameras: Cameras, view: int, other: int, tolerance: float):
+    """(confirmed [h, w], contradicted [h, w]) of `view`'s pixels against `other`'s depth."""
+    height, width = depth.shape[-2:]
+    extrinsics, intrinsics = cameras.extrinsics.to(depth.dtype), cameras.intrinsics.to(depth.dtype)
+    world = unproject_depth(depth[view], extrinsics[view], intrinsics[view]).reshape(-1, 3)
+    camera = world @ extrinsics[other, :, :3].T + extrinsics[other, :, 3]
+    z = camera[:, 2]
+    safe = z.clamp_min(1e-12)
+    u = intrinsics[other, 0, 0] * camera[:, 0] / safe + intrinsics[other, 0, 2]
+    v = intrinsics[other, 1, 1] * camera[:, 1] / safe + intrinsics[other, 1, 2]
+    inside = (z > 0) & (u >= 0) & (u <= width) & (v >= 0) & (v <= height)
+    grid = torch.stack([2 * u / width - 1, 2 * v / height - 1], dim=-1)
+    seen = F.grid_sample(depth[other][None, None], grid[None, None], mode="nearest", align_corners=False,
+                         padding_mode="border")[0, 0, 0]
+    confirmed = inside & ((z - seen).abs() <= tolerance * seen)
+    contradicted = inside & (z < (1 - tolerance) * seen)
+    return confirmed.reshape(height, width), contradicted.reshape(height, width)
+
+
+def confirmed_pixels(
+    depth: torch.Tensor, cameras: Cameras, tolerance: float = DEFAULT_TOLERANCE, neighbours: int = DEFAULT_NEIGHBOURS,
+) -> torch.Tensor:
+    """depth [V, h, w] (positive, one frame) and cameras with intrinsics in pixels of the depth
+    maps -> keep [V, h, w] bool (see the module's rule). With one view everything is kept."""
+    views = depth.shape[0]
+    keep = torch.ones(depth.shape, dtype=torch.bool)
+    if views < 2:
+        return keep
+    nearest = neighbours_by_distance(cameras, neighbours)
+    for view in range(views):
+        confirmed = torch.zeros(depth.shape[1:], dtype=torch.bool)
+        contradicted = torch.zeros(depth.shape[1:], dtype=torch.bool)
+        for other in nearest[view].tolist():
+            yes, no = _compare(depth, cameras, view, other, tolerance)
+            confirmed |= yes
+            contradicted |= no
+        keep[view] = confirmed | ~contradicted
+    return keep
