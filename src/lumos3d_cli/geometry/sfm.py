@@ -4,16 +4,26 @@ The photos go in already brightened (SIFT finds few features in a dark photo); t
 so that their long side is at most `long_side`, written as PNGs into a temporary folder, and
 registered there. Cameras, sparse points and observations come back in pixels of the photos.
 
-Choices, measured on LOM buu (25 views, 500x375) and the Strecha scenes (768x512) on 2 shared
-CPU cores (benchmarks/sfm.py; docs/performance.md, "Structure-from-motion"):
-- long side 512: the same rotation accuracy as full resolution on 768x512 photos, ~2x faster;
-- all CPU cores: 2 threads take ~0.6x the time of 1;
-- exhaustive matching up to EXHAUSTIVE_MATCHING_LIMIT views, then sequential matching (each view
-  with its next SEQUENTIAL_OVERLAP views in the given order, and quadratic strides beyond), which
-  needs no vocabulary tree and registers the same views of ordered captures;
+Choices, measured on LOM buu (500x375) and the Strecha scenes (768x512) on 2 CPU cores
+(benchmarks/sfm.py; docs/performance.md, "Structure-from-motion"; the seconds there were taken
+with the cores shared by other jobs):
+- long side 512 px: on fountain-P11 the same rotation accuracy as full resolution (0.36 vs 0.33
+  degrees median) in half the time (9.0 vs 19.0 s shared; 2.5 vs 5.2 s alone);
+- all CPU cores: on an idle machine 2 threads took 4.0 s on buu's 25 views, 1 thread 6.7 s;
+- exhaustive matching up to EXHAUSTIVE_MATCHING_LIMIT (25) views: there it costs about what
+  sequential matching does (buu, 25 views: 4.2 vs 3.0 s) and does not depend on the photos'
+  order; above it the quadratic cost shows (castle-P30: 20.5 vs 6.1 s; 48 views: 19.9 vs 5.3 s),
+  so each view is matched with its next SEQUENTIAL_OVERLAP views in the given order (plus
+  quadratic strides), which needs no vocabulary tree and registered 48/48 and 29/30 views with
+  the same accuracy;
+- MAX_FEATURES SIFT features per photo (COLMAP's default is 8192): brute-force matching cost
+  grows with its square, and every scene above registers all its views with 4096 (exhaustive);
 - one shared SIMPLE_PINHOLE camera (one focal length, principal point at the image centre, no
-  distortion) when the photos come from one camera: the renderer is a pinhole, and a single focal
-  length is better constrained than two.
+  distortion) when the photos come from one camera: the renderer is a pinhole, and one focal
+  length is better constrained than two. It lands within 0.5 % of fountain's calibrated focal.
+
+COLMAP runs multi-threaded and is then not bit-reproducible; with few photos (about 6) its focal
+length can settle in a wrong minimum on some runs. `threads=1` makes a run deterministic.
 """
 
 from __future__ import annotations
@@ -39,7 +49,7 @@ from lumos3d_cli.io.cameras import Cameras
 logger = logging.getLogger(__name__)
 
 SFM_LONG_SIDE = 512
-EXHAUSTIVE_MATCHING_LIMIT = 40
+EXHAUSTIVE_MATCHING_LIMIT = 25
 SEQUENTIAL_OVERLAP = 10
 # SIFT features per photo: brute-force matching costs grows with the square of this.
 MAX_FEATURES = 4096
