@@ -149,7 +149,7 @@ class Lumos3D(nn.Module):
             mask = fuse_pixels if mask is None else mask & fuse_pixels
         if mask is not None:
             if not bool(mask.any()):
-                raise ValueError("fuse_views / fuse_pixels select no pixel")
+                raise ValueError("fuse_views / fuse_pixels selects no view or pixel")
             points, params, confidence = points[mask], params[mask], confidence[mask]
         points = points.reshape(-1, 3)
         params = params.reshape(points.shape[0], -1)
