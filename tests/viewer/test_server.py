@@ -52,7 +52,7 @@ def test_cameras_points_and_panel(viewer, viser_wire):
     assert len(received["SetSceneNodeClickBindingsMessage"]) == 3
     markdown = viser_wire.markdown(received)
     for expected in ("scene.ply", "**500 Gaussians**", "3 cameras", "4 SfM points", "| PSNR (dB) vs reference | 21.23 |",
-                     "| SSIM vs reference | 0.751 |", "| mode / preset | low-light / fast |", "network 1.2 s"):
+                     "| SSIM vs reference | 0.751 |", "| run | low-light · fast |", "network 1.2 s"):
         assert expected in markdown, markdown
     (dropdown, _), = received["GuiDropdownMessage"]
     assert dropdown["props"]["disabled"] is False and dropdown["value"] == "restored"

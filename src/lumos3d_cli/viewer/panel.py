@@ -39,9 +39,9 @@ def summary_rows(summary: dict) -> list[tuple[str, str]]:
     geometry = _geometry_source(summary)
     if geometry:
         rows.append(("geometry", geometry))
-    made_by = [key for key in ("mode", "preset", "device") if summary.get(key)]
+    made_by = [key for key in ("mode", "preset", "device") if summary.get(key)]  # e.g. low-light · balanced · cpu
     if made_by:
-        rows.append((" / ".join(made_by), " / ".join(str(summary[key]) for key in made_by)))
+        rows.append(("run", " · ".join(str(summary[key]) for key in made_by)))
     seconds = summary.get("seconds")
     if isinstance(seconds, dict) and isinstance(seconds.get("total"), (int, float)):
         stages = ", ".join(f"{k} {_seconds(v)}" for k, v in seconds.items() if k != "total" and isinstance(v, (int, float)))

@@ -83,14 +83,14 @@ def require_free_port(host: str, port: int) -> None:
 
 def _frustum_scale(positions: np.ndarray) -> float:
     """Frustum size in viewer units: half the median spacing of neighbouring cameras, kept
-    between 2 % and 6 % of the scene radius so that frustums neither vanish nor cover the scene."""
+    between 3 % and 8 % of the scene radius so that frustums neither vanish nor cover the scene."""
     if len(positions) > 1:
         distances = np.linalg.norm(positions[:, None] - positions[None], axis=-1)
         np.fill_diagonal(distances, np.inf)
         spacing = float(np.median(distances.min(axis=1)))
     else:
         spacing = math.inf
-    return float(np.clip(0.5 * spacing, 0.02 * VIEWER_RADIUS, 0.06 * VIEWER_RADIUS))
+    return float(np.clip(0.5 * spacing, 0.03 * VIEWER_RADIUS, 0.08 * VIEWER_RADIUS))
 
 
 def _vertical_fov(intrinsics: np.ndarray, height: int) -> float:
@@ -106,7 +106,10 @@ def _set_initial_view(server: viser.ViserServer, scene: ViewerScene, frame: View
         forwards = np.stack([viser.transforms.SO3(q).as_matrix()[:, 2] for q in wxyz])
         forward = forwards.mean(axis=0)
         forward /= max(np.linalg.norm(forward), 1e-9)
-        position = positions.mean(axis=0) - 0.6 * VIEWER_RADIUS * forward + 0.3 * VIEWER_RADIUS * up
+        right = np.cross(forward, -up)
+        right /= max(np.linalg.norm(right), 1e-9)
+        # Oblique, so that relief shows: a view along the cameras' axis looks like a flat photo.
+        position = positions.mean(axis=0) + VIEWER_RADIUS * (-0.5 * forward + 0.3 * up + 0.4 * right)
         width, height = scene.cameras.sizes[0]
         fov = _vertical_fov(scene.cameras.intrinsics[0].numpy(), height)
     else:
@@ -178,6 +181,9 @@ def _add_panel(server: viser.ViserServer, scene: ViewerScene, shown: int, max_sp
 def build_viewer(server: viser.ViserServer, scene: ViewerScene, max_splats: int = DEFAULT_MAX_SPLATS) -> int:
     """Put `scene` into `server` (splats, frustums, points, panel); returns the splats sent."""
     frame = frame_scene(scene.gaussians, scene.cameras)
+    # A dark background, as the restored views are rendered on black: semi-transparent splats
+    # over viser's default white would look paler than the scene is.
+    server.gui.configure_theme(dark_mode=True, control_width="large")
     server.scene.set_up_direction(frame.up)
     _set_initial_view(server, scene, frame)
     arrays = splat_arrays(scene.gaussians, frame.centre, frame.scale, max_splats)
