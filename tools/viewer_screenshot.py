@@ -31,7 +31,9 @@ from lumos3d_cli.viewer.server import start_viewer
 _CHROMIUM_FLAGS = [
     "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
     "--disable-background-networking", "--disable-component-update", "--disable-sync",
-    # WebGL through SwiftShader: --disable-gpu alone leaves headless Chromium without WebGL.
+    # WebGL through SwiftShader. Chromium 156 falls back to it by itself (checked: WebGL2 on
+    # "SwiftShader Device" with or without these flags); they keep working once that implicit
+    # fallback is removed, as Chromium has announced.
     "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
 ]
 
