@@ -1,0 +1,106 @@
+"""`restore` with registered geometry: structure-from-motion, given poses, and what happens when
+neither can place the photos."""
+
+import json
+import shutil
+
+import cv2
+import numpy as np
+import torch
+from assertions import expect_input_error
+
+from lumos3d_cli.data.lom import lom_reference_extrinsics, read_lom_scene
+from lumos3d_cli.io.camera_files import read_cameras
+from lumos3d_cli.io.colmap import read_colmap_model, read_colmap_points
+from lumos3d_cli.io.transforms_json import read_transforms_json, write_transforms_json
+
+FRAMES = ["3.JPG", "4.JPG", "5.JPG", "6.JPG", "7.JPG"]
+
+
+def _photos(buu, tmp_path, names=FRAMES, folder="low"):
+    target = tmp_path / "photos"
+    target.mkdir(parents=True, exist_ok=True)
+    for name in names:
+        shutil.copy(buu / folder / name, target / name)
+    return target
+
+
+def test_sfm_registers_the_photos_and_writes_a_colmap_model_with_points(run_cli, buu, tmp_path, random_checkpoint):
+    photos = _photos(buu, tmp_path)
+    out = tmp_path / "out" / "scene.ply"
+    result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "sfm",
+                     "--max-views", 3, "--json")
+    assert result.code == 0, result.err
+    summary = json.loads(result.out)
+    geometry = summary["geometry"]
+    assert geometry["source"] == "sfm" and geometry["registered_views"] == 5 and geometry["sparse_points"] > 50
+    assert geometry["reprojection_error_px"] < 2 and geometry["brightening"].startswith("auto-gamma")
+    assert 0 <= geometry["depth_consistency"] <= 1 and geometry["depth_alignment"]["views"] == 3
+    assert set(summary["seconds"]) >= {"sfm", "network", "fuse", "render"}
+    # every photo is restored although the network saw three of them
+    assert summary["views"] == FRAMES and len(summary["network_views"]) == 3
+    assert sorted(p.name for p in (out.parent / "restored").iterdir()) == [f"{n[:-4]}.png" for n in FRAMES]
+    colmap = read_colmap_model(out.parent / "colmap")
+    points = read_colmap_points(out.parent / "colmap" / "points3D.txt")
+    assert colmap.names == FRAMES and len(points.xyz) == geometry["sparse_points"]
+    # the registered cameras against the scene's own: relative rotations within a few degrees
+    reference = lom_reference_extrinsics(read_lom_scene(buu, "low-light"))
+    truth = torch.stack([reference[n[:-4]] for n in FRAMES]).double()
+    ours = colmap.extrinsics.double()
+    for i in range(1, 5):
+        relative = lambda e: e[i, :, :3] @ e[0, :, :3].T  # noqa: E731
+        cosine = ((relative(ours).T @ relative(truth)).trace() - 1) / 2
+        assert torch.rad2deg(torch.arccos(cosine.clamp(-1, 1))) < 3
+
+
+def test_given_poses_are_reproduced(run_cli, buu, tmp_path, random_checkpoint):
+    photos = _photos(buu, tmp_path)
+    everything = read_transforms_json(buu / "transforms_train.json")
+    rows = [everything.names.index(n) if n in everything.names else None for n in FRAMES]
+    if None in rows:  # the frames' file names as the transforms write them
+        stems = [name.rsplit("/", 1)[-1].split(".")[0] for name in everything.names]
+        rows = [stems.index(n[:-4]) for n in FRAMES]
+    given = everything[rows]
+    write_transforms_json(tmp_path / "poses.json", given)
+    out = tmp_path / "out" / "scene.ply"
+    result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--poses", tmp_path / "poses.json",
+                     "--max-views", 3, "--json")
+    assert result.code == 0, result.err
+    assert json.loads(result.out)["geometry"]["source"] == "poses"
+    written = read_cameras(out.parent / "cameras.json")
+    np.testing.assert_allclose(written.extrinsics.numpy(), given.extrinsics.numpy(), atol=1e-6)
+    np.testing.assert_allclose(written.intrinsics.numpy(), given.intrinsics.numpy(), atol=1e-6)
+    shutil.copy(buu / "low" / "8.JPG", photos / "8.JPG")
+    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--poses",
+                               tmp_path / "poses.json"), "--poses", "no pose for 1 of 6 photos (8.JPG)")
+    (photos / "8.JPG").unlink()
+    (photos / "7.JPG").unlink()
+    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--poses",
+                               tmp_path / "poses.json"), "--poses", "1 poses have no photo")
+
+
+def test_photos_sfm_cannot_place(run_cli, buu, shared_data, tmp_path, random_checkpoint):
+    blank = tmp_path / "blank"
+    blank.mkdir()
+    for index in range(4):
+        cv2.imwrite(str(blank / f"{index}.png"), np.full((120, 160, 3), 40 + index, np.uint8))
+    out = tmp_path / "out" / "scene.ply"
+    expect_input_error(run_cli("restore", blank, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "sfm"),
+                       "--geometry sfm: structure-from-motion registered 0 of 4 photos", "use geometry network")
+    result = run_cli("restore", blank, "-o", out, "--checkpoint", random_checkpoint, "--json")
+    assert result.code == 0, result.err
+    assert json.loads(result.out)["geometry"]["source"] == "network"
+    said = " ".join(result.err.split())  # rich wraps long log lines
+    assert "registered 0 of 4 photos" in said and "using the network's cameras instead" in said
+    one = _photos(buu, tmp_path / "one", ["5.JPG"])
+    expect_input_error(run_cli("restore", one, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "sfm"),
+                       "--geometry sfm: structure-from-motion needs at least two photos")
+    result = run_cli("restore", one, "-o", tmp_path / "one-out" / "scene.ply", "--checkpoint", random_checkpoint, "--json")
+    assert result.code == 0 and json.loads(result.out)["geometry"]["source"] == "network", result.err
+    unrelated = tmp_path / "unrelated"
+    unrelated.mkdir()
+    for name in ("000.jpg", "010.jpg", "020.jpg", "030.jpg"):
+        shutil.copy(shared_data / "lowlight_single" / name, unrelated / name)
+    result = run_cli("restore", unrelated, "-o", tmp_path / "u" / "scene.ply", "--checkpoint", random_checkpoint, "--json")
+    assert result.code == 0, result.err
+    assert json.loads(result.out)["geometry"]["source"] == "network" and "Traceback" not in result.err
