@@ -41,6 +41,13 @@ from lumos3d_cli.model.loading import load_model  # noqa: E402
 from lumos3d_cli.model.preprocess import prepare_images  # noqa: E402
 
 GT_CAMERAS = LOM.parent / "gt_cameras"
+# Measured once with the same pycolmap calls (8192 features) while the machine was nearly idle.
+IDLE_NOTE = (
+    "On a nearly idle machine (load average 0.1; same pycolmap calls, 8192 features per photo): buu's 25 "
+    "views took 4.0 s with 2 threads and 6.7 s with 1 (0.22° median rotation error, AUC@30 0.95); "
+    "fountain-P11 (as given) took 2.5 s at long side 512 and 5.2 s at full resolution (0.27° and 0.22°). Under "
+    "contention the second thread gains little, which is why the 1-thread rows above are not slower."
+)
 
 
 def darkened(images: torch.Tensor) -> torch.Tensor:
@@ -183,6 +190,7 @@ def main() -> None:
         "`register_photos` matches exhaustively up to `EXHAUSTIVE_MATCHING_LIMIT` views and sequentially above.",
         "### Resolution and threads",
         markdown_table(header, settings),
+        IDLE_NOTE,
         "### Depth alignment: depth or inverse depth",
         "The bundled low-light model's depth of each registered view (network resolution) aligned to the SfM "
         "points it observes with a robust scale and shift; held-out: fitted on half of each view's points, "
