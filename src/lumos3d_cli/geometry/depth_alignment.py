@@ -75,7 +75,9 @@ def sample_depth(depth: torch.Tensor, pixels: torch.Tensor) -> torch.Tensor:
     return torch.where(inside, values, torch.full_like(values, float("nan")))
 
 
-def view_correspondences(depth: torch.Tensor, cameras: Cameras, points: SparsePoints, view: int) -> tuple[torch.Tensor, torch.Tensor]:
+def view_correspondences(
+    depth: torch.Tensor, cameras: Cameras, points: SparsePoints, view: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     """(network depth [N], SfM depth [N]) at the points that `view` observes, projected with its
     camera (intrinsics in pixels of the depth map, so any crop or resize is accounted for);
     points behind the camera, outside the image or on non-positive depth are left out."""

@@ -55,7 +55,8 @@ def read_given_poses(
     from PATH, in the photos' order, with intrinsics rescaled to the photos' sizes.
 
     InputError naming the photos without a pose, the poses without a photo (unless
-    `allow_extra_poses`), two different poses of one stem (the same pose listed twice is fine), or a photo whose aspect ratio differs from its
+    `allow_extra_poses`), two different poses of one stem (the same pose listed twice is fine), or
+    a photo whose aspect ratio differs from its
     pose's image (a cropped photo: its principal point is unknown).
     """
     path = Path(path)

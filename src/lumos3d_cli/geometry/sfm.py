@@ -65,7 +65,9 @@ class Registration:
     OpenCV axes, as every `Cameras`); registered: bool [V]; points: the model's sparse points
     (observations index the V photos); reprojection_error: mean over observations, in pixels of
     the photos (nan when nothing registered); model_sizes: views of the largest model, then the
-    views each disconnected further model adds (empty when none was found); matching: "exhaustive" or "sequential"; sfm_size: (width, height) SfM ran at.
+    views each disconnected further model adds (empty when none was found); matching:
+    "exhaustive" or "sequential"; sfm_size: (width, height) SfM ran at; seconds: the whole run,
+    stage_seconds: features, matching, mapping.
     """
 
     cameras: Cameras

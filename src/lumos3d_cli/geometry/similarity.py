@@ -46,7 +46,8 @@ def fit_similarity(source: torch.Tensor, target: torch.Tensor) -> Similarity:
     on one line (the rotation about it is then undetermined).
     """
     if source.shape != target.shape or source.dim() != 2 or source.shape[1] != 3:
-        raise InputError(f"similarity needs two point sets [N, 3] of one shape, got {tuple(source.shape)} and {tuple(target.shape)}")
+        raise InputError(f"similarity needs two point sets [N, 3] of one shape, "
+                         f"got {tuple(source.shape)} and {tuple(target.shape)}")
     if source.shape[0] < 3:
         raise InputError(f"a similarity needs at least 3 point pairs, got {source.shape[0]}")
     require_finite("similarity source points", source)
@@ -74,7 +75,8 @@ def transform_cameras(cameras: Cameras, similarity: Similarity) -> Cameras:
     lengths scale with the world: R' = R S^T, t' = s t - R S^T T for world->camera [R | t]."""
     rotation = similarity.rotation.to(cameras.extrinsics)
     new_rotation = cameras.extrinsics[:, :, :3] @ rotation.T
-    new_translation = similarity.scale * cameras.extrinsics[:, :, 3] - new_rotation @ similarity.translation.to(cameras.extrinsics)
+    translation = similarity.translation.to(cameras.extrinsics)
+    new_translation = similarity.scale * cameras.extrinsics[:, :, 3] - new_rotation @ translation
     extrinsics = torch.cat([new_rotation, new_translation[:, :, None]], dim=2)
     return Cameras(extrinsics, cameras.intrinsics.clone(), list(cameras.sizes), list(cameras.names))
 
@@ -117,7 +119,8 @@ def fill_unregistered_views(registered_cameras: Cameras, registered: torch.Tenso
     extrinsics[indices] = registered_cameras.extrinsics
     intrinsics[indices] = registered_cameras.intrinsics
     shared = registered_cameras.intrinsics[0]
-    if len(set(registered_cameras.sizes)) == 1 and torch.equal(registered_cameras.intrinsics, shared.expand_as(registered_cameras.intrinsics)):
+    one_camera = torch.equal(registered_cameras.intrinsics, shared.expand_as(registered_cameras.intrinsics))
+    if len(set(registered_cameras.sizes)) == 1 and one_camera:
         for view in range(len(other_cameras)):
             if not registered[view] and other_cameras.sizes[view] == registered_cameras.sizes[0]:
                 intrinsics[view] = shared
