@@ -56,8 +56,8 @@ def read_given_poses(
 
     InputError naming the photos without a pose, the poses without a photo (unless
     `allow_extra_poses`), two different poses of one stem (the same pose listed twice is fine), or
-    a photo whose aspect ratio differs from its
-    pose's image (a cropped photo: its principal point is unknown).
+    a photo whose aspect ratio differs from its pose's image (a cropped photo: its principal point
+    is unknown).
     """
     path = Path(path)
     if len(names) != len(sizes):
