@@ -72,7 +72,7 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as folder:
         folder = Path(folder)
-        from lumos3d_cli.io.checkpoints import save_checkpoint
+        from lumos3d_cli.model.checkpoints import save_checkpoint
         from lumos3d_cli.model.lumos3d import build_model
 
         teacher = folder / "teacher.safetensors"

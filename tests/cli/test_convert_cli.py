@@ -3,7 +3,7 @@ import json
 import torch
 from safetensors import safe_open
 
-from lumos3d_cli.io.checkpoints import save_checkpoint
+from lumos3d_cli.model.checkpoints import save_checkpoint
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import build_model
 from assertions import expect_input_error

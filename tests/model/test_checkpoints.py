@@ -9,8 +9,9 @@ from safetensors import safe_open
 from safetensors.torch import save_file
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.checkpoints import BUNDLED_MODELS, bundled_weights_path, read_checkpoint, save_checkpoint, summarize_checkpoint
 from lumos3d_cli.model.architectures import ARCHITECTURES, Architecture, PatchEmbedConfig
+from lumos3d_cli.model.bundled_models import BUNDLED_MODELS, bundled_weights_path
+from lumos3d_cli.model.checkpoints import read_checkpoint, save_checkpoint, summarize_checkpoint
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import build_model
 from lumos3d_cli.typed_config import from_dict

@@ -2,7 +2,7 @@ import shutil
 
 import pytest
 
-from lumos3d_cli.io.checkpoints import save_checkpoint
+from lumos3d_cli.model.checkpoints import save_checkpoint
 from lumos3d_cli.model.lumos3d import build_model
 
 

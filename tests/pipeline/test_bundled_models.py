@@ -7,8 +7,9 @@ import pytest
 import torch
 from safetensors import safe_open
 
-from lumos3d_cli.io.checkpoints import BUNDLED_MODELS, bundled_weights_path, summarize_checkpoint
 from lumos3d_cli.io.images import load_images
+from lumos3d_cli.model.bundled_models import BUNDLED_MODELS, bundled_weights_path
+from lumos3d_cli.model.checkpoints import summarize_checkpoint
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "lowlight-buu"
 WEIGHTS = {mode: bundled_weights_path(name) for mode, name in BUNDLED_MODELS.items()}

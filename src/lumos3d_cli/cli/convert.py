@@ -8,8 +8,9 @@ from pathlib import Path
 import typer
 
 from lumos3d_cli.cli.console import print_json, say
-from lumos3d_cli.io.checkpoints import STORAGE_DTYPES, save_checkpoint, storage_dtype, summarize_checkpoint
+from lumos3d_cli.io.weight_files import STORAGE_DTYPES, storage_dtype
 from lumos3d_cli.model.architectures import get_architecture
+from lumos3d_cli.model.checkpoints import save_checkpoint, summarize_checkpoint
 from lumos3d_cli.model.loading import load_model
 
 EXAMPLES = """

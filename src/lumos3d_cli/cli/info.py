@@ -10,7 +10,7 @@ from rich.table import Table
 from lumos3d_cli.cli.console import print_json, stdout_console
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.camera_files import find_camera_source
-from lumos3d_cli.io.checkpoints import summarize_checkpoint
+from lumos3d_cli.model.checkpoints import summarize_checkpoint
 from lumos3d_cli.io.image_files import IMAGE_SUFFIXES, list_images
 from lumos3d_cli.io.summaries import summarize_camera_file, summarize_gaussian_file, summarize_image_files
 

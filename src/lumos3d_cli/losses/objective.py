@@ -16,6 +16,7 @@ from torch import nn
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.losses.distillation import depth_distillation, weighted_pose_huber
 from lumos3d_cli.losses.feature_networks import load_trunk
+from lumos3d_cli.losses.loss_config import LossConfig
 from lumos3d_cli.losses.lpips import LPIPS
 from lumos3d_cli.losses.lumos.content import ContentLoss
 from lumos3d_cli.losses.lumos.image import image_l1
@@ -23,7 +24,6 @@ from lumos3d_cli.losses.lumos.voxel import VoxelStatisticsLoss
 from lumos3d_cli.losses.reconstruction import lpips_loss, mse_loss
 from lumos3d_cli.losses.supervision import pose_supervision, sparse_depth_supervision
 from lumos3d_cli.model.lumos3d import Lumos3DOutput
-from lumos3d_cli.train.config import LossConfig
 
 logger = logging.getLogger(__name__)
 

@@ -2,7 +2,7 @@
 
 Inference never silently runs on random weights: a name that is not a bundled model (an
 architecture's name included: an architecture is a network size, not trained weights) is an error
-saying what to pass.
+saying what to pass (`model.bundled_models.resolve_checkpoint`).
 Random weights come only from `build_model`, which says so.
 """
 
@@ -13,34 +13,14 @@ from pathlib import Path
 
 import torch
 
-from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.checkpoints import BUNDLED_MODELS, FORMAT_VGGT, Checkpoint, bundled_weights_path, read_checkpoint
 from lumos3d_cli.io.state_dicts import check_tensors
-from lumos3d_cli.model.architectures import ARCHITECTURES, Architecture
+from lumos3d_cli.model.architectures import Architecture
+from lumos3d_cli.model.bundled_models import resolve_checkpoint
+from lumos3d_cli.model.checkpoints import FORMAT_VGGT, Checkpoint, read_checkpoint
 from lumos3d_cli.model.heads.gaussian import GaussianHead
 from lumos3d_cli.model.lumos3d import Lumos3D
 
 logger = logging.getLogger(__name__)
-
-
-def _checkpoint_for(source: str | Path, architecture: Architecture | None) -> Checkpoint:
-    path = Path(source)
-    if path.exists():
-        return read_checkpoint(path, architecture)
-    bundled_names = ", ".join(f"'{mode}'" for mode in BUNDLED_MODELS)
-    if isinstance(source, str) and source in BUNDLED_MODELS:
-        bundled = bundled_weights_path(BUNDLED_MODELS[source])
-        if not bundled.is_file():
-            raise InputError(f"the bundled {source} model is missing from this installation ({bundled}); "
-                             "reinstall lumos3d or pass a checkpoint file")
-        return read_checkpoint(bundled)
-    if isinstance(source, str) and source in ARCHITECTURES:
-        raise InputError(
-            f"'{source}' is a model architecture (a network size), not trained weights: pass a checkpoint file "
-            f"(ours, VGGT's model.pt/model.safetensors or AnySplat's model.safetensors) or a bundled model "
-            f"({bundled_names}); build_model('{source}') gives random weights for experiments"
-        )
-    raise InputError(f"'{source}' is neither a checkpoint file nor a bundled model ({bundled_names})")
 
 
 def model_from_checkpoint(checkpoint: Checkpoint) -> Lumos3D:
@@ -71,6 +51,6 @@ def load_model(source: str | Path, device: str | torch.device = "cpu", architect
     bundled model ('low-light', 'over-exposure'). `architecture` sets the size of a foreign
     (VGGT/AnySplat) checkpoint; it defaults to vggt-1b and must not be given for our own files,
     which carry theirs."""
-    model = model_from_checkpoint(_checkpoint_for(source, architecture))
+    model = model_from_checkpoint(read_checkpoint(resolve_checkpoint(source), architecture))
     logger.info("loaded architecture '%s' from %s", model.architecture.name, model.provenance.get("path"))
     return model.to(device).eval()

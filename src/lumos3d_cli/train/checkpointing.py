@@ -14,7 +14,7 @@ import torch
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import write_bytes_atomic
-from lumos3d_cli.io.checkpoints import read_checkpoint, save_checkpoint
+from lumos3d_cli.model.checkpoints import read_checkpoint, save_checkpoint
 from lumos3d_cli.model.lumos3d import Lumos3D
 
 MODEL_FILE = "model.safetensors"

@@ -1,4 +1,5 @@
-"""Model checkpoints: our format, and the official VGGT-1B and AnySplat layouts.
+"""Model checkpoints: our format, and the official VGGT-1B and AnySplat layouts mapped onto
+`model.lumos3d.Lumos3D` (the file handling itself is `io/weight_files.py`).
 
 Our format is one `.safetensors` file whose header metadata holds a JSON config under the key
 "lumos3d": {"format_version", "preset": {...every Architecture field...}, "provenance": {...}}.
@@ -12,7 +13,6 @@ Foreign layouts are recognised by their key names:
            depth_head.*; point_head.* and track_head.* are ignored; there is no Gaussian head.
   AnySplat (`model.safetensors`): encoder.aggregator.*, encoder.camera_head.*,
            encoder.depth_head.*, encoder.gaussian_param_head.* (-> gaussian_head.*).
-Nothing is ever unpickled beyond plain tensors (`torch.load(weights_only=True)`).
 """
 
 from __future__ import annotations
@@ -26,12 +26,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import torch
-from safetensors import SafetensorError, safe_open
-from safetensors.torch import load_file, save_file
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.atomic import atomic_path
-from lumos3d_cli.io.state_dicts import listing, load_torch_state_dict
+from lumos3d_cli.io.state_dicts import listing
+from lumos3d_cli.io.weight_files import read_header, read_weights, resolve_weights_file, write_weights
 from lumos3d_cli.model.architectures import Architecture, get_architecture
 from lumos3d_cli.typed_config import from_dict, to_dict
 
@@ -47,9 +45,6 @@ METADATA_KEY = "lumos3d"
 FORMAT_VERSION = 1
 ARCHITECTURE_KEY = "preset"  # format version 1's name for the architecture in the JSON config
 OFFICIAL_ARCHITECTURE = "vggt-1b"
-TORCH_SUFFIXES = (".pt", ".pth", ".bin")
-# Files looked for, in order, when a folder (e.g. a Hugging Face snapshot) is given.
-FOLDER_FILES = ("model.safetensors", "model.pt", "pytorch_model.bin")
 _GAUSSIAN_OUTPUT = "gaussian_head.scratch.output_conv2.2.weight"
 
 
@@ -71,67 +66,12 @@ class Checkpoint:
     fresh_modules: list[str] = field(default_factory=list)
 
 
-BUNDLED_MODELS = {"low-light": "lumos3d-low-light", "over-exposure": "lumos3d-over-exposure"}
-"""Restoration mode -> file stem of the model shipped for it in lumos3d_cli/weights/."""
-
-
-def bundled_weights_path(name: str) -> Path:
-    """Where the packaged weights `name` live: lumos3d_cli/weights/<name>.safetensors."""
-    return Path(__file__).resolve().parents[1] / "weights" / f"{name}.safetensors"
-
-
-STORAGE_DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
-
-
-def storage_dtype(name: str) -> torch.dtype:
-    """The torch dtype of a storage precision name; InputError listing the choices otherwise."""
-    if name not in STORAGE_DTYPES:
-        raise InputError(f"storage dtype {name!r}: use one of {', '.join(STORAGE_DTYPES)}")
-    return STORAGE_DTYPES[name]
-
-
 def save_checkpoint(model: Lumos3D, path: Path | str, provenance: dict | None = None, dtype: str = "float32") -> Path:
     """Write `model` in our format (atomically). `provenance` (JSON-serialisable) records how the
     weights were made, e.g. training data, steps, git commit. `dtype` is the storage precision of
     floating-point tensors ("float16" halves the file; loading always returns float32)."""
-    path = Path(path)
-    if path.suffix != ".safetensors":
-        raise InputError(f"{path}: checkpoints are written as .safetensors files")
-    storage = storage_dtype(dtype)
     config = {"format_version": FORMAT_VERSION, ARCHITECTURE_KEY: to_dict(model.architecture), "provenance": provenance or {}}
-    tensors = {}
-    for name, tensor in model.state_dict().items():
-        tensor = tensor.detach().to("cpu", torch.float32 if tensor.is_floating_point() else tensor.dtype)
-        if tensor.is_floating_point() and storage != torch.float32:
-            limit = torch.finfo(storage).max
-            if tensor.abs().max() > limit:
-                raise InputError(f"{name}: values beyond the {dtype} range (±{limit:.4g}); store this checkpoint as float32")
-            tensor = tensor.to(storage)
-        tensors[name] = tensor.contiguous()
-    with atomic_path(path) as temporary:
-        save_file(tensors, str(temporary), metadata={METADATA_KEY: json.dumps(config)})
-    return path
-
-
-def _resolve_file(path: Path) -> Path:
-    if not path.exists():
-        raise InputError(f"{path}: checkpoint not found")
-    if path.is_dir():
-        for name in FOLDER_FILES:
-            if (path / name).is_file():
-                return path / name
-        raise InputError(f"{path}: folder holds none of {', '.join(FOLDER_FILES)}")
-    if path.suffix != ".safetensors" and path.suffix not in TORCH_SUFFIXES:
-        raise InputError(f"{path}: not a checkpoint; expected .safetensors or a torch state dict ({', '.join(TORCH_SUFFIXES)})")
-    return path
-
-
-def _read_metadata(path: Path) -> dict[str, str]:
-    try:
-        with safe_open(str(path), framework="pt") as handle:
-            return handle.metadata() or {}
-    except (SafetensorError, OSError) as error:
-        raise InputError(f"{path}: cannot read as safetensors ({error})") from None
+    return write_weights(model.state_dict(), Path(path), {METADATA_KEY: json.dumps(config)}, dtype)
 
 
 def _detect_format(path: Path, keys: list[str], metadata: dict[str, str]) -> str:
@@ -219,15 +159,8 @@ def _interpret(path: Path, shapes: dict[str, tuple[int, ...]], metadata: dict[st
 def read_checkpoint(path: Path | str, architecture: Architecture | None = None) -> Checkpoint:
     """Read any supported checkpoint (file, or folder holding one). `architecture` gives the network
     size for foreign layouts (default vggt-1b); our files carry their own."""
-    path = _resolve_file(Path(path))
-    if path.suffix == ".safetensors":
-        metadata = _read_metadata(path)
-        try:
-            raw = load_file(str(path))
-        except (SafetensorError, OSError) as error:
-            raise InputError(f"{path}: cannot read as safetensors ({error})") from None
-    else:
-        metadata, raw = {}, load_torch_state_dict(path)
+    path = resolve_weights_file(Path(path))
+    metadata, raw = read_weights(path)
     layout = _interpret(path, {k: tuple(v.shape) for k, v in raw.items()}, metadata, architecture)
     tensors = {}
     for key, name in layout.names.items():
@@ -239,26 +172,11 @@ def read_checkpoint(path: Path | str, architecture: Architecture | None = None) 
     return Checkpoint(path, layout.format, layout.architecture, tensors, layout.provenance, layout.ignored, layout.fresh_modules)
 
 
-def _header(path: Path) -> tuple[dict[str, tuple[int, ...]], Counter, dict[str, str]]:
-    """(shapes, dtype counts, metadata) without loading tensor data where the format allows."""
-    if path.suffix == ".safetensors":
-        metadata = _read_metadata(path)
-        shapes, dtypes = {}, Counter()
-        with safe_open(str(path), framework="pt") as handle:
-            for key in handle.keys():
-                piece = handle.get_slice(key)
-                shapes[key] = tuple(piece.get_shape())
-                dtypes[piece.get_dtype()] += 1
-        return shapes, dtypes, metadata
-    state = load_torch_state_dict(path)
-    return {k: tuple(v.shape) for k, v in state.items()}, Counter(str(v.dtype).removeprefix("torch.") for v in state.values()), {}
-
-
 def summarize_checkpoint(path: Path | str) -> dict:
     """Format, architecture, parameter count, tensor names by module, dtypes and provenance (for
     `lumos3d info`); reads only the header of safetensors files."""
-    path = _resolve_file(Path(path))
-    shapes, dtypes, metadata = _header(path)
+    path = resolve_weights_file(Path(path))
+    shapes, dtypes, metadata = read_header(path)
     layout = _interpret(path, shapes, metadata, None)
     used = {name: shapes[key] for key, name in layout.names.items()}
     modules = Counter(name.split(".")[0] for name in used)
