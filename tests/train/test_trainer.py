@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from lumos3d_cli.errors import RunError
-from lumos3d_cli.io.checkpoints import read_checkpoint
+from lumos3d_cli.model.checkpoints import read_checkpoint
 from lumos3d_cli.train.config import load_config
 from lumos3d_cli.train.distributed import setup_distributed
 from lumos3d_cli.train.trainer import Trainer
@@ -74,6 +74,23 @@ def test_non_finite_steps_are_skipped_then_abort(tiny_config, monkeypatch):
     assert trainer.nonfinite_total == 4
     assert any(not torch.equal(before[k], v) for k, v in trainer.model.state_dict().items())  # good steps applied
     assert all(torch.isfinite(v).all() for v in trainer.model.state_dict().values())
+
+
+def test_a_step_outside_run_counts_a_non_finite_loss(tiny_config, monkeypatch):
+    """step() is public: called on its own (no run()), a non-finite loss is skipped and counted."""
+    trainer = _trainer(tiny_config(name="lone-step"))
+    original = trainer.objective.forward
+
+    def nan_total(*args, **kwargs):
+        terms = original(*args, **kwargs)
+        terms["total"] = terms["total"] * float("nan")
+        return terms
+
+    monkeypatch.setattr(trainer.objective, "forward", nan_total)
+    before = {k: v.clone() for k, v in trainer.model.state_dict().items()}
+    report = trainer.step(0)
+    assert report.skipped and (trainer.nonfinite_in_a_row, trainer.nonfinite_total) == (1, 1)
+    assert all(torch.equal(before[k], v) for k, v in trainer.model.state_dict().items())
 
 
 def test_student_stage_logs_every_term(tiny_config, tmp_path):

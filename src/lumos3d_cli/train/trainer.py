@@ -7,7 +7,6 @@ resumed run reproduces the losses of an uninterrupted one.
 
 from __future__ import annotations
 
-import json
 import logging
 import signal
 import time
@@ -23,17 +22,11 @@ from lumos3d_cli.data.degradations import degrade, white_balance_shift
 from lumos3d_cli.data.multiview_dataset import MultiViewDataset
 from lumos3d_cli.data.scene_records import scan_dl3dv, scan_scene_folders
 from lumos3d_cli.errors import InputError, NonFiniteError, RunError
-from lumos3d_cli.eval.metrics import psnr
-from lumos3d_cli.eval.pose_accuracy import relative_pose_errors, summarise_pose_errors
-from lumos3d_cli.io.atomic import write_bytes_atomic
-from lumos3d_cli.io.cameras import Cameras
-from lumos3d_cli.io.checkpoints import save_checkpoint
-from lumos3d_cli.io.image_write import write_image
 from lumos3d_cli.losses.objective import StageBatch, TrainingObjective
 from lumos3d_cli.model.architectures import ARCHITECTURES
+from lumos3d_cli.model.checkpoints import save_checkpoint
 from lumos3d_cli.model.loading import load_model
-from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DOutput, build_model
-from lumos3d_cli.render.render import render
+from lumos3d_cli.model.lumos3d import Lumos3D, build_model
 from lumos3d_cli.train.checkpointing import (
     TrainingState,
     latest_checkpoint,
@@ -42,7 +35,9 @@ from lumos3d_cli.train.checkpointing import (
 )
 from lumos3d_cli.train.config import TrainConfig, config_to_yaml
 from lumos3d_cli.train.distributed import DistributedContext, all_reduce_mean, any_rank
+from lumos3d_cli.train.run_logs import RunLogs
 from lumos3d_cli.train.schedule import learning_rate_factor
+from lumos3d_cli.train.validation import render_views, validate
 
 logger = logging.getLogger(__name__)
 
@@ -64,20 +59,6 @@ class TrainResult:
     history: list[StepReport] = field(default_factory=list)
     final_checkpoint: Path | None = None
     stopped_early: bool = False
-
-
-def render_views(output: Lumos3DOutput, background: tuple[float, float, float]) -> tuple[torch.Tensor, torch.Tensor]:
-    """Render every scene's fused Gaussians at its predicted cameras, at the network size:
-    images [B, V, 3, H, W], expected depth [B, V, H, W]."""
-    width, height = output.image_size
-    images, depths = [], []
-    for scene, gaussians in enumerate(output.gaussians):
-        views = output.extrinsics.shape[1]
-        cameras = Cameras(output.extrinsics[scene].detach(), output.intrinsics[scene].detach(), [(width, height)] * views)
-        rendered = render(gaussians, cameras, background=background)
-        images.append(rendered.images)
-        depths.append(rendered.depths)
-    return torch.stack(images), torch.stack(depths)
 
 
 class Trainer:
@@ -105,7 +86,9 @@ class Trainer:
             if context.enabled else self.model
         )
         self._stop_requested = False
-        self._tensorboard = self._tensorboard_writer()
+        self.nonfinite_in_a_row = 0  # steps skipped in a row for a non-finite loss or gradient
+        self.nonfinite_total = 0
+        self._logs = RunLogs(self.output, config.tensorboard) if context.is_main else None
 
     # -- set-up ---------------------------------------------------------------------------------
 
@@ -149,15 +132,6 @@ class Trainer:
         heads = [p for n, p in self.model.named_parameters() if not n.startswith("aggregator.") and p.requires_grad]
         multiplier = self.config.optim.backbone_lr_multiplier
         return [{"params": backbone, "lr": self.config.optim.lr * multiplier}, {"params": heads, "lr": self.config.optim.lr}]
-
-    def _tensorboard_writer(self):
-        if not (self.config.tensorboard and self.context.is_main):
-            return None
-        try:
-            from torch.utils.tensorboard import SummaryWriter
-        except ImportError as error:
-            raise InputError("tensorboard: true needs the tensorboard package (pip install tensorboard)") from error
-        return SummaryWriter(str(self.output / "tensorboard"))
 
     # -- data -----------------------------------------------------------------------------------
 
@@ -284,69 +258,24 @@ class Trainer:
         return state.step
 
     def _log(self, report: StepReport) -> None:
-        if not self.context.is_main:
-            return
-        line = {"step": report.step, "lr": report.learning_rate, "skipped": report.skipped,
-                "seconds": round(report.seconds, 4), "nonfinite_total": self.nonfinite_total, **report.terms}
-        with open(self.output / "metrics.jsonl", "a") as handle:
-            handle.write(json.dumps(line) + "\n")
-        if self._tensorboard is not None:
-            for name, value in report.terms.items():
-                self._tensorboard.add_scalar(f"loss/{name}", value, report.step)
-            self._tensorboard.add_scalar("lr", report.learning_rate, report.step)
+        if self._logs is not None:
+            self._logs.append_step(report.step, report.learning_rate, report.skipped, report.seconds, self.nonfinite_total,
+                                   report.terms)
 
-    def _truncate_logs(self, start: int) -> None:
-        """Drop the log lines of the work about to be redone from step `start`: metrics.jsonl
-        lines of steps >= start, validation.jsonl lines after `start` steps (its step counts the
-        steps done before it, so the validation at `start` itself is kept)."""
-        if not self.context.is_main:
-            return
-        for name, last_kept in (("metrics.jsonl", start - 1), ("validation.jsonl", start)):
-            path = self.output / name
-            if path.is_file():
-                kept = [line for line in path.read_text().splitlines() if line and json.loads(line)["step"] <= last_kept]
-                write_bytes_atomic(path, ("\n".join(kept) + "\n" if kept else "").encode())
-
-    def validate(self, step: int) -> Path | None:
-        """Score the first `validation_samples` samples of epoch 0 (fixed across the run): PSNR
-        of the renders against the normal-light images and, for samples with dataset cameras,
-        the accuracy of the predicted cameras (eval/pose_accuracy.py) — one line of
-        validation.jsonl; and render the first sample's views: rows of input | render | target."""
-        if not self.context.is_main:
-            return None
-        self.model.eval()
-        rotation_errors, translation_errors, psnrs = [], [], []
-        first = None
+    def _validation_samples(self):
+        """The first `validation_samples` samples of epoch 0 (fixed across the run), as
+        (batch, network input, targets)."""
         for sample_id in range(min(self.config.validation_samples, len(self.dataset))):
             batch = self._load_samples([sample_id])
-            inputs, targets = self.inputs_and_targets(batch, sample_id)
-            with torch.no_grad(), self._autocast():
-                output = self.model(inputs)
-            renders, _ = render_views(output, self.config.loss.background)
-            renders = renders.to(targets).clamp(0, 1)
-            psnrs.append(float(psnr(renders[0], targets[0]).mean()))
-            if bool(batch["has_poses"][0]) and inputs.shape[1] > 1:
-                errors = relative_pose_errors(output.extrinsics[0].detach().double().cpu(), batch["extrinsics"][0].double().cpu())
-                rotation_errors.append(errors[0])
-                translation_errors.append(errors[1])
-            if first is None:
-                first = (inputs, renders, targets)
+            yield (batch, *self.inputs_and_targets(batch, sample_id))
+
+    def validate(self, step: int) -> Path | None:
+        """Validation after `step` steps on rank 0 (train/validation.py); returns the picture's path."""
+        if not self.context.is_main:
+            return None
+        path = validate(self.model, self._validation_samples(), step, self.output, self.config.validation_views,
+                        self.config.loss.background, self._autocast)
         self.model.train()
-        line = {"step": step, "samples": len(psnrs), "psnr": float(np.mean(psnrs))}
-        if rotation_errors:
-            line["cameras"] = summarise_pose_errors(torch.cat(rotation_errors), torch.cat(translation_errors)).as_dict()
-        with open(self.output / "validation.jsonl", "a") as handle:
-            handle.write(json.dumps(line) + "\n")
-        cameras = line.get("cameras")
-        logger.info("validation at step %d: PSNR %.2f dB%s", step, line["psnr"],
-                    f", cameras AUC@30 {cameras['auc_30']:.3f}, rotation error median {cameras['rotation_error_median']:.1f}°"
-                    if cameras else "")
-        inputs, renders, targets = first
-        views = min(self.config.validation_views, inputs.shape[1])
-        rows = [torch.cat([inputs[0, v], renders[0, v], targets[0, v]], dim=-1) for v in range(views)]
-        grid = torch.cat(rows, dim=-2).permute(1, 2, 0).float().cpu().numpy()
-        path = self.output / "validation" / f"step_{step:08d}.png"
-        write_image(path, grid)
         return path
 
     # -- the loop -------------------------------------------------------------------------------
@@ -355,17 +284,13 @@ class Trainer:
         logger.warning("signal %d: saving a checkpoint and stopping after this step", signum)
         self._stop_requested = True
 
-    def request_stop(self) -> None:
-        """Ask the loop to checkpoint and stop after the current step (what SIGINT/SIGTERM do)."""
-        self._stop_requested = True
-
     def run(self, resume: bool = False, max_steps: int | None = None, stop_after: int | None = None) -> TrainResult:
         """Train to optim.steps (or `max_steps`). `stop_after` behaves like a signal arriving
         during that step (used to test interruption)."""
         self.output.mkdir(parents=True, exist_ok=True)
-        self.nonfinite_in_a_row = self.nonfinite_total = 0
         start = self.resume() if resume else 0
-        self._truncate_logs(start)
+        if self._logs is not None:
+            self._logs.truncate(start)
         if self.context.is_main:
             (self.output / "config.yaml").write_text(config_to_yaml(self.config))
         end = min(self.config.optim.steps, max_steps) if max_steps else self.config.optim.steps
@@ -400,6 +325,6 @@ class Trainer:
         finally:
             for signum, handler in previous.items():
                 signal.signal(signum, handler)
-            if self._tensorboard is not None:
-                self._tensorboard.close()
+            if self._logs is not None:
+                self._logs.close()
 
