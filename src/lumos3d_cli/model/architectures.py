@@ -8,6 +8,7 @@ store an architecture as JSON through `typed_config` (`to_dict` / `from_dict`), 
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 from lumos3d_cli.errors import InputError
@@ -26,6 +27,9 @@ class PatchEmbedConfig:
     depth: int = 0
     num_heads: int = 0
     mlp_ratio: float = 4.0
+
+
+APPEARANCES = ("regression", "operator")
 
 
 @dataclass(frozen=True)
@@ -66,6 +70,14 @@ class Architecture:
     gaussian_scale_base: float = 0.001
     gaussian_scale_max: float = 0.3
     gaussian_scale_min: float = 1e-7
+    # Appearance: "regression", the Gaussian head regresses every Gaussian's colour (the paper's;
+    # VGGT/AnySplat-based checkpoints), or "operator", the illumination head predicts one
+    # restoration operator per scene in linear light that colours the Gaussians from the photos'
+    # own pixels (model/appearance/; its SH block of the Gaussian head goes unused).
+    appearance: str = "regression"
+    illumination_hidden: int = 128
+    illumination_histogram_bins: int = 16  # 0: the illumination head reads the tokens only
+    local_correction_channels: int = 1  # per-view local gain grid channels (1 or 3); 0: none
 
     def __post_init__(self) -> None:
         head_dim = self.embed_dim // max(self.num_heads, 1)
@@ -84,6 +96,10 @@ class Architecture:
             "sh_degree must be 0..4": 0 <= self.sh_degree <= 4,
             "voxel_size must be positive": self.voxel_size > 0,
             "0 < gaussian_scale_min <= gaussian_scale_max": 0 < self.gaussian_scale_min <= self.gaussian_scale_max,
+            "appearance must be 'regression' or 'operator'": self.appearance in APPEARANCES,
+            "local_correction_channels must be 0, 1 or 3": self.local_correction_channels in (0, 1, 3),
+            "illumination_hidden and illumination_histogram_bins must be positive and non-negative":
+                self.illumination_hidden > 0 and self.illumination_histogram_bins >= 0,
         }
         failed = [message for message, ok in checks.items() if not ok]
         if failed:
@@ -174,6 +190,9 @@ ARCHITECTURES: dict[str, Architecture] = {
         sh_degree=4,
     ),
 }
+# The tiny network with the appearance operator instead of colour regression (issue 15): SH
+# degree 0, since the operator's colours carry no view dependence.
+ARCHITECTURES["tiny-operator"] = dataclasses.replace(ARCHITECTURES["tiny"], name="tiny-operator", appearance="operator", sh_degree=0)
 
 DEFAULT_ARCHITECTURE = "tiny"
 

@@ -13,6 +13,9 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.model.architectures import DEFAULT_ARCHITECTURE, Architecture, get_architecture
+from lumos3d_cli.model.appearance.gaussian_colours import with_operator_colours
+from lumos3d_cli.model.appearance.illumination_head import IlluminationHead
+from lumos3d_cli.model.appearance.operator import AppearanceOperator
 from lumos3d_cli.model.backbone import Aggregator
 from lumos3d_cli.model.gaussian_adapter import activate_gaussians, split_confidence
 from lumos3d_cli.model.geometry import scene_scale, unproject_depth
@@ -50,7 +53,9 @@ class Lumos3DOutput:
     world_points [B, V, H, W, 3] (depth unprojected at pixel centres); pixel_confidence
     [B, V, H, W] fusion logits; pixel_gaussians and gaussians (fused, pruned): one Gaussians per
     scene, pixel rows in (view, row, column) order; scene_scale [B] median depth, the unit of
-    voxel and Gaussian sizes; counts per scene.
+    voxel and Gaussian sizes; counts per scene; appearance: the scenes' restoration operators
+    (architectures with appearance "operator"; None for colour regression), which coloured the
+    Gaussians here and colour the full-resolution photos through `restore_photos`.
     """
 
     pose_enc: torch.Tensor
@@ -65,6 +70,7 @@ class Lumos3DOutput:
     gaussians: list[Gaussians]
     scene_scale: torch.Tensor
     counts: list[GaussianCounts] = field(default_factory=list)
+    appearance: AppearanceOperator | None = None
 
     @property
     def image_size(self) -> tuple[int, int]:
@@ -83,7 +89,8 @@ class Lumos3DPrediction:
     pose_enc_list (every camera refinement, [B, V, 9] each); extrinsics [B, V, 3, 4] world->camera
     and intrinsics [B, V, 3, 3] (network pixels) decoded from the last; depth, depth_conf
     [B, V, H, W]; params [B, V, H, W, K-1] raw Gaussian parameters (gaussian_adapter layout);
-    confidence [B, V, H, W] fusion logits."""
+    confidence [B, V, H, W] fusion logits; appearance: the scenes' restoration operators (None for
+    colour regression; with it, params carry the restored colours)."""
 
     pose_enc_list: list[torch.Tensor]
     extrinsics: torch.Tensor
@@ -92,6 +99,7 @@ class Lumos3DPrediction:
     depth_conf: torch.Tensor
     params: torch.Tensor
     confidence: torch.Tensor
+    appearance: AppearanceOperator | None = None
 
 
 class Lumos3D(nn.Module):
@@ -105,6 +113,14 @@ class Lumos3D(nn.Module):
         self.camera_head = CameraHead(architecture)
         self.depth_head = DepthHead(architecture)
         self.gaussian_head = GaussianHead(architecture)
+        self.illumination_head = (
+            IlluminationHead(
+                2 * architecture.embed_dim, architecture.patch_start_index, architecture.patch_size,
+                architecture.illumination_hidden, histogram_bins=architecture.illumination_histogram_bins,
+                local_channels=architecture.local_correction_channels,
+            )
+            if architecture.appearance == "operator" else None
+        )
         # Where the weights came from (set by `load_model`; `build_model` marks them random).
         self.provenance: dict = {}
 
@@ -176,10 +192,29 @@ class Lumos3D(nn.Module):
             pose_enc_list = self.camera_head(tokens[self.architecture.depth - 1])
             depth, depth_conf = self.depth_head(tokens, images)
             raw = self.gaussian_head(tokens, images)  # [B, V, K, H, W]
+            appearance = None
+            if self.illumination_head is not None:
+                appearance = self.illumination_head(tokens[self.architecture.depth - 1], images)
             del tokens  # the layer tokens are the largest tensors; free them before fusion
             extrinsics, intrinsics = decode_pose(pose_enc_list[-1], (height, width))
             params, confidence = split_confidence(raw.permute(0, 1, 3, 4, 2))  # [B, V, H, W, K-1], [B, V, H, W]
-        return Lumos3DPrediction(pose_enc_list, extrinsics, intrinsics, depth, depth_conf, params, confidence)
+            if appearance is not None:
+                # Each pixel Gaussian takes its restored pixel's colour at the network size; the
+                # pipeline recolours from the full-resolution photos (`restore_photos`).
+                params = with_operator_colours(params, appearance.apply(images), self.architecture.sh_degree)
+        return Lumos3DPrediction(pose_enc_list, extrinsics, intrinsics, depth, depth_conf, params, confidence, appearance)
+
+    def predict_appearance(self, images: torch.Tensor) -> AppearanceOperator:
+        """images [B, V, 3, H, W] in [0, 1] (network size) -> the scenes' restoration operators,
+        running only the aggregator's last layer and the illumination head (no geometry): for
+        one-view samples such as exposure brackets, and 2D restoration."""
+        if self.illumination_head is None:
+            raise InputError(f"architecture '{self.architecture.name}' regresses colours (appearance 'regression'); "
+                             "it predicts no restoration operator")
+        self._check_images(images)
+        last = self.architecture.depth - 1
+        tokens = self.aggregator(images, [last])[last]
+        return self.illumination_head(tokens, images)
 
     def assemble(
         self, prediction: Lumos3DPrediction, extrinsics: torch.Tensor | None = None,
@@ -210,7 +245,7 @@ class Lumos3D(nn.Module):
             pose_enc=prediction.pose_enc_list[-1], pose_enc_list=prediction.pose_enc_list, extrinsics=extrinsics,
             intrinsics=intrinsics, depth=depth, depth_conf=prediction.depth_conf, world_points=world_points,
             pixel_confidence=prediction.confidence, pixel_gaussians=pixel_gaussians, gaussians=gaussians,
-            scene_scale=scales, counts=counts,
+            scene_scale=scales, counts=counts, appearance=prediction.appearance,
         )
         _require_finite_output(output)
         return output
@@ -231,6 +266,8 @@ def _require_finite_output(output: Lumos3DOutput) -> None:
         gaussians.require_finite(f"model output gaussians[{scene}]")
     for scene, gaussians in enumerate(output.pixel_gaussians):
         gaussians.require_finite(f"model output pixel_gaussians[{scene}]")
+    if output.appearance is not None:
+        output.appearance.require_finite("model output appearance")
 
 
 def build_model(architecture: str | Architecture = DEFAULT_ARCHITECTURE, seed: int | None = None) -> Lumos3D:
