@@ -24,6 +24,8 @@ from lumos3d_cli.eval.metrics import auto_gamma
 from lumos3d_cli.geometry.confirmed_depth import confirmed_pixels
 from lumos3d_cli.geometry.consistency import depth_consistency
 from lumos3d_cli.geometry.depth_alignment import MIN_POINTS, align_depth
+from lumos3d_cli.geometry.depth_correction import GRID as DEPTH_CORRECTION_GRID
+from lumos3d_cli.geometry.depth_correction import correct_depth
 from lumos3d_cli.geometry.given_poses import read_given_poses
 from lumos3d_cli.geometry.sfm import Registration, register_photos
 from lumos3d_cli.geometry.similarity import fill_unregistered_views, fit_camera_similarity
@@ -163,25 +165,38 @@ def _points_of_views(points: SparsePoints, views: list[int]) -> SparsePoints:
     return replace(points, view=position[points.view[keep]], point=points.point[keep], pixel=points.pixel[keep])
 
 
+def _median(values: torch.Tensor) -> float | None:
+    finite = values[torch.isfinite(values)]
+    return round(float(finite.median()), 4) if len(finite) else None
+
+
 def _aligned_depth(
     network: NetworkPass, selected: list[int], network_cameras: Cameras, points: SparsePoints, selected_names: list[str],
     selected_cameras: Cameras,
 ) -> tuple[torch.Tensor, dict]:
     """The network's depth [S, h, w] of the selected views in the registered frame, and how it was
-    aligned: per view to the sparse points it observes, or — with no points (given poses where
+    aligned: per view to the sparse points it observes (a scale and shift, then a smooth
+    correction: `geometry.depth_correction`), or — with no points (given poses where
     structure-from-motion failed) — by the scale of the similarity between the network's cameras
     and the registered ones."""
     depth = network.prediction.depth[0].detach().cpu().double()
     if len(points) >= MIN_POINTS:
+        observed = _points_of_views(points, selected)
         try:
-            alignment = align_depth(depth, network_cameras, _points_of_views(points, selected))
+            alignment = align_depth(depth, network_cameras, observed)
         except InputError as error:
             logger.warning("%s; the depth is scaled by the camera similarity instead", error)
         else:
-            return alignment.depth, {
+            correction = correct_depth(alignment.depth, network_cameras, observed)
+            return correction.depth, {
                 "form": alignment.form, "fitted_views": int(alignment.fitted.sum()), "views": len(selected),
                 "median_relative_residual": round(alignment.median_residual(), 4),
                 "points_per_view": alignment.points.tolist(),
+                "smooth_correction": {
+                    "grid": list(DEPTH_CORRECTION_GRID), "corrected_views": int(correction.corrected.sum()),
+                    "median_log_residual_before": _median(correction.residual_before),
+                    "median_log_residual_after": _median(correction.residual_after),
+                },
             }
     similarity = fit_camera_similarity(network.network_cameras(selected_names), selected_cameras)
     return depth * similarity.scale, {"form": "camera similarity scale", "scale": similarity.scale, "views": len(selected)}
