@@ -10,7 +10,7 @@ import logging
 import resource
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import torch
@@ -23,7 +23,10 @@ from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.io.image_files import list_images
 from lumos3d_cli.io.images import ImageBatch, load_images
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
-from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D
+from lumos3d_cli.model.appearance.footprint import footprint_colours
+from lumos3d_cli.model.appearance.gaussian_colours import with_operator_colours
+from lumos3d_cli.model.appearance.photo_restoration import restore_photos
+from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D, Lumos3DPrediction
 from lumos3d_cli.pipeline.model_loading import load_restoration_model
 from lumos3d_cli.pipeline.network_pass import even_subset, run_network
 from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, RestorePreset, get_restore_preset
@@ -115,6 +118,20 @@ class BuiltScene:
     timings: dict[str, float]
 
 
+def with_full_resolution_colours(prediction: Lumos3DPrediction, photos: torch.Tensor, model: Lumos3D) -> Lumos3DPrediction:
+    """For a model that predicts a restoration operator: each pixel Gaussian's colour becomes the
+    operator applied to the photo [S, 3, H, W] at full resolution, averaged over the Gaussian's
+    footprint (the network image only saw a resized copy, which would blur the colours)."""
+    if prediction.appearance is None:
+        return prediction
+    height, width = prediction.depth.shape[-2:]
+    with torch.no_grad():
+        restored = restore_photos(photos.to(prediction.params.device), prediction.appearance.scene(0))
+        colours = footprint_colours(restored, height, width)
+        params = with_operator_colours(prediction.params, colours[None], model.architecture.sh_degree)
+    return replace(prediction, params=params)
+
+
 def build_scene(
     images: torch.Tensor, names: list[str], model: Lumos3D, preset: RestorePreset, geometry: str = "auto",
     poses: Path | str | None = None, max_views: int | None = None, mode: str = "low-light",
@@ -146,12 +163,13 @@ def build_scene(
     progress.advance("network")
     started = time.perf_counter()
     scene_geometry = place_views(registration, network, selected, names)
+    prediction = with_full_resolution_colours(network.prediction, images[selected], model)
     keep = None if fuse_views is None else torch.tensor([bool(fuse_views[i]) for i in selected])
     if keep is not None and not bool(keep.any()):
         raise InputError("selects none of the network's views", parameter="fuse_views")
     with torch.no_grad():
         output = model.assemble(
-            network.prediction, scene_geometry.network_extrinsics[None], scene_geometry.network_intrinsics[None],
+            prediction, scene_geometry.network_extrinsics[None], scene_geometry.network_intrinsics[None],
             scene_geometry.depth[None], voxel_size=model.architecture.voxel_size * preset.voxel_scale, fuse_views=keep,
             fuse_pixels=None if scene_geometry.fuse_pixels is None else scene_geometry.fuse_pixels[None],
         )
