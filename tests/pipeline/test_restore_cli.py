@@ -113,3 +113,18 @@ def test_even_subset_keeps_required_views():
     assert even_subset(3, 8) == [0, 1, 2]
     with pytest.raises(InputError, match="max_views 2: 3 views must go through the network"):
         even_subset(10, 2, required=[1, 2, 3])
+
+
+def test_restore_writes_an_orbit_video(run_cli, buu, tmp_path, random_checkpoint):
+    from lumos3d_cli.io.video import probe_video
+
+    photos = _copy(buu, tmp_path, ["1.JPG", "2.JPG"])
+    out = tmp_path / "out" / "scene.ply"
+    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--video", tmp_path / "o.avi"),
+                       ".mp4 (H.264) or .gif")
+    assert not out.parent.exists()
+    result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "network",
+                     "--video", tmp_path / "orbit.mp4", "--quiet")
+    assert result.code == 0, result.err
+    stream = probe_video(tmp_path / "orbit.mp4")
+    assert stream.codec == "h264" and stream.pixel_format == "yuv420p" and stream.width > 0

@@ -9,18 +9,24 @@ from pathlib import Path
 import typer
 
 from lumos3d_cli.cli.console import ProgressBars, print_json, progress_bar, say
+from lumos3d_cli.cli.view import EXIT_INTERRUPTED, announce
 from lumos3d_cli.data.degradations import MODES
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.output_paths import check_output_path
+from lumos3d_cli.io.video import video_kind
 from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET
-from lumos3d_cli.pipeline.restore import restore
+from lumos3d_cli.pipeline.restore import RestoredScene, restore
 from lumos3d_cli.pipeline.restore_outputs import check_view_format, write_restored_scene
 from lumos3d_cli.pipeline.scene_geometry import GEOMETRY_SOURCES
+from lumos3d_cli.viewer.orbit_video import DEFAULT_ORBIT_FRAMES, write_orbit_video
+from lumos3d_cli.viewer.server import DEFAULT_HOST, DEFAULT_PORT, serve_scene
 
 EXAMPLES = """
   lumos3d restore photos/ -o out/scene.ply
   lumos3d restore dark/ -o out/scene.ply --preset best --reference bright/ --lpips-weights vgg16-397923af.pth
   lumos3d restore dark/ -o out/scene.ply --poses transforms.json
   lumos3d restore raw/*.dng -o out/scene.ply --checkpoint lumos3d.safetensors --output-format exr
+  lumos3d restore dark/ -o out/scene.ply --video out/orbit.mp4 --view
 """
 
 
@@ -37,12 +43,18 @@ def restore_command(
     reference: Path | None = typer.Option(None, "--reference", help="Normal-light photos of the same views (metrics)."),
     lpips_weights: Path | None = typer.Option(None, "--lpips-weights", help="torchvision vgg16 weights for LPIPS."),
     output_format: str = typer.Option("png", "--output-format", help="Restored views as png (8-bit), png16 or exr (linear)."),
+    video: Path | None = typer.Option(None, "--video", help="Also write an orbit of the restored scene (.mp4 H.264 or .gif)."),
+    view: bool = typer.Option(False, "--view", help="Open the result in the browser viewer when done (Ctrl-C stops it)."),
+    port: int = typer.Option(DEFAULT_PORT, "--port", help="The viewer's port with --view (0: any free port)."),
     json_output: bool = typer.Option(False, "--json", help="Print the summary as JSON on stdout."),
 ) -> None:
     """Restore a 3D scene from unposed low-light or over-exposed photos."""
     if output.suffix.lower() != ".ply":
         raise InputError(f"{output}: the scene file must end in .ply", parameter="output")
+    check_output_path(output, "output")
     check_view_format(output_format)
+    if video is not None:
+        video_kind(video)
     with progress_bar() as bars:
         scene = restore(
             photos, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,
@@ -50,10 +62,23 @@ def restore_command(
             progress=ProgressBars(bars),
         )
         summary = write_restored_scene(scene, output, output_format)
+        if video is not None:
+            frames = bars.add_task("orbit video", total=DEFAULT_ORBIT_FRAMES)
+            write_orbit_video(scene.gaussians, scene.cameras, video, on_frame=lambda: bars.advance(frames))
     if json_output:
         print_json(summary)
-        return
+    else:
+        _report(scene, summary, output, video)
+    if view:
+        serve_scene(output.parent, DEFAULT_HOST, port, on_ready=announce)
+        raise typer.Exit(EXIT_INTERRUPTED)
+
+
+def _report(scene: RestoredScene, summary: dict, output: Path, video: Path | None) -> None:
+    """What was written, on stderr (stdout stays for --json)."""
     geometry_report = summary["geometry"]
+    if video is not None:
+        say(f"orbit video: {video}")
     say(f"restored {len(scene.names)} view(s) with {geometry_report['source']} cameras: {output} "
         f"({len(scene.gaussians):,} Gaussians), views in {output.parent / 'restored'}, contact sheet "
         f"{output.parent / 'contact_sheet.png'}")

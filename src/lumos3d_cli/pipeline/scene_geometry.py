@@ -27,7 +27,7 @@ from lumos3d_cli.geometry.depth_alignment import MIN_POINTS, align_depth
 from lumos3d_cli.geometry.depth_correction import GRID as DEPTH_CORRECTION_GRID
 from lumos3d_cli.geometry.depth_correction import correct_depth
 from lumos3d_cli.geometry.given_poses import read_given_poses
-from lumos3d_cli.geometry.sfm import Registration, register_photos
+from lumos3d_cli.geometry.sfm import EXHAUSTIVE_MATCHING_LIMIT, Registration, register_photos
 from lumos3d_cli.geometry.similarity import fill_unregistered_views, fit_camera_similarity
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.sparse_points import SparsePoints
@@ -70,7 +70,10 @@ class ViewRegistration:
 def _structure_from_motion(images: torch.Tensor, names: list[str], progress: JobProgress) -> Registration:
     progress.start("structure from motion", 1)
     # The photos are dark (or washed out); SIFT finds far more features after a tone curve.
-    registration = register_photos(auto_gamma(images), names)
+    # One thread makes COLMAP's result repeatable (with more, a small photo set can settle on
+    # another focal length from run to run); above the exhaustive-matching range speed matters more.
+    threads = 1 if len(names) <= EXHAUSTIVE_MATCHING_LIMIT else None
+    registration = register_photos(auto_gamma(images), names, threads=threads)
     progress.advance("structure from motion")
     if not registration.failed and not registration.looks_like_one_scene:
         logger.warning("the photos may not show one scene: %s", registration.describe())
