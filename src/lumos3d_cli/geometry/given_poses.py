@@ -63,7 +63,7 @@ def read_given_poses(
     if len(names) != len(sizes):
         raise InputError(f"{len(names)} photo names for {len(sizes)} photo sizes")
     if not path.exists():
-        raise InputError(f"--poses {path}: no such file or folder")
+        raise InputError(f"{path}: no such file or folder", parameter="poses")
     given = _read_pose_source(path)
     stems = [Path(name).stem for name in given.names]
     row_of_stem: dict[str, int] = {}
@@ -78,16 +78,17 @@ def read_given_poses(
                 and torch.allclose(given.intrinsics[first], given.intrinsics[row], atol=1e-9)):
             conflicting.append(given.names[row])
     if conflicting:
-        raise InputError(f"--poses {path}: differing poses for one photo ({_listed(conflicting)}); keep one pose per photo")
+        raise InputError(f"{path}: differing poses for one photo ({_listed(conflicting)}); keep one pose per photo",
+                         parameter="poses")
     photo_stems = [Path(name).stem for name in names]
     missing = [name for name, stem in zip(names, photo_stems) if stem not in row_of_stem]
     if missing:
-        raise InputError(f"--poses {path}: no pose for {len(missing)} of {len(names)} photos ({_listed(missing)}); "
-                         "poses are matched to photos by file name without suffix")
+        raise InputError(f"{path}: no pose for {len(missing)} of {len(names)} photos ({_listed(missing)}); "
+                         "poses are matched to photos by file name without suffix", parameter="poses")
     extra = [given.names[row] for stem, row in row_of_stem.items() if stem not in set(photo_stems)]
     if extra and not allow_extra_poses:
-        raise InputError(f"--poses {path}: {len(extra)} poses have no photo ({_listed(extra)}); "
-                         "pass the photos of every pose, or a camera file of these photos only")
+        raise InputError(f"{path}: {len(extra)} poses have no photo ({_listed(extra)}); "
+                         "pass the photos of every pose, or a camera file of these photos only", parameter="poses")
     rows = [row_of_stem[stem] for stem in photo_stems]
     chosen = given[rows]
     intrinsics = chosen.intrinsics.double().clone()
@@ -95,15 +96,15 @@ def read_given_poses(
         if (width, height) == (file_width, file_height):
             continue
         if abs((width / height) / (file_width / file_height) - 1) > _ASPECT_TOLERANCE:
-            raise InputError(f"--poses {path}: photo {names[view]} is {width}x{height} but its pose is for "
-                             f"{file_width}x{file_height} (another aspect ratio); pass uncropped photos")
+            raise InputError(f"{path}: photo {names[view]} is {width}x{height} but its pose is for "
+                             f"{file_width}x{file_height} (another aspect ratio); pass uncropped photos", parameter="poses")
         intrinsics[view, 0] *= width / file_width
         intrinsics[view, 1] *= height / file_height
     cameras = Cameras(chosen.extrinsics.double(), intrinsics, list(sizes), list(names))
     try:
-        cameras.require_valid(f"--poses {path}")
+        cameras.require_valid(str(path))
     except ValueError as error:
-        raise InputError(str(error)) from error
+        raise InputError(str(error), parameter="poses") from error
     if extra:
-        logger.info("--poses %s: %d poses without a photo are not used", path, len(extra))
+        logger.info("poses %s: %d poses without a photo are not used", path, len(extra))
     return cameras
