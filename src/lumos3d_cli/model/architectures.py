@@ -190,9 +190,10 @@ ARCHITECTURES: dict[str, Architecture] = {
         sh_degree=4,
     ),
 }
-# The tiny network with the appearance operator instead of colour regression (issue 15): SH
-# degree 0, since the operator's colours carry no view dependence.
-ARCHITECTURES["tiny-operator"] = dataclasses.replace(ARCHITECTURES["tiny"], name="tiny-operator", appearance="operator", sh_degree=0)
+# The tiny network with the appearance operator instead of colour regression (issue 15). Its
+# module tree is tiny's plus the illumination head, so a tiny checkpoint initialises it
+# (`with_appearance`); the Gaussian head's SH channels go unused.
+ARCHITECTURES["tiny-operator"] = dataclasses.replace(ARCHITECTURES["tiny"], name="tiny-operator", appearance="operator")
 
 DEFAULT_ARCHITECTURE = "tiny"
 

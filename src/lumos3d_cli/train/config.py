@@ -16,6 +16,7 @@ import yaml
 
 from lumos3d_cli.data.degradations import Degradation
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.losses.appearance import SSIM_WEIGHT
 from lumos3d_cli.losses.loss_config import LossConfig
 from lumos3d_cli.typed_config import apply_override, from_dict, to_dict
 
@@ -44,6 +45,23 @@ class DataConfig:
 
 
 @dataclass
+class BracketConfig:
+    """root: the brackets folder (None: no bracket samples); weight of their appearance loss in
+    the total; batch_size: bracket samples per step (each one view); ssim_weight: w of the
+    appearance loss; validation_samples: held-out pairs scored at each validation."""
+
+    root: str | None = None
+    weight: float = 1.0
+    batch_size: int = 4
+    ssim_weight: float = SSIM_WEIGHT
+    validation_samples: int = 16
+
+    def __post_init__(self) -> None:
+        if self.batch_size < 1 or self.validation_samples < 1 or self.weight < 0:
+            raise ValueError("brackets.batch_size and brackets.validation_samples must be at least 1, brackets.weight >= 0")
+
+
+@dataclass
 class OptimConfig:
     lr: float = 2e-4
     weight_decay: float = 0.05
@@ -60,6 +78,8 @@ class TrainConfig:
     stage: Literal["teacher", "student"]
     output: str
     model: str = "tiny"  # architecture name (random init) or checkpoint to start from
+    # switch the starting model's appearance ('regression' | 'operator'; model/appearance/conversion.py)
+    appearance: str | None = None
     teacher: str | None = None  # frozen teacher checkpoint (student stage)
     # what the frozen teacher sees: the normal-light images (the paper's cross-illumination
     # distillation) or the student's own degraded input (the paper's ablation)
@@ -68,6 +88,7 @@ class TrainConfig:
     degrade: Degradation = field(default_factory=Degradation)  # data.degradations, student stage
     loss: LossConfig = field(default_factory=LossConfig)
     optim: OptimConfig = field(default_factory=OptimConfig)
+    brackets: BracketConfig = field(default_factory=BracketConfig)  # real exposure brackets (train/bracket_samples.py)
     batch_size: int = 1  # scenes per step per process
     seed: int = 0
     device: Literal["auto", "cpu", "cuda"] = "auto"

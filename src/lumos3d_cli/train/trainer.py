@@ -23,10 +23,12 @@ from lumos3d_cli.data.multiview_dataset import MultiViewDataset
 from lumos3d_cli.data.scene_records import scan_dl3dv, scan_scene_folders
 from lumos3d_cli.errors import InputError, NonFiniteError, RunError
 from lumos3d_cli.losses.objective import StageBatch, TrainingObjective
+from lumos3d_cli.model.appearance.conversion import with_appearance
 from lumos3d_cli.model.architectures import ARCHITECTURES
 from lumos3d_cli.model.checkpoints import save_checkpoint
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import Lumos3D, build_model
+from lumos3d_cli.train.bracket_samples import BracketSamples, check_bracket_model
 from lumos3d_cli.train.checkpointing import (
     TrainingState,
     latest_checkpoint,
@@ -73,6 +75,7 @@ class Trainer:
         self.model = self._student().to(self.device)
         self.model.set_gradient_checkpointing(config.gradient_checkpointing)
         self.teacher = self._teacher()
+        self.brackets = self._brackets()
         self.objective = TrainingObjective(config.loss, config.stage).to(self.device)
         self.optimizer = torch.optim.AdamW(
             self._parameter_groups(), lr=config.optim.lr, betas=config.optim.betas, weight_decay=config.optim.weight_decay
@@ -115,6 +118,8 @@ class Trainer:
             model = build_model(source, seed=self.config.seed)
         else:
             model = load_model(source)
+        if self.config.appearance is not None:
+            model = with_appearance(model, self.config.appearance)
         patch = model.architecture.patch_size
         data = self.config.data
         if data.width % patch or data.height % patch:
@@ -126,6 +131,14 @@ class Trainer:
             return None
         teacher = load_model(self.config.teacher, device=self.device)
         return teacher.eval().requires_grad_(False)
+
+    def _brackets(self) -> BracketSamples | None:
+        config = self.config.brackets
+        if config.root is None:
+            return None
+        check_bracket_model(self.model, config)
+        data = self.config.data
+        return BracketSamples(config, self.config.degrade.mode, (data.width, data.height), data.crop_scale, self.config.seed)
 
     def _parameter_groups(self) -> list[dict]:
         backbone = [p for n, p in self.model.named_parameters() if n.startswith("aggregator.") and p.requires_grad]
@@ -183,7 +196,12 @@ class Trainer:
                     teacher = self.teacher(teacher_sees)
         renders, rendered_depth = render_views(output, self.config.loss.background)
         stage_batch = StageBatch(targets, batch["extrinsics"], batch["intrinsics"], batch["sparse_depth"], batch["has_poses"])
-        return self.objective(output, renders, rendered_depth, stage_batch, teacher)
+        terms = self.objective(output, renders, rendered_depth, stage_batch, teacher)
+        if self.brackets is not None:  # one-view bracket samples: the appearance loss only
+            with self._autocast():
+                terms["brackets"] = self.brackets.loss(self.model, step, self.context.rank, self.context.world_size, self.device)
+            terms["total"] = terms["total"] + self.config.brackets.weight * terms["brackets"]
+        return terms
 
     def step(self, step: int) -> StepReport:
         started = time.perf_counter()
@@ -273,8 +291,9 @@ class Trainer:
         """Validation after `step` steps on rank 0 (train/validation.py); returns the picture's path."""
         if not self.context.is_main:
             return None
+        extra = self.brackets.scores(self.model.eval(), self.device) if self.brackets is not None else None
         path = validate(self.model, self._validation_samples(), step, self.output, self.config.validation_views,
-                        self.config.loss.background, self._autocast)
+                        self.config.loss.background, self._autocast, extra)
         self.model.train()
         return path
 

@@ -45,13 +45,15 @@ def validate(
     views: int,
     background: tuple[float, float, float],
     autocast: Callable[[], AbstractContextManager],
+    extra: dict[str, float] | None = None,
 ) -> Path:
     """Score `samples` (batch of one sample, network input [1, V, 3, H, W], normal-light targets
     [1, V, 3, H, W]): PSNR of the renders against the targets and, for samples with dataset
     cameras, the accuracy of the predicted cameras (eval/pose_accuracy.py); append the line to
     output/validation.jsonl; write the first sample's first `views` views as rows of
     input | render | target to output/validation/step_<step>.png and return its path.
-    `model` is left in eval mode; `autocast()` gives the run's precision context.
+    `model` is left in eval mode; `autocast()` gives the run's precision context; `extra` scores
+    (e.g. the held-out brackets') join the line.
     """
     model.eval()
     rotation_errors, translation_errors, psnrs = [], [], []
@@ -71,6 +73,7 @@ def validate(
     line = {"step": step, "samples": len(psnrs), "psnr": float(np.mean(psnrs))}
     if rotation_errors:
         line["cameras"] = summarise_pose_errors(torch.cat(rotation_errors), torch.cat(translation_errors)).as_dict()
+    line.update(extra or {})
     with open(output / "validation.jsonl", "a") as handle:
         handle.write(json.dumps(line) + "\n")
     cameras = line.get("cameras")
