@@ -8,8 +8,7 @@ import numpy as np
 import torch
 
 from lumos3d_cli.render.kernels.binning import bin_and_sort
-from lumos3d_cli.render.kernels.projection import project_forward
-from lumos3d_cli.render.kernels.projection_backward import project_backward
+from lumos3d_cli.render.kernels.projection import project_backward, project_forward
 from lumos3d_cli.render.kernels.rasterize import (
     GRADIENT_COLUMNS,
     gather_entry_gradients,

@@ -51,25 +51,29 @@ def sh_basis_reference(degree: int, directions: torch.Tensor) -> torch.Tensor:
     return torch.stack(values, dim=-1)
 
 
-def project_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
-    """Per-Gaussian projection. Returns means2d [N,2], conics [N,3], depths [N], opacities [N]
-    (with compensation), colours [N,3] and radii [N,2] (int32, 0 = culled)."""
-    dtype = means.dtype
-    fx, fy, cx, cy = (float(v) for v in intrinsics)
-    width, height = float(settings.width), float(settings.height)
-    rotation, translation = viewmat[:, :3].to(dtype), viewmat[:, 3].to(dtype)
-    camera = means @ rotation.T + translation
-    x, y, z_true = camera.unbind(-1)
-    in_depth_range = (z_true >= settings.near) & (z_true <= settings.far)
-    z = torch.where(in_depth_range, z_true, torch.ones_like(z_true))  # culled ones stay finite
-
+def covariance_reference(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
+    """World covariance R(q/|q|) diag(scales)^2 R^T [N,3,3] of quats [N,4] wxyz and scales [N,3];
+    a quaternion shorter than DEGENERATE_QUATERNION_NORM counts as the identity."""
     norms = quats.norm(dim=-1, keepdim=True)
     degenerate = norms < DEGENERATE_QUATERNION_NORM
-    identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=dtype).expand_as(quats)
+    identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=quats.dtype).expand_as(quats)
     unit = torch.where(degenerate, identity, quats / norms.clamp_min(DEGENERATE_QUATERNION_NORM))
     m = quaternion_to_matrix(unit) * scales[:, None, :]
-    cov_camera = rotation @ (m @ m.transpose(1, 2)) @ rotation.T
+    return m @ m.transpose(1, 2)
 
+
+def world_to_camera_reference(means: torch.Tensor, covariances: torch.Tensor, viewmat: torch.Tensor):
+    """Camera-space means [N,3] and covariances [N,3,3] under the [3,4] world->camera matrix."""
+    rotation, translation = viewmat[:, :3].to(means.dtype), viewmat[:, 3].to(means.dtype)
+    return means @ rotation.T + translation, rotation @ covariances @ rotation.T
+
+
+def ewa_reference(means_c: torch.Tensor, cov_c: torch.Tensor, intrinsics, width: float, height: float):
+    """Pinhole projection of camera-space means [N,3] (z > 0) and covariances [N,3,3]: means2d
+    [N,2] in pixels and the undilated 2D covariance J cov_c J^T [N,2,2], J evaluated at the mean
+    clamped to the field of view plus FOV_MARGIN."""
+    fx, fy, cx, cy = (float(v) for v in intrinsics)
+    x, y, z = means_c.unbind(-1)
     tan_x, tan_y = 0.5 * width / fx, 0.5 * height / fy
     tx = z * torch.clamp(x / z, -(cx / fx + FOV_MARGIN * tan_x), (width - cx) / fx + FOV_MARGIN * tan_x)
     ty = z * torch.clamp(y / z, -(cy / fy + FOV_MARGIN * tan_y), (height - cy) / fy + FOV_MARGIN * tan_y)
@@ -77,19 +81,46 @@ def project_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, 
     jacobian = torch.stack(
         [torch.stack([fx / z, zero, -fx * tx / z**2], -1), torch.stack([zero, fy / z, -fy * ty / z**2], -1)], dim=-2
     )
-    cov2d = jacobian @ cov_camera @ jacobian.transpose(1, 2)
-    a0, b, c0 = cov2d[:, 0, 0], cov2d[:, 0, 1], cov2d[:, 1, 1]
-    a, c = a0 + settings.eps2d, c0 + settings.eps2d
-    det = a * c - b * b
-    if settings.antialiased:
-        compensation = torch.sqrt(torch.clamp_min((a0 * c0 - b * b) / det, MIN_COMPENSATION**2))
-        opacity = opacities * compensation
-    else:
-        opacity = opacities
-    conics = torch.stack([c / det, -b / det, a / det], dim=-1)
     means2d = torch.stack([fx * x / z + cx, fy * y / z + cy], dim=-1)
+    return means2d, jacobian @ cov_c @ jacobian.transpose(1, 2)
+
+
+def conic_reference(cov2d: torch.Tensor, opacities: torch.Tensor, eps2d: float, antialiased: bool):
+    """Conics [N,3] = (A, B, C) of (cov2d + eps2d I)^-1 for cov2d [N,2,2], and the opacities [N]
+    times the antialiasing compensation sqrt(det cov2d / det(cov2d + eps2d I)) when antialiased."""
+    a0, b, c0 = cov2d[:, 0, 0], cov2d[:, 0, 1], cov2d[:, 1, 1]
+    a, c = a0 + eps2d, c0 + eps2d
+    det = a * c - b * b
+    if antialiased:
+        opacities = opacities * torch.sqrt(torch.clamp_min((a0 * c0 - b * b) / det, MIN_COMPENSATION**2))
+    return torch.stack([c / det, -b / det, a / det], dim=-1), opacities
+
+
+def colours_reference(means: torch.Tensor, sh: torch.Tensor, campos: torch.Tensor, degree: int) -> torch.Tensor:
+    """Colours [N,3] = max(0.5 + SH(sh [N,K,3], degree) at the unit direction from campos [3] to
+    means [N,3], 0)."""
+    directions = means - campos
+    directions = directions / directions.norm(dim=-1, keepdim=True).clamp_min(1e-30)
+    basis = sh_basis_reference(degree, directions)
+    k = basis.shape[1]
+    return torch.clamp_min((basis[:, :, None] * sh[:, :k, :]).sum(dim=1) + 0.5, 0.0)
+
+
+def project_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
+    """Per-Gaussian projection, the stages above in sequence. Returns means2d [N,2], conics [N,3],
+    depths [N], opacities [N] (with compensation), colours [N,3] and radii [N,2] (int32, 0 =
+    culled); the other outputs of culled Gaussians are finite but meaningless."""
+    width, height = float(settings.width), float(settings.height)
+    camera, cov_camera = world_to_camera_reference(means, covariance_reference(quats, scales), viewmat)
+    x, y, z_true = camera.unbind(-1)
+    in_depth_range = (z_true >= settings.near) & (z_true <= settings.far)
+    z = torch.where(in_depth_range, z_true, torch.ones_like(z_true))  # culled ones stay finite
+    means2d, cov2d = ewa_reference(torch.stack([x, y, z], dim=-1), cov_camera, intrinsics, width, height)
+    conics, opacity = conic_reference(cov2d, opacities, settings.eps2d, settings.antialiased)
 
     with torch.no_grad():
+        a, c = cov2d[:, 0, 0] + settings.eps2d, cov2d[:, 1, 1] + settings.eps2d
+        det = a * c - cov2d[:, 0, 1] ** 2
         extend = torch.sqrt(2 * torch.log(opacity.clamp_min(ALPHA_THRESHOLD) / ALPHA_THRESHOLD)).clamp_max(GAUSSIAN_EXTEND)
         rx = torch.ceil(extend * torch.sqrt(a.clamp_min(0)))
         ry = torch.ceil(extend * torch.sqrt(c.clamp_min(0)))
@@ -100,12 +131,8 @@ def project_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, 
         )
         radii = torch.where(valid[:, None], torch.stack([rx, ry], -1), torch.zeros_like(means2d)).to(torch.int32)
 
-    campos = -rotation.T @ translation
-    directions = means - campos
-    directions = directions / directions.norm(dim=-1, keepdim=True).clamp_min(1e-30)
-    basis = sh_basis_reference(settings.sh_degree, directions)
-    k = basis.shape[1]
-    colours = torch.clamp_min((basis[:, :, None] * sh[:, :k, :]).sum(dim=1) + 0.5, 0.0)
+    rotation, translation = viewmat[:, :3].to(means.dtype), viewmat[:, 3].to(means.dtype)
+    colours = colours_reference(means, sh, -rotation.T @ translation, settings.sh_degree)
     return means2d, conics, z, opacity, colours, radii
 
 
