@@ -30,12 +30,12 @@ def neighbours_by_distance(cameras: Cameras, count: int) -> torch.Tensor:
     return distances.argsort(dim=1)[:, : min(count, len(cameras) - 1)]
 
 
-def _compare(depth: torch.Tensor, cameras: Cameras, view: int, other: int, tolerance: float):
-    """(confirmed [h, w], contradicted [h, w]) of `view`'s pixels against `other`'s depth."""
+def _compare(world: torch.Tensor, depth: torch.Tensor, cameras: Cameras, other: int, tolerance: float):
+    """(confirmed [h, w], contradicted [h, w]) of one view's pixels, unprojected to world [h, w, 3],
+    against `other`'s depth."""
     height, width = depth.shape[-2:]
     extrinsics, intrinsics = cameras.extrinsics.to(depth.dtype), cameras.intrinsics.to(depth.dtype)
-    world = unproject_depth(depth[view], extrinsics[view], intrinsics[view]).reshape(-1, 3)
-    camera = world @ extrinsics[other, :, :3].T + extrinsics[other, :, 3]
+    camera = world.reshape(-1, 3) @ extrinsics[other, :, :3].T + extrinsics[other, :, 3]
     z = camera[:, 2]
     safe = z.clamp_min(1e-12)
     u = intrinsics[other, 0, 0] * camera[:, 0] / safe + intrinsics[other, 0, 2]
@@ -59,11 +59,14 @@ def confirmed_pixels(
     if views < 2:
         return keep
     nearest = neighbours_by_distance(cameras, neighbours)
+    # float32 is ample for a 5 % test and halves the work of these [V, h, w] passes
+    depth = depth.float()
+    world = unproject_depth(depth, cameras.extrinsics.float(), cameras.intrinsics.float())  # [V, h, w, 3]
     for view in range(views):
         confirmed = torch.zeros(depth.shape[1:], dtype=torch.bool)
         contradicted = torch.zeros(depth.shape[1:], dtype=torch.bool)
         for other in nearest[view].tolist():
-            yes, no = _compare(depth, cameras, view, other, tolerance)
+            yes, no = _compare(world[view], depth, cameras, other, tolerance)
             confirmed |= yes
             contradicted |= no
         keep[view] = confirmed | ~contradicted
