@@ -1,0 +1,37 @@
+"""Check an output path before any work is done, so that a run never computes for minutes and
+then fails to write: its folder must be creatable (no regular file on the way) and writable."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from lumos3d_cli.errors import InputError
+
+
+def blocking_file(path: Path) -> Path | None:
+    """The nearest existing ancestor of `path` when it is not a folder (so `path` cannot be
+    created), else None."""
+    for ancestor in Path(path).absolute().parents:
+        if ancestor.exists():
+            return None if ancestor.is_dir() else ancestor
+    return None
+
+
+def check_output_path(path: Path | str | None, parameter: str, folder: bool = False) -> None:
+    """InputError (naming `parameter` and `path`) unless `path` can be written: as a folder when
+    `folder`, else as a file. None (an optional output not asked for) passes."""
+    if path is None:
+        return
+    path = Path(path)
+    blocker = blocking_file(path)
+    if blocker is not None:
+        raise InputError(f"{path}: cannot be created because {blocker} is a file, not a folder; choose another path",
+                         parameter=parameter)
+    if path.exists() and path.is_dir() != folder:
+        found, needed = ("a folder", "a file") if path.is_dir() else ("a file", "a folder")
+        raise InputError(f"{path}: is {found}; give {needed} here", parameter=parameter)
+    existing = next(p for p in [path, *path.absolute().parents] if p.exists())
+    writable_folder = existing if existing.is_dir() else existing.parent
+    if not os.access(writable_folder, os.W_OK | os.X_OK):
+        raise InputError(f"{path}: no permission to write in {writable_folder}; choose another path", parameter=parameter)
