@@ -21,7 +21,6 @@ from lumos3d_cli.render.kernels.projection import (
     covariances,
     ewa_jacobian,
     project_backward,
-    project_forward,
     quaternion_backward,
     rotation,
     sh_colour,
@@ -30,6 +29,7 @@ from lumos3d_cli.render.kernels.projection import (
     view_direction,
 )
 from lumos3d_cli.render.kernels.sh import sh_basis
+from lumos3d_cli.render.rasterizer import project
 from lumos3d_cli.render.reference import (
     colours_reference,
     conic_reference,
@@ -299,22 +299,12 @@ def _scene(seed: int):
     return gaussians, viewmat
 
 
-def _kernel_projection(gaussians, viewmat, settings):
-    n = len(gaussians)
-    arrays = [t.detach().numpy() for t in gaussians.tensors().values()]
-    outputs = (np.zeros((n, 2)), np.zeros((n, 3)), np.zeros(n), np.zeros(n), np.zeros((n, 3)), np.zeros((n, 2), np.int32))
-    project_forward(
-        *arrays, viewmat.numpy(), *INTRINSICS, float(settings.width), float(settings.height), settings.sh_degree,
-        settings.near, settings.far, settings.eps2d, settings.antialiased, *outputs,
-    )
-    return arrays, outputs
-
-
 @pytest.mark.parametrize("antialiased", [False, True])
 def test_projection_kernel_output_by_output(antialiased):
     settings = RasterSettings(WIDTH, HEIGHT, 3, eps2d=EPS2D, antialiased=antialiased)
     gaussians, viewmat = _scene(8)
-    arrays, ours = _kernel_projection(gaussians, viewmat, settings)
+    ours = project(*gaussians.tensors().values(), viewmat, INTRINSICS, settings)
+    arrays = [t.numpy() for t in gaussians.tensors().values()]
     leaves = _leaves(*gaussians.tensors().values())
     *twin, twin_radii = project_reference(*leaves, viewmat, INTRINSICS, settings)
 

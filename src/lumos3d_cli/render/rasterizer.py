@@ -33,6 +33,28 @@ def _array(tensor: torch.Tensor) -> np.ndarray:
     return tensor.detach().contiguous().numpy()
 
 
+def project(means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings) -> tuple:
+    """The projection kernel on the inputs of RasterizeGaussians (CPU tensors, not differentiated).
+
+    Returns numpy arrays in the inputs' precision: means2d [N,2], conics [N,3], depths [N],
+    opacities_eff [N] (with the antialiasing compensation), colours [N,3], and radii [N,2]
+    int32 (0: culled; the other outputs of a culled Gaussian are 0)."""
+    numpy_dtype = np.float64 if means.dtype == torch.float64 else np.float32
+    n = means.shape[0]
+    fx, fy, cx, cy = (float(v) for v in intrinsics)
+    outputs = (
+        np.zeros((n, 2), numpy_dtype), np.zeros((n, 3), numpy_dtype), np.zeros(n, numpy_dtype),
+        np.zeros(n, numpy_dtype), np.zeros((n, 3), numpy_dtype), np.zeros((n, 2), np.int32),
+    )
+    project_forward(
+        *(_array(t) for t in (means, quats, scales, opacities, sh)),
+        np.ascontiguousarray(_array(viewmat), dtype=np.float64), fx, fy, cx, cy,
+        float(settings.width), float(settings.height), settings.sh_degree,
+        settings.near, settings.far, settings.eps2d, settings.antialiased, *outputs,
+    )
+    return outputs
+
+
 class RasterizeGaussians(torch.autograd.Function):
     """One camera. Inputs: means [N,3], quats [N,4] wxyz, scales [N,3], opacities [N],
     sh [N,K,3]; viewmat [3,4] world->camera (float64), intrinsics (fx, fy, cx, cy).
@@ -42,23 +64,10 @@ class RasterizeGaussians(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
         _use_torch_thread_count(means.shape[0], settings.width * settings.height)
-        dtype = means.dtype
-        numpy_dtype = np.float64 if dtype == torch.float64 else np.float32
-        n = means.shape[0]
+        numpy_dtype = np.float64 if means.dtype == torch.float64 else np.float32
         width, height = settings.width, settings.height
-        fx, fy, cx, cy = (float(v) for v in intrinsics)
-        arrays = [_array(t) for t in (means, quats, scales, opacities, sh)]
-        view = np.ascontiguousarray(_array(viewmat), dtype=np.float64)
-        means2d = np.zeros((n, 2), numpy_dtype)
-        conics = np.zeros((n, 3), numpy_dtype)
-        depths = np.zeros(n, numpy_dtype)
-        opacities_eff = np.zeros(n, numpy_dtype)
-        colours = np.zeros((n, 3), numpy_dtype)
-        radii = np.zeros((n, 2), np.int32)
-        project_forward(
-            *arrays, view, fx, fy, cx, cy, float(width), float(height), settings.sh_degree,
-            settings.near, settings.far, settings.eps2d, settings.antialiased,
-            means2d, conics, depths, opacities_eff, colours, radii,
+        means2d, conics, depths, opacities_eff, colours, radii = project(
+            means, quats, scales, opacities, sh, viewmat, intrinsics, settings
         )
         tile_offsets, entries, tiles_x, _ = bin_and_sort(
             means2d, radii, depths, width, height, numba.get_num_threads() * _CHUNKS_PER_THREAD
@@ -72,8 +81,8 @@ class RasterizeGaussians(torch.autograd.Function):
             colour, depth, transmittance, last,
         )
         ctx.settings = settings
-        ctx.intrinsics = (fx, fy, cx, cy)
-        ctx.view = view
+        ctx.intrinsics = tuple(float(v) for v in intrinsics)
+        ctx.view = np.ascontiguousarray(_array(viewmat), dtype=np.float64)
         ctx.projected = (means2d, conics, depths, opacities_eff, colours, radii)
         ctx.tiles = (tile_offsets, entries, tiles_x)
         ctx.pixels = (transmittance, last)
