@@ -9,8 +9,9 @@ import torch
 
 from lumos3d_cli.checks import require_finite
 
+# The one home of both (the .ply/.splat files, colour conversions and the rasterizer import them).
 SH_C0 = 0.28209479177387814  # Y_0^0; rgb = 0.5 + SH_C0 * f_dc
-MAX_SH_DEGREE = 4
+MAX_SH_DEGREE = 4  # highest SH degree read, written and rendered
 
 
 def sh_coefficient_count(degree: int) -> int:

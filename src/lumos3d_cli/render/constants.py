@@ -12,7 +12,8 @@ MIN_COMPENSATION = 0.005  # floor of the antialiasing opacity compensation
 FOV_MARGIN = 0.3  # the EWA Jacobian is evaluated at most this fraction of tan(fov) outside the image
 DEGENERATE_QUATERNION_NORM = 1e-12  # quaternions shorter than this are treated as identity
 
-SH_C0 = 0.28209479177387814
+# Real SH basis constants for degrees 1-4 (3DGS order); SH_C0 and MAX_SH_DEGREE, which the
+# files and colour conversions share, live in io/gaussians.py.
 SH_C1 = 0.4886025119029199
 SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
 SH_C3 = (
@@ -23,4 +24,3 @@ SH_C4 = (
     2.5033429417967046, -1.7701307697799304, 0.9461746957575601, -0.6690465435572892, 0.10578554691520431,
     -0.6690465435572892, 0.47308734787878004, -1.7701307697799304, 0.6258357354491761,
 )
-MAX_SH_DEGREE = 4

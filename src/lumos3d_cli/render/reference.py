@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import torch
 
+from lumos3d_cli.io.gaussians import SH_C0
 from lumos3d_cli.render.constants import (
     ALPHA_THRESHOLD,
     DEGENERATE_QUATERNION_NORM,
@@ -13,7 +14,6 @@ from lumos3d_cli.render.constants import (
     GAUSSIAN_EXTEND,
     MAX_ALPHA,
     MIN_COMPENSATION,
-    SH_C0,
     SH_C1,
     SH_C2,
     SH_C3,

@@ -11,8 +11,8 @@ import torch
 
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.io.cameras import Cameras
-from lumos3d_cli.io.gaussians import Gaussians
-from lumos3d_cli.render.constants import EPS2D, FAR_PLANE, MAX_SH_DEGREE, NEAR_PLANE
+from lumos3d_cli.io.gaussians import MAX_SH_DEGREE, Gaussians
+from lumos3d_cli.render.constants import EPS2D, FAR_PLANE, NEAR_PLANE
 from lumos3d_cli.render.gsplat_backend import gsplat_available, render_with_gsplat
 from lumos3d_cli.render.rasterizer import RasterizeGaussians
 from lumos3d_cli.render.reference import rasterize_reference

@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from lumos3d_cli.render.constants import SH_C0, SH_C1, SH_C2, SH_C3, SH_C4
+from lumos3d_cli.io.gaussians import SH_C0
+from lumos3d_cli.render.constants import SH_C1, SH_C2, SH_C3, SH_C4
 
 
 @njit(cache=True, inline="always")
