@@ -1,12 +1,15 @@
 import json
 
+import numpy as np
 import torch
 from safetensors import safe_open
 
+from lumos3d_cli.io.ply import read_ply, write_ply
 from lumos3d_cli.model.checkpoints import save_checkpoint
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import build_model
 from assertions import expect_input_error
+from factories import random_gaussians
 
 
 def _random_checkpoint(path):
@@ -48,3 +51,45 @@ def test_bad_arguments(tmp_path, run_cli):
     expect_input_error(run_cli("convert", str(source), "-o", str(tmp_path / "x.safetensors"), "--dtype", "int8"), "int8", "float16")
     expect_input_error(run_cli("convert", str(source), "-o", str(tmp_path / "x.pt")), "x.pt", ".safetensors")
     expect_input_error(run_cli("convert", str(tmp_path / "none.pt"), "-o", str(tmp_path / "x.safetensors")), "none.pt")
+
+
+# The .splat record as docs/formats.md describes it, written out here independently of io/splat.py.
+SPLAT_RECORD = np.dtype([("position", "<f4", 3), ("scale", "<f4", 3), ("rgba", "u1", 4), ("rotation", "u1", 4)])
+C0 = 0.28209479177387814  # docs/formats.md: rgb = 0.5 + C0 * f_dc
+
+
+def test_a_ply_scene_converts_to_splat(tmp_path, run_cli):
+    original = random_gaussians(300, 2, seed=4)
+    original.quats[7] = 0.0  # becomes the identity
+    original.sh[:5, 0] = torch.tensor([4.0, -4.0, 0.0])  # rgb beyond [0, 1] is clipped
+    write_ply(tmp_path / "scene.ply", original)
+    scene = read_ply(tmp_path / "scene.ply")  # what the file holds (opacity and scale via logit/log)
+    result = run_cli("convert", str(tmp_path / "scene.ply"), "-o", str(tmp_path / "scene.splat"), "--json")
+    assert result.code == 0, result.err
+    summary = json.loads(result.out)
+    assert summary["gaussians"] == 300 and summary["source_sh_degree"] == 2
+
+    data = (tmp_path / "scene.splat").read_bytes()
+    assert SPLAT_RECORD.itemsize == 32 and len(data) == 300 * 32 == summary["bytes"]
+    records = np.frombuffer(data, SPLAT_RECORD)
+    g = scene.to(torch.float64)
+    order = torch.argsort(-(g.scales.prod(dim=1) * g.opacities), stable=True).numpy()  # decreasing volume x opacity
+    np.testing.assert_array_equal(records["position"], scene.means.numpy()[order])
+    np.testing.assert_array_equal(records["scale"], scene.scales.numpy()[order])
+    rgba = np.concatenate([0.5 + C0 * g.sh[:, 0].numpy(), g.opacities.numpy()[:, None]], axis=1)
+    np.testing.assert_array_equal(records["rgba"], np.clip(np.round(rgba * 255), 0, 255)[order])
+    unit = torch.nn.functional.normalize(g.quats, dim=1).numpy()
+    unit[7] = [1.0, 0.0, 0.0, 0.0]
+    np.testing.assert_array_equal(records["rotation"], np.clip(np.round(unit * 128 + 128), 0, 255)[order])
+    assert (records["rgba"][np.argsort(order)[:5], :3] == [255, 0, 128]).all()  # clipped, clipped, 0.5
+
+
+def test_scene_and_checkpoint_suffixes_do_not_mix(tmp_path, run_cli):
+    write_ply(tmp_path / "scene.ply", random_gaussians(4, 0))
+    source = _random_checkpoint(tmp_path / "full.safetensors")
+    expect_input_error(run_cli("convert", str(tmp_path / "scene.ply"), "-o", str(tmp_path / "x.safetensors")), "x.safetensors", ".splat")
+    expect_input_error(run_cli("convert", str(source), "-o", str(tmp_path / "x.splat")), "full.safetensors", ".ply")
+    expect_input_error(
+        run_cli("convert", str(tmp_path / "scene.ply"), "-o", str(tmp_path / "x.splat"), "--dtype", "float16"), "--dtype", "checkpoints"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["full.safetensors", "scene.ply"]

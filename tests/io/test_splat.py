@@ -1,8 +1,10 @@
 import numpy as np
 import torch
 
-from lumos3d_cli.io.gaussians import SH_C0, Gaussians
+from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.io.splat import write_splat
+
+C0 = 0.28209479177387814  # docs/formats.md: rgb = 0.5 + C0 * f_dc
 
 
 def test_splat_layout_and_values(tmp_path):
@@ -21,7 +23,7 @@ def test_splat_layout_and_values(tmp_path):
     np.testing.assert_array_equal(np.frombuffer(first[:12], "<f4"), [-1.0, 0.0, 0.5])
     np.testing.assert_array_equal(np.frombuffer(first[12:24], "<f4"), [1.0, 2.0, 3.0])
     rgba = np.frombuffer(first[24:28], np.uint8)
-    expected_rgb = np.clip(np.round((0.5 + SH_C0 * np.array([1.0, -1.0, 10.0])) * 255), 0, 255)
+    expected_rgb = np.clip(np.round((0.5 + C0 * np.array([1.0, -1.0, 10.0])) * 255), 0, 255)
     np.testing.assert_array_equal(rgba, [*expected_rgb, 128])
     np.testing.assert_array_equal(np.frombuffer(first[28:32], np.uint8), [255, 128, 128, 128])  # zero quat -> identity
     second = data[32:]

@@ -1,5 +1,6 @@
 """`lumos3d convert`: rewrite any checkpoint `load_model` reads (ours, a training checkpoint,
-VGGT's, AnySplat's) as one of our .safetensors files, optionally in half precision."""
+VGGT's, AnySplat's) as one of our .safetensors files, optionally in half precision; or a Gaussian
+scene (.ply) as a .splat file for WebGL viewers. The suffixes of the input and output choose."""
 
 from __future__ import annotations
 
@@ -8,6 +9,10 @@ from pathlib import Path
 import typer
 
 from lumos3d_cli.cli.console import print_json, say
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.output_paths import check_output_path
+from lumos3d_cli.io.ply import read_ply
+from lumos3d_cli.io.splat import write_splat
 from lumos3d_cli.io.weight_files import STORAGE_DTYPES, storage_dtype
 from lumos3d_cli.model.architectures import get_architecture
 from lumos3d_cli.model.checkpoints import save_checkpoint, summarize_checkpoint
@@ -16,18 +21,49 @@ from lumos3d_cli.model.loading import load_model
 EXAMPLES = """
   lumos3d convert runs/low-light/final.safetensors -o lumos3d-low-light.safetensors --dtype float16
   lumos3d convert vggt/model.pt -o vggt-1b.safetensors     [dim]# VGGT-1B in our layout (fresh Gaussian head)[/dim]
+  lumos3d convert out/scene.ply -o scene.splat              [dim]# for WebGL .splat viewers (SH degree 0 colour)[/dim]
 """
 
 
+def _converts_a_scene(source: Path, output: Path, dtype: str, architecture: str | None) -> bool:
+    """True for a .ply scene to .splat; False for a checkpoint; InputError for a mix of the two."""
+    scene_in, splat_out = source.suffix.lower() == ".ply", output.suffix.lower() == ".splat"
+    if scene_in and not splat_out:
+        raise InputError(f"{output}: a .ply scene converts to a .splat file; name the output *.splat")
+    if splat_out and not scene_in:
+        raise InputError(f"{source}: only a Gaussian scene (.ply) converts to .splat")
+    if scene_in and (dtype != "float32" or architecture is not None):
+        raise InputError("--dtype and --architecture apply to checkpoints, not to a .ply scene")
+    return scene_in
+
+
+def _scene_to_splat(source: Path, output: Path, as_json: bool) -> None:
+    gaussians = read_ply(source)
+    write_splat(output, gaussians)
+    summary = {"output": str(output), "format": "splat", "gaussians": len(gaussians), "bytes": output.stat().st_size,
+               "source_sh_degree": gaussians.sh_degree}
+    if as_json:
+        print_json(summary)
+        return
+    say(f"wrote {output} ({len(gaussians):,} Gaussians, {summary['bytes'] / 2**20:.1f} MiB)")
+    if gaussians.sh_degree > 0:
+        say(f"note: .splat keeps the base colour only; the scene's SH degree {gaussians.sh_degree} view-dependent colour is dropped")
+
+
 def convert_command(
-    source: Path = typer.Argument(..., help="Checkpoint file or folder (ours, VGGT model.pt/.safetensors, AnySplat)."),
-    output: Path = typer.Option(..., "--output", "-o", help="The .safetensors file to write."),
+    source: Path = typer.Argument(..., help="Checkpoint file or folder (ours, VGGT model.pt/.safetensors, AnySplat), or a scene .ply."),
+    output: Path = typer.Option(..., "--output", "-o", help="The .safetensors file to write (.splat for a scene)."),
     dtype: str = typer.Option("float32", "--dtype", help=f"Storage precision: {', '.join(STORAGE_DTYPES)}."),
     architecture: str | None = typer.Option(None, "--architecture", help="Model size of a foreign (VGGT/AnySplat) checkpoint: tiny, small, base or vggt-1b (default)."),
-    as_json: bool = typer.Option(False, "--json", help="Print the written checkpoint's summary as JSON."),
+    as_json: bool = typer.Option(False, "--json", help="Print the written file's summary as JSON."),
 ) -> None:
-    """Rewrite a checkpoint in lumos3d's format (e.g. float16 to halve it)."""
+    """Rewrite a checkpoint in lumos3d's format (e.g. float16 to halve it), or a scene .ply as .splat."""
+    if _converts_a_scene(source, output, dtype, architecture):
+        check_output_path(output, "output")
+        _scene_to_splat(source, output, as_json)
+        return
     storage_dtype(dtype)  # refuse a bad --dtype before the (possibly large) checkpoint is read
+    check_output_path(output, "output")
     model = load_model(source, architecture=get_architecture(architecture) if architecture else None)
     provenance = {key: value for key, value in model.provenance.items() if key not in ("path", "format")}
     provenance["converted_from"] = {"file": Path(source).name, "format": model.provenance.get("format"), "dtype": dtype}
