@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import sys
+import traceback
 
 import typer
+from rich.text import Text
 
 from lumos3d_cli import __version__
 from lumos3d_cli.cli import convert, degrade, eval, info, render, restore, train, view
 from lumos3d_cli.cli.console import configure_logging, state, stderr_console
+from lumos3d_cli.cli.interrupts import Interrupted, signals_raise_interrupted
 from lumos3d_cli.errors import InputError, RunError
 
 EXAMPLES = """
@@ -75,14 +78,29 @@ def _for_command_line(error: InputError) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Console entry point; returns the exit code.
 
-    Bad input: one line on stderr and exit code 2 (the traceback only with --debug). Usage
-    errors (unknown option, missing argument) also exit with 2, as click reports them.
+    0: done. 2: bad input — one line on stderr (the traceback only with --debug); usage errors
+    (unknown option, missing argument) also exit with 2, as click reports them. 1: a run that
+    failed (RunError) or an internal error. 128 + signal number: stopped by SIGINT (130),
+    SIGTERM (143) or SIGHUP (129), one line on stderr; unfinished outputs are removed on the way
+    out as for any failure (cli/interrupts.py).
     """
     args = sys.argv[1:] if argv is None else list(argv)
     # Global flags are accepted anywhere on the line (`lumos3d degrade ... --debug`).
     flags = [a for a in args if a in _GLOBAL_FLAGS]
     args = flags + [a for a in args if a not in _GLOBAL_FLAGS]
     debug = "--debug" in flags
+    with signals_raise_interrupted():
+        try:
+            return _run(args, debug)
+        except Interrupted as stop:
+            if debug:
+                traceback.print_exc()
+            stderr_console().print(Text(stop.message(), style="bold yellow"))
+            return stop.exit_code
+
+
+def _run(args: list[str], debug: bool) -> int:
+    """Run the app; map its errors to messages and exit codes (interruptions pass through)."""
     try:
         app(args=args, prog_name="lumos3d", standalone_mode=True)
     except SystemExit as done:

@@ -16,6 +16,7 @@ from lumos3d_cli.io.atomic import atomic_directory
 from lumos3d_cli.io.image_files import PHOTO_SUFFIXES, list_images
 from lumos3d_cli.io.image_write import write_image
 from lumos3d_cli.io.images import read_image, to_srgb
+from lumos3d_cli.io.output_paths import check_output_path
 
 EXAMPLES = """
   lumos3d degrade photos/ -o dark/ --mode low-light --seed 0
@@ -23,19 +24,23 @@ EXAMPLES = """
   lumos3d degrade photos/ -o bright/ --mode over-exposure --per-image --bit-depth 16
 """
 
+_SINGLE_FILE_SUFFIXES = (".png", ".jpg", ".jpeg")  # what io.image_write encodes
 
-def _check_output(inputs: list[Path], output: Path) -> bool:
-    """Validate -o; True when it names a single output file rather than a folder."""
-    if output.suffix.lower() in PHOTO_SUFFIXES:
+
+def _check_output(inputs: list[Path], output: Path, bit_depth: int) -> bool:
+    """Validate -o before any image is read; True when it names a single output file rather than
+    a folder. Messages name the user's path (the files are written under temporary names)."""
+    suffix = output.suffix.lower()
+    if suffix in PHOTO_SUFFIXES:
         if len(inputs) != 1:
             raise InputError(f"{output}: names one file but there are {len(inputs)} inputs; pass a folder to -o")
+        if suffix not in _SINGLE_FILE_SUFFIXES:
+            raise InputError(f"{output}: cannot write '{output.suffix}' files; use .png or .jpg")
+        if bit_depth != 8 and suffix != ".png":
+            raise InputError(f"{output}: JPEG holds 8 bits only; use .png for 16-bit output")
+        check_output_path(output, "output")
         return True
-    if output.exists() and not output.is_dir():
-        raise InputError(f"{output}: exists and is not a folder; pass a folder or a .png/.jpg file to -o")
-    stems = [path.stem for path in inputs]
-    duplicates = sorted({stem for stem in stems if stems.count(stem) > 1})
-    if duplicates:
-        raise InputError(f"inputs share the file names {', '.join(duplicates)}; degrade them into separate folders")
+    check_output_path(output, "output", folder=True)
     return False
 
 
@@ -57,7 +62,7 @@ def degrade_command(
     if bit_depth not in (8, 16):
         raise InputError(f"--bit-depth {bit_depth}: use 8 or 16")
     paths = list_images(inputs)
-    single_file = _check_output(paths, output)
+    single_file = _check_output(paths, output, bit_depth)
     degradation = Degradation(mode, noise=noise)
     generator = torch.Generator().manual_seed(seed)
     shared = None if per_image else sample_parameters(degradation, (), generator)

@@ -7,17 +7,19 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from lumos3d_cli.cli.console import print_json, stdout_console
+from lumos3d_cli.cli.console import print_json, progress_bar, stdout_console
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.camera_files import find_camera_source
-from lumos3d_cli.model.checkpoints import summarize_checkpoint
 from lumos3d_cli.io.image_files import IMAGE_SUFFIXES, list_images
+from lumos3d_cli.io.images import read_image
 from lumos3d_cli.io.summaries import summarize_camera_file, summarize_gaussian_file, summarize_image_files
+from lumos3d_cli.model.checkpoints import summarize_checkpoint
 
 EXAMPLES = """
   lumos3d info out/scene.ply
   lumos3d info scenes/kitchen            [dim]# images/ and sparse/0 of a scene folder[/dim]
   lumos3d info transforms.json --json
+  lumos3d info photos/ --deep            [dim]# decode every image: which will not load[/dim]
 """
 
 
@@ -25,8 +27,39 @@ def _has_images(folder: Path) -> bool:
     return any(p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".") for p in folder.iterdir() if p.is_file())
 
 
-def collect_summaries(path: Path) -> list[dict]:
-    """Every summary that applies to `path`."""
+def _image_summary(paths: list[Path], deep: bool) -> dict:
+    """summarize_image_files, plus with `deep` the files that will not load and why (every image
+    decoded, as restore would). Without it only the headers are read: decoding takes about 17 ms
+    per 0.2-megapixel photo of LOM buu here, seconds per 24-megapixel photo or RAW file."""
+    summary = summarize_image_files(paths)
+    if not deep:
+        summary["pixels"] = "not decoded; --deep decodes every image to find those that will not load"
+        return summary
+    unreadable = {}
+    with progress_bar() as progress:
+        task = progress.add_task("decode", total=len(paths))
+        for path in paths:
+            try:
+                read_image(path)
+            except InputError as error:  # NonFiniteError included: NaN or Inf samples
+                unreadable[path.name] = str(error).removeprefix(f"{path}: ")
+            progress.advance(task)
+    summary["will_not_load"] = unreadable
+    return summary
+
+
+def _refuse_unreadable(summaries: list[dict]) -> None:
+    """After the table: exit 2 with one line naming the images that will not load."""
+    for summary in summaries:
+        unreadable = summary.get("will_not_load")
+        if unreadable:
+            shown = "; ".join(f"{name} ({reason})" for name, reason in list(unreadable.items())[:3])
+            more = f"; and {len(unreadable) - 3} more" if len(unreadable) > 3 else ""
+            raise InputError(f"{len(unreadable)} of {summary['count']} images will not load: {shown}{more}")
+
+
+def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
+    """Every summary that applies to `path`; `deep` decodes images (see `_image_summary`)."""
     if not path.exists():
         raise InputError(f"{path}: no such file or folder")
     if path.is_file():
@@ -36,15 +69,15 @@ def collect_summaries(path: Path) -> list[dict]:
         if suffix in (".safetensors", ".pt", ".pth", ".bin"):
             return [summarize_checkpoint(path)]
         if suffix in IMAGE_SUFFIXES:
-            return [summarize_image_files([path])]
+            return [_image_summary([path], deep)]
         if find_camera_source(path) is not None:
             return [summarize_camera_file(path)]
         raise InputError(f"{path}: cannot summarise '{path.suffix}' files; pass a .ply, checkpoint, camera file, image or folder")
     summaries = []
     if _has_images(path):
-        summaries.append(summarize_image_files(list_images(path)))
+        summaries.append(_image_summary(list_images(path), deep))
     elif (path / "images").is_dir() and _has_images(path / "images"):
-        summaries.append(summarize_image_files(list_images(path / "images")))
+        summaries.append(_image_summary(list_images(path / "images"), deep))
     if find_camera_source(path) is not None:
         summaries.append(summarize_camera_file(path))
     if not summaries:
@@ -64,12 +97,16 @@ def _format(value) -> str:
 
 def info_command(
     path: Path = typer.Argument(..., help="A .ply scene, a checkpoint, a camera file or COLMAP folder, an image or a folder."),
+    deep: bool = typer.Option(False, "--deep", help="Decode every image (slow) and list those that will not load."),
     json_output: bool = typer.Option(False, "--json", help="Print the summary as JSON on stdout."),
 ) -> None:
-    """Summarise a Gaussian scene, a model checkpoint, cameras or images."""
-    summaries = collect_summaries(path)
+    """Summarise a Gaussian scene, a model checkpoint (refused if it holds NaN/Inf), cameras or images.
+
+    With --deep, images that will not load are listed and the command exits with 2."""
+    summaries = collect_summaries(path, deep)
     if json_output:
         print_json(summaries[0] if len(summaries) == 1 else {"path": str(path), "summaries": summaries})
+        _refuse_unreadable(summaries)
         return
     console = stdout_console()
     for summary in summaries:
@@ -80,3 +117,4 @@ def info_command(
             if key not in ("kind", "path"):
                 table.add_row(key, _format(value))
         console.print(table)
+    _refuse_unreadable(summaries)

@@ -15,6 +15,7 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import atomic_directory, atomic_path
 from lumos3d_cli.io.camera_files import find_camera_source, read_cameras
 from lumos3d_cli.io.image_write import write_image
+from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.io.ply import read_ply
 from lumos3d_cli.io.video import VideoWriter, probe_video, video_kind
 from lumos3d_cli.render.camera_paths import orbit_from_cameras, orbit_from_gaussians
@@ -84,6 +85,8 @@ def render_command(
     if not 1 <= fps <= 240:
         raise InputError(f"--fps {fps}: use between 1 and 240")
     colour = parse_background(background)
+    check_output_path(output, "output", folder=True)
+    check_output_path(video, "video")
     gaussians = read_ply(scene)
     if poses is not None:
         cameras = read_cameras(poses)

@@ -45,7 +45,8 @@ def list_images(inputs: Path | str | Sequence[Path | str]) -> list[Path]:
     """Expand a folder (its image files, naturally sorted) or a list of files and folders.
 
     Explicitly named files must exist and have a supported suffix; inside folders, files
-    that are not images (and hidden files) are skipped.
+    that are not images (and hidden files) are skipped. The same photo twice is an InputError
+    (see `check_distinct`).
     """
     items = [inputs] if isinstance(inputs, (str, Path)) else list(inputs)
     if not items:
@@ -66,4 +67,24 @@ def list_images(inputs: Path | str | Sequence[Path | str]) -> list[Path]:
             paths.append(path)
         else:
             raise InputError(f"{path}: no such file or folder")
+    check_distinct(paths)
     return paths
+
+
+def check_distinct(paths: Sequence[Path]) -> None:
+    """InputError when a file comes twice (named twice, or in a folder also given) or two files
+    share a name stem (`a/1.jpg` and `b/1.jpg`, or a camera's `IMG_1.CR2` + `IMG_1.JPG` pair):
+    views and their outputs are named by the stem, so one would overwrite the other. An error
+    rather than dropping one: which of two same-named photos is meant is the user's call."""
+    seen: dict[str, Path] = {}
+    for path in paths:
+        earlier = seen.get(path.stem)
+        if earlier is None:
+            seen[path.stem] = path
+            continue
+        if earlier.resolve() == path.resolve():
+            raise InputError(f"{path}: the same photo is given twice; pass each photo once")
+        raise InputError(
+            f"{earlier} and {path}: two photos named '{path.stem}' (views and outputs are named by the file "
+            "name, so one would overwrite the other); pass only one of them or rename one"
+        )

@@ -181,6 +181,9 @@ def read_ply_fields(path: Path | str) -> tuple[np.ndarray, int]:
 
 
 def read_ply(path: Path | str) -> Gaussians:
-    """Read a Gaussian `.ply` (any 3DGS-layout file) into activated Gaussians."""
+    """Read a Gaussian `.ply` (any 3DGS-layout file) into activated Gaussians. NaN or Inf (also
+    from an overflowing log-scale) is an error naming the file (`info` counts them instead)."""
     table, degree = read_ply_fields(path)
-    return ply_fields_to_gaussians(table, degree)
+    gaussians = ply_fields_to_gaussians(table, degree)
+    gaussians.require_finite(f"{path}: gaussians")
+    return gaussians

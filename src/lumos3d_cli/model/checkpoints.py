@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING
 
 import torch
 
+from lumos3d_cli.checks import require_finite
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.state_dicts import listing
 from lumos3d_cli.io.weight_files import read_header, read_weights, resolve_weights_file, write_weights
@@ -156,11 +157,20 @@ def _interpret(path: Path, shapes: dict[str, tuple[int, ...]], metadata: dict[st
     return _Layout(file_format, architecture, provenance, names, ignored, ["gaussian_head"])
 
 
+def require_finite_weights(path: Path, tensors: dict[str, torch.Tensor]) -> None:
+    """NonFiniteError naming the file and the first tensor holding NaN or Inf: such weights (a
+    diverged or damaged save) would only surface later as a failure deep inside the network."""
+    for key, tensor in tensors.items():
+        require_finite(f"{path}: tensor {key}", tensor, "the checkpoint is damaged (e.g. saved by a diverged run); use another")
+
+
 def read_checkpoint(path: Path | str, architecture: Architecture | None = None) -> Checkpoint:
     """Read any supported checkpoint (file, or folder holding one). `architecture` gives the network
-    size for foreign layouts (default vggt-1b); our files carry their own."""
+    size for foreign layouts (default vggt-1b); our files carry their own. NaN or Inf in any
+    tensor is an error naming the file and the tensor."""
     path = resolve_weights_file(Path(path))
     metadata, raw = read_weights(path)
+    require_finite_weights(path, raw)
     layout = _interpret(path, {k: tuple(v.shape) for k, v in raw.items()}, metadata, architecture)
     tensors = {}
     for key, name in layout.names.items():
@@ -174,10 +184,12 @@ def read_checkpoint(path: Path | str, architecture: Architecture | None = None) 
 
 def summarize_checkpoint(path: Path | str) -> dict:
     """Format, architecture, parameter count, tensor names by module, dtypes and provenance (for
-    `lumos3d info`); reads only the header of safetensors files."""
+    `lumos3d info`). The values are read too, to refuse NaN or Inf as loading would: one pass at
+    disk speed (seconds for VGGT-1B)."""
     path = resolve_weights_file(Path(path))
     shapes, dtypes, metadata = read_header(path)
     layout = _interpret(path, shapes, metadata, None)
+    require_finite_weights(path, read_weights(path)[1])
     used = {name: shapes[key] for key, name in layout.names.items()}
     modules = Counter(name.split(".")[0] for name in used)
     parameters = sum(int(torch.Size(shape).numel()) for shape in used.values())

@@ -64,7 +64,7 @@ def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_fo
     check_view_format(output_format)
     suffix = VIEW_FORMATS[output_format][0]
     started = time.perf_counter()
-    with atomic_directory(scene_path.parent) as staging:
+    with atomic_directory(scene_path.parent, replace_folders=True) as staging:
         write_ply(staging / scene_path.name, scene.gaussians)
         write_transforms_json(staging / "cameras.json", scene.cameras)
         write_colmap_model(staging / "colmap", scene.cameras, scene.geometry.points)

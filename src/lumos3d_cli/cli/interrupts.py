@@ -1,0 +1,71 @@
+"""Stopping a command from outside — Ctrl-C (SIGINT), `kill` (SIGTERM), a closed terminal
+(SIGHUP) — turns into an exception raised where the command is, so the cleanup that runs on any
+failure runs here too: temporary outputs are removed (io/atomic.py), nothing half-written is
+left. The CLI reports it in one line and exits with 128 + the signal number (130, 143, 129)."""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+from collections.abc import Iterator
+
+HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class Interrupted(BaseException):
+    """A command stopped by a signal. Like KeyboardInterrupt it is no `Exception`, so the
+    `except Exception` blocks on its way out do not swallow it, while `finally` blocks run.
+
+    `detail` says what was kept (e.g. the checkpoint a stopped training run saved)."""
+
+    def __init__(self, signum: int, detail: str = ""):
+        super().__init__(signum, detail)
+        self.signum = signum
+        self.detail = detail
+
+    @property
+    def exit_code(self) -> int:
+        """The shell's code for a process ended by this signal: 128 + its number."""
+        return 128 + self.signum
+
+    @property
+    def signal_name(self) -> str:
+        return signal.Signals(self.signum).name
+
+    def message(self) -> str:
+        """The one line the CLI prints."""
+        return f"interrupted by {self.signal_name}" + (
+            f": {self.detail}" if self.detail else "; unfinished outputs were removed, earlier ones left as they were"
+        )
+
+
+@contextlib.contextmanager
+def signals_raise_interrupted() -> Iterator[None]:
+    """While inside, SIGINT, SIGTERM and SIGHUP raise `Interrupted` in the main thread.
+
+    Only the first signal raises: later ones arrive while the cleanup runs and must not cut it
+    short (SIGKILL still ends the process at once). A signal the process was started with
+    ignored (`nohup` ignores SIGHUP) stays ignored. Off the main thread, where Python cannot
+    install handlers (an embedding application), nothing changes.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    raised = False
+
+    def handler(signum, frame) -> None:
+        nonlocal raised
+        if not raised:
+            raised = True
+            raise Interrupted(signum)
+
+    previous = {}
+    for signum in HANDLED_SIGNALS:
+        if signal.getsignal(signum) is not signal.SIG_IGN:
+            previous[signum] = signal.signal(signum, handler)
+    try:
+        yield
+    finally:
+        for signum, old in previous.items():
+            signal.signal(signum, old)

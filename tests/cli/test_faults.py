@@ -1,0 +1,248 @@
+"""Faults and bad input through the real command in a child process (issue 17): runs stopped by a
+signal leave nothing half-written and say so in one line; a killed run's leftovers are removed by
+the next; a re-run replaces the output set; bad inputs are refused before any work, naming the
+file or value."""
+
+import json
+import shutil
+import signal
+import struct
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+import torch
+
+from lumos3d_cli.io.ply import write_ply
+from lumos3d_cli.model.checkpoints import save_checkpoint
+from lumos3d_cli.model.lumos3d import build_model
+
+from assertions import expect_input_error
+from factories import random_gaussians
+from processes import cli_started, hidden_entries, interrupt_when, run_lumos3d, signal_name
+
+SIGNALS = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP]
+
+
+@pytest.fixture(scope="module")
+def tiny_weights(tmp_path_factory):
+    """A tiny model with random weights (it restores nothing; the tests are about files)."""
+    path = tmp_path_factory.mktemp("weights") / "tiny-random.safetensors"
+    save_checkpoint(build_model("tiny", seed=0), path, {"weights": "random, for tests"})
+    return path
+
+
+@pytest.fixture(scope="module")
+def scene_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("scene") / "scene.ply"
+    write_ply(path, random_gaussians(2000, 0))
+    return path
+
+
+def _photos(buu, folder, names):
+    folder.mkdir()
+    for name in names:
+        shutil.copy(buu / "low" / name, folder / name)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def photos(tmp_path_factory, buu):
+    return _photos(buu, tmp_path_factory.mktemp("photos") / "dark", ["1.JPG", "2.JPG", "3.JPG", "4.JPG", "5.JPG", "6.JPG"])
+
+
+def _restore(photos, output, weights, *extra):
+    return ("restore", photos, "-o", output, "--checkpoint", weights, "--geometry", "network", *extra)
+
+
+@pytest.fixture(scope="module")
+def first_restore(tmp_path_factory, photos, tiny_weights):
+    """The outputs of one restore of six photos (copied by the tests that change them)."""
+    out = tmp_path_factory.mktemp("first") / "out"
+    result = run_lumos3d(*_restore(photos, out / "scene.ply", tiny_weights))
+    assert result.code == 0, result.err
+    return out
+
+
+def _contents(folder):
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def _has_staging(folder):
+    return folder.is_dir() and any(p.name.startswith(".staging.") for p in folder.iterdir())
+
+
+def _expect_interrupted(result, signum):
+    assert result.code == 128 + signum, (result.code, result.err[-3000:])
+    assert result.last_line.startswith(f"interrupted by {signal_name(signum)}"), result.err[-3000:]
+    assert "Traceback" not in result.err
+
+
+# -- row 1, 14: signals -----------------------------------------------------------------------------
+
+
+def _render_args(tmp_path, frames_count=100000):
+    return ("render", tmp_path / "scene.ply", "--orbit", frames_count, "-o", tmp_path / "frames", "--width", 128,
+            "--video", tmp_path / "orbit.mp4")
+
+
+def _render_is_writing(tmp_path):
+    frames = tmp_path / "frames"
+    return (_has_staging(frames) and any(frames.glob(".staging.*/00002.png"))
+            and any(tmp_path.glob(".orbit.*.tmp.mp4")))
+
+
+@pytest.mark.parametrize("signum", SIGNALS, ids=signal_name)
+def test_render_stopped_by_a_signal_removes_its_temporary_outputs(tmp_path, scene_file, signum):
+    shutil.copy(scene_file, tmp_path / "scene.ply")
+    result = interrupt_when(_render_args(tmp_path), lambda _: _render_is_writing(tmp_path), signum)
+    _expect_interrupted(result, signum)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.ply"]
+
+
+def test_leftovers_of_a_killed_render_are_removed_by_the_next_run(tmp_path, scene_file):
+    shutil.copy(scene_file, tmp_path / "scene.ply")
+    killed = interrupt_when(_render_args(tmp_path), lambda _: _render_is_writing(tmp_path), signal.SIGKILL)
+    assert killed.code == -signal.SIGKILL
+    leftovers = hidden_entries(tmp_path)
+    assert any(p.name.startswith(".staging.") for p in leftovers) and any(p.suffix == ".mp4" for p in leftovers)
+    again = run_lumos3d(*_render_args(tmp_path, frames_count=3))
+    assert again.code == 0, again.err
+    assert hidden_entries(tmp_path) == []
+    assert sorted(p.name for p in (tmp_path / "frames").iterdir()) == ["00000.png", "00001.png", "00002.png"]
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=signal_name)
+def test_restore_stopped_while_writing_keeps_the_earlier_outputs(tmp_path, first_restore, photos, tiny_weights, signum):
+    out = shutil.copytree(first_restore, tmp_path / "out")
+    before = _contents(out)
+    result = interrupt_when(_restore(photos, out / "scene.ply", tiny_weights), lambda _: _has_staging(out), signum)
+    _expect_interrupted(result, signum)
+    assert hidden_entries(tmp_path) == []
+    assert _contents(out) == before
+
+
+def test_restore_stopped_before_writing_leaves_no_output_folder(tmp_path, photos, tiny_weights):
+    out = tmp_path / "new" / "out"
+    result = interrupt_when(_restore(photos, out / "scene.ply", tiny_weights), cli_started, signal.SIGINT)
+    _expect_interrupted(result, signal.SIGINT)
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- row 2: re-runs -----------------------------------------------------------------------------------
+
+
+def test_rerun_with_fewer_views_replaces_the_output_set(tmp_path, buu, first_restore, tiny_weights):
+    out = shutil.copytree(first_restore, tmp_path / "out")
+    assert len(list((out / "restored").iterdir())) == 6
+    (out / "notes.txt").write_text("the user's own file beside the outputs")
+    fewer = _photos(buu, tmp_path / "fewer", ["2.JPG", "4.JPG", "6.JPG"])
+    result = run_lumos3d(*_restore(fewer, out / "scene.ply", tiny_weights))
+    assert result.code == 0, result.err
+    assert sorted(p.name for p in (out / "restored").iterdir()) == ["2.png", "4.png", "6.png"]
+    summary = json.loads((out / "summary.json").read_text())
+    cameras = json.loads((out / "cameras.json").read_text())
+    assert summary["views"] == ["2.JPG", "4.JPG", "6.JPG"] and len(cameras["frames"]) == 3
+    images = (out / "colmap" / "images.txt").read_text()
+    assert "1.JPG" not in images and "6.JPG" in images
+    assert (out / "notes.txt").read_text() == "the user's own file beside the outputs"
+    assert hidden_entries(tmp_path) == []
+
+
+# -- row 3: the same photo twice -----------------------------------------------------------------------
+
+
+def test_the_same_photo_twice_is_refused(tmp_path, photos, buu, tiny_weights):
+    twice = run_lumos3d(*_restore(photos / "1.JPG", tmp_path / "a" / "scene.ply", tiny_weights), photos / "1.JPG")
+    expect_input_error(twice, f"{photos / '1.JPG'}: the same photo is given twice")
+    other = _photos(buu, tmp_path / "other", ["1.JPG"])
+    same_name = run_lumos3d("degrade", photos, other / "1.JPG", "-o", tmp_path / "b")
+    expect_input_error(same_name, f"{photos / '1.JPG'} and {other / '1.JPG'}: two photos named '1'")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other"]
+
+
+# -- row 4: an output under a regular file -------------------------------------------------------------
+
+
+def test_outputs_under_a_regular_file_are_refused_before_any_work(tmp_path, photos, scene_file, tiny_weights):
+    blocker = tmp_path / "file"
+    blocker.write_text("a regular file")
+    cases = [
+        (_restore(photos, blocker / "scene.ply", tiny_weights), "-o", blocker / "scene.ply"),
+        (("render", scene_file, "--orbit", 2, "-o", blocker / "frames"), "-o", blocker / "frames"),
+        (("render", scene_file, "--orbit", 2, "-o", tmp_path / "frames", "--video", blocker / "v.mp4"), "--video", blocker / "v.mp4"),
+        (("degrade", photos, "-o", blocker / "dark"), "-o", blocker / "dark"),
+        (("convert", tiny_weights, "-o", blocker / "w.safetensors"), "-o", blocker / "w.safetensors"),
+    ]
+    for args, option, path in cases:
+        result = run_lumos3d(*args)
+        expect_input_error(result, f"{option} {path}: cannot be created because {blocker} is a file")
+        assert "render " not in result.err and "load images" not in result.err  # no work started
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
+
+
+# -- row 6: info on images that will not load ----------------------------------------------------------
+
+
+def _write_exr_with_nan(path):
+    pixels = np.ones((4, 4, 3), np.float32)
+    pixels[1, 2, 0] = np.nan
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(4, 4, 3, "float"))
+    out.write_image(pixels)
+    out.close()
+
+
+def test_info_deep_names_the_images_that_will_not_load(tmp_path, buu):
+    folder = _photos(buu, tmp_path / "photos", ["1.JPG", "2.JPG"])
+    data = (folder / "2.JPG").read_bytes()
+    (folder / "2.JPG").write_bytes(data[: len(data) // 2])
+    _write_exr_with_nan(folder / "3.exr")
+    quick = run_lumos3d("info", folder, "--json")
+    assert quick.code == 0, quick.err
+    assert json.loads(quick.out)["pixels"].startswith("not decoded; --deep")
+    deep = run_lumos3d("info", folder, "--deep", "--json")
+    expect_input_error(deep, "2 of 3 images will not load", "2.JPG (cannot decode as JPG", "3.exr (1 of 48 samples are NaN or Inf")
+    unreadable = json.loads(deep.out)["will_not_load"]
+    assert sorted(unreadable) == ["2.JPG", "3.exr"]
+    assert run_lumos3d("info", folder / "1.JPG", "--deep").code == 0
+
+
+# -- rows 7, 8: non-finite checkpoints and scenes ------------------------------------------------------
+
+
+def test_a_checkpoint_with_nan_weights_is_refused_by_info_convert_and_restore(tmp_path, photos):
+    model = build_model("tiny", seed=0)
+    name, tensor = next((n, t) for n, t in model.state_dict().items() if t.is_floating_point() and t.numel() > 4)
+    with torch.no_grad():
+        tensor.view(-1)[:3] = float("nan")
+    weights = tmp_path / "nan.safetensors"
+    save_checkpoint(model, weights, {})
+    fragment = f"{weights}: tensor {name}: 3 of {tensor.numel()} values are NaN or Inf"
+    expect_input_error(run_lumos3d("info", weights), fragment)
+    expect_input_error(run_lumos3d("convert", weights, "-o", tmp_path / "copy.safetensors"), fragment)
+    expect_input_error(run_lumos3d(*_restore(photos, tmp_path / "out" / "scene.ply", weights)), fragment)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["nan.safetensors"]
+
+
+def test_render_of_a_scene_holding_nan_names_the_file(tmp_path, scene_file):
+    scene = tmp_path / "nan.ply"
+    data = bytearray(scene_file.read_bytes())
+    start = data.index(b"end_header\n") + len(b"end_header\n")
+    data[start + 4 : start + 8] = struct.pack("<f", float("nan"))  # y of the first Gaussian
+    scene.write_bytes(bytes(data))
+    result = run_lumos3d("render", scene, "--orbit", 2, "-o", tmp_path / "frames")
+    expect_input_error(result, f"{scene}: gaussians.means: 1 of 6000 values are NaN or Inf")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["nan.ply"]
+
+
+# -- row 9: messages name the user's path, not a temporary one ------------------------------------------
+
+
+def test_degrade_output_messages_name_the_users_path(tmp_path, buu):
+    photo = buu / "low" / "1.JPG"
+    for target, fragment in [("x.jpg", "JPEG holds 8 bits only; use .png"), ("x.tif", "cannot write '.tif' files")]:
+        result = run_lumos3d("degrade", photo, "-o", tmp_path / target, "--bit-depth", 16)
+        expect_input_error(result, f"{tmp_path / target}: {fragment}")
+        assert ".tmp" not in result.err
+    assert list(tmp_path.iterdir()) == []
