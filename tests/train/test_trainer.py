@@ -172,7 +172,7 @@ def test_sigterm_saves_a_checkpoint_and_stops(tiny_config):
         time.sleep(0.5)
     process.send_signal(signal.SIGTERM)
     _, stderr = process.communicate(timeout=300)
-    assert process.returncode == 0, stderr
+    assert process.returncode == 143, stderr  # 128 + SIGTERM: a scheduler sees an unfinished run
     latest = (output / "checkpoints" / "latest").read_text().strip()
     step = int(latest.split("_")[1])
     assert 1 <= step < 1000

@@ -4,14 +4,16 @@ under torchrun)."""
 from __future__ import annotations
 
 import logging
+import signal
 from pathlib import Path
 
 import typer
 
 from lumos3d_cli.cli.console import print_json, progress_bar, say, state
+from lumos3d_cli.cli.interrupts import Interrupted
 from lumos3d_cli.train.config import load_config
 from lumos3d_cli.train.distributed import setup_distributed, shutdown_distributed
-from lumos3d_cli.train.trainer import StepReport, Trainer
+from lumos3d_cli.train.trainer import StepReport, Trainer, TrainResult, check_max_steps
 
 EXAMPLES = """
   lumos3d train configs/tiny-cpu.yaml
@@ -35,7 +37,11 @@ def train_command(
     max_steps: int | None = typer.Option(None, "--max-steps", help="Stop (with a checkpoint) after this many steps in total."),
     json_output: bool = typer.Option(False, "--json", help="Print a JSON summary on stdout (rank 0)."),
 ) -> None:
-    """Train a model: the normal-light teacher or the low-light/over-exposure student."""
+    """Train a model: the normal-light teacher or the low-light/over-exposure student.
+
+    Stopped by SIGINT, SIGTERM or SIGHUP, it saves a checkpoint after the current step and exits
+    with 128 + the signal number (130, 143, 129), so that a scheduler sees an unfinished run."""
+    check_max_steps(max_steps)
     settings = load_config(config, overrides or [])
     context = setup_distributed(settings.device)
     if not context.is_main:
@@ -48,18 +54,23 @@ def train_command(
                 if context.is_main:
                     progress.update(task, completed=report.step + 1, description=f"train {_describe(report)}")
 
-            trainer = Trainer(settings, context, on_step if not state.quiet else None)
-            if resume:
-                progress.update(task, completed=0)
+            def on_resume(step: int, folder: Path) -> None:
+                progress.update(task, completed=step)
+                if context.is_main:
+                    say(f"resuming from step {step} ({folder})")
+
+            trainer = Trainer(settings, context, on_step if not state.quiet else None, on_resume)
             result = trainer.run(resume=resume, max_steps=max_steps)
     finally:
         shutdown_distributed()
     if not context.is_main:
+        _stop_if_interrupted(result)
         return
     last = result.history[-1] if result.history else None
     summary = {
         "stage": settings.stage, "output": settings.output, "steps_done": result.steps_done,
-        "stopped_early": result.stopped_early, "final_checkpoint": str(result.final_checkpoint) if result.final_checkpoint else None,
+        "stopped_early": result.stopped_early, "stop_signal": _signal_name(result.stop_signal),
+        "final_checkpoint": str(result.final_checkpoint) if result.final_checkpoint else None,
         "last_terms": last.terms if last else {}, "world_size": context.world_size,
         "seconds_per_step": round(sum(r.seconds for r in result.history) / max(1, len(result.history)), 4),
     }
@@ -68,3 +79,15 @@ def train_command(
     else:
         say(f"{settings.stage}: {result.steps_done} steps done; checkpoints in {settings.output}/checkpoints"
             + (f"; final weights {result.final_checkpoint}" if result.final_checkpoint else ""))
+    _stop_if_interrupted(result)
+
+
+def _signal_name(signum: int | None) -> str | None:
+    return signal.Signals(signum).name if signum is not None else None
+
+
+def _stop_if_interrupted(result: TrainResult) -> None:
+    """A run a signal stopped ends as interrupted (exit 128 + signal) once its checkpoint is saved."""
+    if result.stop_signal is not None:
+        saved = f"checkpoint {result.last_checkpoint} saved" if result.last_checkpoint else "checkpoint saved"
+        raise Interrupted(result.stop_signal, f"stopped after step {result.steps_done}; {saved}; continue with --resume")

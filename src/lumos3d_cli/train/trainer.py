@@ -31,8 +31,8 @@ from lumos3d_cli.model.lumos3d import Lumos3D, build_model
 from lumos3d_cli.train.bracket_samples import BracketSamples, check_bracket_model
 from lumos3d_cli.train.checkpointing import (
     TrainingState,
-    latest_checkpoint,
     load_training_checkpoint,
+    resume_candidates,
     save_training_checkpoint,
 )
 from lumos3d_cli.train.config import TrainConfig, config_to_yaml
@@ -57,17 +57,37 @@ class StepReport:
 
 @dataclass
 class TrainResult:
+    """What `Trainer.run` did. `stop_signal`: the signal that stopped the run early (after a
+    checkpoint was saved), None when it ran to its end or stopped on `stop_after`."""
+
     steps_done: int
     history: list[StepReport] = field(default_factory=list)
     final_checkpoint: Path | None = None
     stopped_early: bool = False
+    stop_signal: int | None = None
+    last_checkpoint: Path | None = None
+
+
+# Signals that stop training after a checkpoint (SIGHUP: the terminal of an interactive run closed).
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def check_max_steps(max_steps: int | None) -> None:
+    """`max_steps` counts every step of the run, done before a resume included; 0 or less would
+    run nothing, so it is refused rather than read as "no limit"."""
+    if max_steps is not None and max_steps < 1:
+        raise InputError(f"{max_steps}: give the number of steps to train to in total (1 or more)", parameter="max_steps")
 
 
 class Trainer:
-    def __init__(self, config: TrainConfig, context: DistributedContext, on_step: Callable[[StepReport], None] | None = None):
+    def __init__(self, config: TrainConfig, context: DistributedContext, on_step: Callable[[StepReport], None] | None = None,
+                 on_resume: Callable[[int, Path], None] | None = None):
+        """`on_step(report)` runs after every step; `on_resume(step, folder)` once a resumed run
+        has loaded the checkpoint it continues from."""
         self.config = config
         self.context = context
         self.on_step = on_step
+        self.on_resume = on_resume
         self.output = Path(config.output)
         self.device = context.device
         torch.manual_seed(config.seed)
@@ -89,6 +109,7 @@ class Trainer:
             if context.enabled else self.model
         )
         self._stop_requested = False
+        self._stop_signal: int | None = None
         self.nonfinite_in_a_row = 0  # steps skipped in a row for a non-finite loss or gradient
         self.nonfinite_total = 0
         self._logs = RunLogs(self.output, config.tensorboard) if context.is_main else None
@@ -263,17 +284,27 @@ class Trainer:
         return folder
 
     def resume(self) -> int:
-        """Load the latest checkpoint of this output folder; returns the step to continue at."""
-        folder = latest_checkpoint(self.output)
-        if folder is None:
-            raise InputError(f"{self.output}: no checkpoint to resume from (checkpoints/latest is missing)")
-        state = load_training_checkpoint(folder, self.model)
-        self.optimizer.load_state_dict(state.optimizer)
-        self.scheduler.load_state_dict(state.scheduler)
-        torch.set_rng_state(state.torch_rng)
-        self.nonfinite_in_a_row, self.nonfinite_total = state.nonfinite_in_a_row, state.nonfinite_total
-        logger.info("resumed from %s at step %d", folder, state.step)
-        return state.step
+        """Load the newest intact checkpoint of this output folder (the one `latest` names; a
+        damaged or missing one is skipped with a warning for the next older); returns the step to
+        continue at."""
+        problems = []
+        for folder in resume_candidates(self.output):
+            try:
+                state = load_training_checkpoint(folder, self.model)
+            except InputError as error:
+                logger.warning("skipping checkpoint %s: %s", folder.name, error)
+                problems.append(str(error))
+                continue
+            if problems:
+                logger.info("resuming from %s instead, the newest intact checkpoint", folder)
+            self.optimizer.load_state_dict(state.optimizer)
+            self.scheduler.load_state_dict(state.scheduler)
+            torch.set_rng_state(state.torch_rng)
+            self.nonfinite_in_a_row, self.nonfinite_total = state.nonfinite_in_a_row, state.nonfinite_total
+            if self.on_resume is not None:
+                self.on_resume(state.step, folder)
+            return state.step
+        raise InputError(f"{self.output}: no intact checkpoint to resume from ({'; '.join(problems)})")
 
     def _log(self, report: StepReport) -> None:
         if self._logs is not None:
@@ -300,20 +331,24 @@ class Trainer:
     # -- the loop -------------------------------------------------------------------------------
 
     def _request_stop(self, signum, frame) -> None:
-        logger.warning("signal %d: saving a checkpoint and stopping after this step", signum)
+        logger.warning("%s: saving a checkpoint and stopping after this step", signal.Signals(signum).name)
         self._stop_requested = True
+        self._stop_signal = self._stop_signal or signum
 
     def run(self, resume: bool = False, max_steps: int | None = None, stop_after: int | None = None) -> TrainResult:
-        """Train to optim.steps (or `max_steps`). `stop_after` behaves like a signal arriving
-        during that step (used to test interruption)."""
+        """Train to optim.steps (or `max_steps`, at least 1). `stop_after` behaves like a signal
+        arriving during that step (used to test interruption). A signal (STOP_SIGNALS) ends the
+        run after the current step with a checkpoint; `stop_signal` of the result names it."""
+        check_max_steps(max_steps)
         self.output.mkdir(parents=True, exist_ok=True)
         start = self.resume() if resume else 0
         if self._logs is not None:
             self._logs.truncate(start)
         if self.context.is_main:
             (self.output / "config.yaml").write_text(config_to_yaml(self.config))
-        end = min(self.config.optim.steps, max_steps) if max_steps else self.config.optim.steps
-        previous = {s: signal.signal(s, self._request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+        end = min(self.config.optim.steps, max_steps) if max_steps is not None else self.config.optim.steps
+        # A signal the process was started with ignored (nohup: SIGHUP) stays ignored.
+        previous = {s: signal.signal(s, self._request_stop) for s in STOP_SIGNALS if signal.getsignal(s) is not signal.SIG_IGN}
         result = TrainResult(start)
         try:
             for step in range(start, end):
@@ -329,8 +364,9 @@ class Trainer:
                 if stop_after is not None and step + 1 == stop_after:
                     self._stop_requested = True
                 if any_rank(self._stop_requested, self.context):
-                    self.save(step + 1)
+                    result.last_checkpoint = self.save(step + 1)
                     result.stopped_early = True
+                    result.stop_signal = self._stop_signal
                     return result
                 if self.config.checkpoint_every and (step + 1) % self.config.checkpoint_every == 0:
                     self.save(step + 1)

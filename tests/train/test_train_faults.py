@@ -1,0 +1,84 @@
+"""Training that fails safe, through the real `lumos3d train` in a child process (issue 17): a
+signal ends a run with a checkpoint and a non-zero exit; resuming says where it resumes; a damaged
+or missing checkpoint falls back to the newest intact one, naming what it skipped."""
+
+import json
+import re
+import signal
+from pathlib import Path
+
+from lumos3d_cli.train.config import load_config
+from lumos3d_cli.train.distributed import setup_distributed
+from lumos3d_cli.train.trainer import Trainer
+
+from assertions import expect_input_error
+from processes import interrupt_when, run_lumos3d
+
+
+def _output(config) -> Path:
+    return Path(str(config).replace(".yaml", ""))
+
+
+def _unwrapped(text: str) -> str:
+    """stderr without whitespace: log lines are wrapped (long paths folded) at the console width."""
+    return re.sub(r"\s+", "", text)
+
+
+def _trained(config):
+    """Four steps in this process with checkpoints after steps 2 and 4 (`latest` names step 4)."""
+    Trainer(load_config(config, []), setup_distributed("cpu")).run()
+    checkpoints = _output(config) / "checkpoints"
+    assert sorted(p.name for p in checkpoints.glob("step_*")) == ["step_00000002", "step_00000004"]
+    return checkpoints
+
+
+def test_sigint_stops_with_a_checkpoint_and_exit_130_then_resume_says_where(tiny_config):
+    config = tiny_config(name="stopped", optim__steps=1000)
+    output = _output(config)
+    stopped = interrupt_when(("train", config), lambda _: (output / "metrics.jsonl").is_file(), signal.SIGINT, poll=0.2)
+    assert stopped.code == 130, stopped.err[-3000:]
+    assert stopped.last_line.startswith("interrupted by SIGINT: stopped after step "), stopped.err[-3000:]
+    assert stopped.last_line.endswith("saved; continue with --resume")
+    step = int((output / "checkpoints" / "latest").read_text().strip().removeprefix("step_"))
+    assert 1 <= step < 1000 and f"step_{step:08d}" in stopped.last_line
+    assert not list(output.rglob(".*"))
+    resumed = run_lumos3d("train", config, "--resume", "--max-steps", step + 1, "--json")
+    assert resumed.code == 0, resumed.err[-3000:]
+    assert f"resuming from step {step} ({output / 'checkpoints' / f'step_{step:08d}'})" in resumed.err
+    assert json.loads(resumed.out)["steps_done"] == step + 1
+
+
+def test_a_corrupt_training_state_falls_back_to_the_newest_intact_checkpoint(tiny_config):
+    config = tiny_config(name="corrupt", optim__steps=4, checkpoint_every=2)
+    checkpoints = _trained(config)
+    damaged = checkpoints / "step_00000004" / "training_state.pt"
+    damaged.write_bytes(damaged.read_bytes()[:100])
+    result = run_lumos3d("train", config, "--resume", "--json")
+    assert result.code == 0, result.err[-3000:]
+    err = _unwrapped(result.err)
+    assert _unwrapped(f"skipping checkpoint step_00000004: {damaged}: cannot be read (RuntimeError:") in err
+    assert _unwrapped("the checkpoint is damaged") in err and "internal error" not in result.err
+    assert "resuming from step 2" in result.err
+    assert json.loads(result.out)["steps_done"] == 4
+
+
+def test_latest_naming_a_missing_step_folder(tiny_config):
+    config = tiny_config(name="missing", optim__steps=4, checkpoint_every=2)
+    checkpoints = _trained(config)
+    (checkpoints / "latest").write_text("step_00000099\n")
+    fallback = run_lumos3d("train", config, "--resume", "--max-steps", 4)
+    assert fallback.code == 0, fallback.err[-3000:]
+    assert _unwrapped(f"{checkpoints / 'latest'} names {checkpoints / 'step_00000099'}, which is missing") in _unwrapped(fallback.err)
+    assert "resuming from step 4" in fallback.err
+    for folder in checkpoints.glob("step_*"):
+        for file in folder.iterdir():
+            file.unlink()
+        folder.rmdir()
+    expect_input_error(run_lumos3d("train", config, "--resume"),
+                       f"{checkpoints / 'latest'} names step_00000099, but the folder {checkpoints / 'step_00000099'} is missing")
+
+
+def test_max_steps_below_one_is_refused(tiny_config):
+    config = tiny_config(name="zero")
+    expect_input_error(run_lumos3d("train", config, "--max-steps", 0), "--max-steps 0: give the number of steps")
+    assert not _output(config).exists()
