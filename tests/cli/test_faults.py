@@ -164,11 +164,13 @@ def test_the_same_photo_twice_is_refused(tmp_path, photos, buu, tiny_weights):
 # -- row 4: an output under a regular file -------------------------------------------------------------
 
 
-def test_outputs_under_a_regular_file_are_refused_before_any_work(tmp_path, photos, scene_file, tiny_weights):
+def test_outputs_under_a_regular_file_are_refused_before_any_work(tmp_path, buu, photos, scene_file, tiny_weights):
     blocker = tmp_path / "file"
     blocker.write_text("a regular file")
     cases = [
         (_restore(photos, blocker / "scene.ply", tiny_weights), "-o", blocker / "scene.ply"),
+        (_restore(photos, tmp_path / "out" / "scene.ply", tiny_weights, "--video", blocker / "v.mp4"), "--video", blocker / "v.mp4"),
+        (("eval", buu.parent, "--scenes", "buu", "--out", blocker / "report"), "--out", blocker / "report"),
         (("render", scene_file, "--orbit", 2, "-o", blocker / "frames"), "-o", blocker / "frames"),
         (("render", scene_file, "--orbit", 2, "-o", tmp_path / "frames", "--video", blocker / "v.mp4"), "--video", blocker / "v.mp4"),
         (("degrade", photos, "-o", blocker / "dark"), "-o", blocker / "dark"),

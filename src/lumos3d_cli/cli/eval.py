@@ -11,6 +11,7 @@ from rich.table import Table
 
 from lumos3d_cli.cli.console import print_json, progress_bar, stdout_console
 from lumos3d_cli.data.degradations import MODES
+from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.pipeline.evaluation import EvalReport, evaluate_lom, write_eval_report
 from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET
 from lumos3d_cli.pipeline.scene_geometry import GEOMETRY_SOURCES
@@ -66,6 +67,7 @@ def eval_command(
     json_output: bool = typer.Option(False, "--json", help="Print metrics.json on stdout."),
 ) -> None:
     """Evaluate restoration on LOM scenes (PSNR on [0,1], SSIM 11x11 sigma 1.5, LPIPS)."""
+    check_output_path(out, "out", folder=True)
     names = [n.strip() for n in scenes.split(",") if n.strip()] if scenes else None
     with progress_bar() as bars:
         task = bars.add_task(f"eval ({protocol})", total=len(names) if names else None)

@@ -36,7 +36,7 @@ class Interrupted(BaseException):
     def message(self) -> str:
         """The one line the CLI prints."""
         return f"interrupted by {self.signal_name}" + (
-            f": {self.detail}" if self.detail else "; unfinished outputs were removed, earlier ones left as they were"
+            f": {self.detail}" if self.detail else "; nothing half-written was left behind"
         )
 
 

@@ -52,6 +52,7 @@ def restore_command(
     if output.suffix.lower() != ".ply":
         raise InputError(f"{output}: the scene file must end in .ply", parameter="output")
     check_output_path(output, "output")
+    check_output_path(video, "video")
     check_view_format(output_format)
     if video is not None:
         video_kind(video)

@@ -1,0 +1,32 @@
+"""io/image_files.py: the same photo twice is refused, naming both."""
+
+import cv2
+import numpy as np
+import pytest
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.image_files import list_images
+
+
+@pytest.fixture
+def folders(tmp_path):
+    for folder, names in (("a", ["1.jpg", "2.jpg"]), ("b", ["1.jpg"]), ("c", ["IMG_1.png", "IMG_1.jpg"])):
+        (tmp_path / folder).mkdir()
+        for name in names:
+            cv2.imwrite(str(tmp_path / folder / name), np.zeros((4, 4, 3), np.uint8))
+    return tmp_path
+
+
+def test_the_same_file_twice_is_refused(folders):
+    with pytest.raises(InputError, match=r"a/1\.jpg: the same photo is given twice"):
+        list_images([folders / "a", folders / "a" / "1.jpg"])
+    with pytest.raises(InputError, match="given twice"):
+        list_images([folders / "a" / "2.jpg", folders / "b" / ".." / "a" / "2.jpg"])
+
+
+def test_two_files_with_one_name_are_refused(folders):
+    with pytest.raises(InputError, match=r"a/1\.jpg and .*b/1\.jpg: two photos named '1'"):
+        list_images([folders / "a", folders / "b"])
+    with pytest.raises(InputError, match=r"two photos named 'IMG_1'"):  # a camera's RAW+JPEG pair, say
+        list_images(folders / "c")
+    assert [p.name for p in list_images([folders / "a", folders / "c" / "IMG_1.png"])] == ["1.jpg", "2.jpg", "IMG_1.png"]
