@@ -105,6 +105,7 @@ def main() -> None:
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     torch.manual_seed(args.seed)
+    torch.set_num_threads(1)  # this machine is shared; small tensors gain little from threads
     model = load_model(args.mode)
     architecture = model.architecture
     started = time.perf_counter()
