@@ -122,7 +122,9 @@ def test_restore_stopped_while_writing_keeps_the_earlier_outputs(tmp_path, first
     assert _contents(out) == before
 
 
-def test_restore_stopped_before_writing_leaves_no_output_folder(tmp_path, photos, tiny_weights):
+def test_ctrl_c_during_start_up_ends_in_one_line_and_leaves_nothing(tmp_path, photos, tiny_weights):
+    """The signal lands while the subcommands import torch and pycolmap (whose C extension would
+    turn it into an error telling the user to reinstall pycolmap)."""
     out = tmp_path / "new" / "out"
     result = interrupt_when(_restore(photos, out / "scene.ply", tiny_weights), cli_started, signal.SIGINT)
     _expect_interrupted(result, signal.SIGINT)

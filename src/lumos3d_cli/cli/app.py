@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import sys
 import traceback
+from collections.abc import Callable
 
 import typer
 from rich.text import Text
 
 from lumos3d_cli import __version__
-from lumos3d_cli.cli import convert, degrade, eval, info, render, restore, train, view
 from lumos3d_cli.cli.console import configure_logging, state, stderr_console
-from lumos3d_cli.cli.interrupts import Interrupted, signals_raise_interrupted
+from lumos3d_cli.cli.interrupts import Interrupted, interruption_behind, signals_raise_interrupted
 from lumos3d_cli.errors import InputError, RunError
 
 EXAMPLES = """
@@ -53,14 +53,24 @@ def global_options(
     configure_logging(debug, quiet)
 
 
-app.command("degrade", epilog=degrade.EXAMPLES, rich_help_panel="Data")(degrade.degrade_command)
-app.command("restore", epilog=restore.EXAMPLES, rich_help_panel="Scenes")(restore.restore_command)
-app.command("eval", epilog=eval.EXAMPLES, rich_help_panel="Scenes")(eval.eval_command)
-app.command("train", epilog=train.EXAMPLES, rich_help_panel="Models", context_settings={"allow_extra_args": False})(train.train_command)
-app.command("render", epilog=render.EXAMPLES, rich_help_panel="Scenes")(render.render_command)
-app.command("info", epilog=info.EXAMPLES, rich_help_panel="Inspect")(info.info_command)
-app.command("convert", epilog=convert.EXAMPLES, rich_help_panel="Models")(convert.convert_command)
-app.command("view", epilog=view.EXAMPLES, rich_help_panel="Scenes")(view.view_command)
+def add_commands() -> typer.Typer:
+    """Import the subcommands and add them to `app` (once); returns `app`. Their modules import
+    torch, pycolmap and the rest (seconds), so `main` calls this only once its signal handlers
+    are in place: Ctrl-C during start-up then ends in the same one line as later."""
+    if app.registered_commands:
+        return app
+    from lumos3d_cli.cli import convert, degrade, eval, info, render, restore, train, view
+
+    app.command("degrade", epilog=degrade.EXAMPLES, rich_help_panel="Data")(degrade.degrade_command)
+    app.command("restore", epilog=restore.EXAMPLES, rich_help_panel="Scenes")(restore.restore_command)
+    app.command("eval", epilog=eval.EXAMPLES, rich_help_panel="Scenes")(eval.eval_command)
+    app.command("train", epilog=train.EXAMPLES, rich_help_panel="Models",
+                context_settings={"allow_extra_args": False})(train.train_command)
+    app.command("render", epilog=render.EXAMPLES, rich_help_panel="Scenes")(render.render_command)
+    app.command("info", epilog=info.EXAMPLES, rich_help_panel="Inspect")(info.info_command)
+    app.command("convert", epilog=convert.EXAMPLES, rich_help_panel="Models")(convert.convert_command)
+    app.command("view", epilog=view.EXAMPLES, rich_help_panel="Scenes")(view.view_command)
+    return app
 
 
 _GLOBAL_FLAGS = ("--debug", "--quiet", "-q")
@@ -89,9 +99,9 @@ def main(argv: list[str] | None = None) -> int:
     flags = [a for a in args if a in _GLOBAL_FLAGS]
     args = flags + [a for a in args if a not in _GLOBAL_FLAGS]
     debug = "--debug" in flags
-    with signals_raise_interrupted():
+    with signals_raise_interrupted() as claim_signals:
         try:
-            return _run(args, debug)
+            return _run(args, debug, claim_signals)
         except Interrupted as stop:
             if debug:
                 traceback.print_exc()
@@ -99,10 +109,13 @@ def main(argv: list[str] | None = None) -> int:
             return stop.exit_code
 
 
-def _run(args: list[str], debug: bool) -> int:
-    """Run the app; map its errors to messages and exit codes (interruptions pass through)."""
+def _run(args: list[str], debug: bool, claim_signals: Callable[[], None]) -> int:
+    """Run the app; map its errors to messages and exit codes (interruptions pass through).
+    `claim_signals` re-installs the CLI's signal handlers over those the imports installed."""
     try:
-        app(args=args, prog_name="lumos3d", standalone_mode=True)
+        command_line = add_commands()
+        claim_signals()
+        command_line(args=args, prog_name="lumos3d", standalone_mode=True)
     except SystemExit as done:
         return done.code if isinstance(done.code, int) else 0 if done.code is None else 1
     except InputError as error:
@@ -116,6 +129,9 @@ def _run(args: list[str], debug: bool) -> int:
         stderr_console().print(f"[bold red]error:[/bold red] {error}", highlight=False)
         return 1
     except Exception as error:  # noqa: BLE001 - the CLI's last line of defence
+        stop = interruption_behind(error)
+        if stop is not None:
+            raise stop from error
         if debug:
             raise
         stderr_console().print(

@@ -8,7 +8,7 @@ from __future__ import annotations
 import contextlib
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
@@ -40,9 +40,26 @@ class Interrupted(BaseException):
         )
 
 
+def interruption_behind(error: BaseException) -> Interrupted | None:
+    """The `Interrupted` that `error` was raised from, if any. Some code turns whatever stops it
+    into its own error: a C extension interrupted while it initialises becomes an ImportError
+    (and pycolmap's a RuntimeError saying to reinstall it); the cause is still the signal."""
+    seen = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, Interrupted):
+            return error
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return None
+
+
 @contextlib.contextmanager
-def signals_raise_interrupted() -> Iterator[None]:
+def signals_raise_interrupted() -> Iterator[Callable[[], None]]:
     """While inside, SIGINT, SIGTERM and SIGHUP raise `Interrupted` in the main thread.
+
+    Yields `claim`, which installs the handlers again: a library may install its own on import
+    (pycolmap's logging library takes SIGTERM to print a stack dump and abort), so the caller
+    claims the signals back once its imports are done.
 
     Only the first signal raises: later ones arrive while the cleanup runs and must not cut it
     short (SIGKILL still ends the process at once). A signal the process was started with
@@ -50,7 +67,7 @@ def signals_raise_interrupted() -> Iterator[None]:
     install handlers (an embedding application), nothing changes.
     """
     if threading.current_thread() is not threading.main_thread():
-        yield
+        yield lambda: None
         return
     raised = False
 
@@ -60,12 +77,16 @@ def signals_raise_interrupted() -> Iterator[None]:
             raised = True
             raise Interrupted(signum)
 
-    previous = {}
-    for signum in HANDLED_SIGNALS:
-        if signal.getsignal(signum) is not signal.SIG_IGN:
-            previous[signum] = signal.signal(signum, handler)
+    previous = {signum: signal.getsignal(signum) for signum in HANDLED_SIGNALS}
+    handled = [signum for signum, old in previous.items() if old is not signal.SIG_IGN]
+
+    def claim() -> None:
+        for signum in handled:
+            signal.signal(signum, handler)
+
+    claim()
     try:
-        yield
+        yield claim
     finally:
-        for signum, old in previous.items():
-            signal.signal(signum, old)
+        for signum in handled:
+            signal.signal(signum, previous[signum])
