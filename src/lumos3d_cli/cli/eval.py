@@ -44,7 +44,7 @@ def _print_report(report: EvalReport, out: Path) -> None:
         if result.pose is not None:
             pose = result.pose
             console.print(
-                f"{result.scene} cameras ({source}, {result.views_used} views, {pose.pairs} pairs): rotation error "
+                f"{result.scene} cameras ({source}, {pose.pairs} view pairs): rotation error "
                 f"median {pose.rotation_error_median:.1f}°, translation direction {pose.translation_error_median:.1f}°, "
                 f"RRA@15 {pose.rra_15:.2f}, RTA@15 {pose.rta_15:.2f}, AUC@30 {pose.auc_30:.3f}"
             )
