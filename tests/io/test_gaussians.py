@@ -1,8 +1,10 @@
+import math
+
 import pytest
 import torch
 
 from lumos3d_cli.errors import NonFiniteError
-from lumos3d_cli.io.gaussians import SH_C0, Gaussians, rgb_to_sh_dc, sh_dc_to_rgb, sh_degree_from_count
+from lumos3d_cli.io.gaussians import Gaussians, rgb_to_sh_dc, sh_dc_to_rgb, sh_degree_from_count
 
 from factories import random_gaussians
 
@@ -19,7 +21,8 @@ def test_sh_degree_and_dc_colour():
     assert [sh_degree_from_count((d + 1) ** 2) for d in range(5)] == [0, 1, 2, 3, 4]
     rgb = torch.tensor([0.0, 0.5, 1.0])
     torch.testing.assert_close(sh_dc_to_rgb(rgb_to_sh_dc(rgb)), rgb)
-    assert sh_dc_to_rgb(torch.tensor(1.0)).item() == pytest.approx(0.5 + SH_C0)
+    # the INRIA 3DGS convention (docs/formats.md): f_dc = 1 is 0.5 + Y_0^0 = 0.5 + 1 / (2 sqrt(pi))
+    assert sh_dc_to_rgb(torch.tensor(1.0)).item() == pytest.approx(0.5 + 0.5 / math.sqrt(math.pi))
 
 
 def test_select_concatenate_and_finiteness():
