@@ -71,7 +71,8 @@ def resume_candidates(output: Path) -> list[Path]:
     parent = output / "checkpoints"
     pointer = parent / LATEST_FILE
     folders = _step_folders(parent) if parent.is_dir() else []
-    named = parent / pointer.read_text().strip() if pointer.is_file() else None
+    name = pointer.read_text().strip() if pointer.is_file() else ""
+    named = parent / name if name else None
     if named is not None and named not in folders:
         logger.warning("%s names %s, which is missing", pointer, named)
     if not folders:
@@ -79,7 +80,7 @@ def resume_candidates(output: Path) -> list[Path]:
             raise InputError(f"{pointer} names {named.name}, but the folder {named} is missing and no other "
                              "checkpoint is there; start without --resume")
         raise InputError(f"{output}: no checkpoint to resume from ({parent} holds no step_* folders); start without --resume")
-    return [named] + [f for f in folders if f != named] if named in folders else folders
+    return ([named] + [f for f in folders if f != named]) if named in folders else folders
 
 
 def load_training_checkpoint(folder: Path, model: Lumos3D) -> TrainingState:
