@@ -33,8 +33,15 @@ def stdout_console() -> Console:
 
 def configure_logging(debug: bool, quiet: bool) -> None:
     level = logging.DEBUG if debug else logging.ERROR if quiet else logging.WARNING
-    handler = RichHandler(console=stderr_console(), show_time=False, show_path=debug, markup=False)
-    logging.basicConfig(level=logging.WARNING, handlers=[handler], format="%(message)s", force=True)
+    if sys.stderr.isatty():
+        handler = RichHandler(console=stderr_console(), show_time=False, show_path=debug, markup=False)
+        line_format = "%(message)s"
+    else:
+        # Piped or captured (CI, log files, scripts): rich would wrap every record at 80 columns,
+        # splitting paths and one-line warnings; plain lines keep them whole and greppable.
+        handler = logging.StreamHandler(sys.stderr)
+        line_format = "%(levelname)s %(message)s"
+    logging.basicConfig(level=logging.WARNING, handlers=[handler], format=line_format, force=True)
     logging.getLogger("lumos3d_cli").setLevel(level)
 
 
