@@ -33,3 +33,18 @@ def test_colour_regression_models_keep_their_colours(buu):
     model = build_model("tiny", seed=0).eval()
     network = run_network(model, photos, get_restore_preset("fast"))
     assert with_full_resolution_colours(network.prediction, photos, model) is network.prediction
+
+
+def test_structure_from_motion_sees_the_models_restoration(buu):
+    from lumos3d_cli.pipeline.restore import build_scene
+
+    names = ["3.JPG", "4.JPG", "5.JPG", "6.JPG", "7.JPG"]
+    photos = load_images([buu / "low" / name for name in names]).images
+    model = build_model("tiny-operator", seed=0).eval()
+    built = build_scene(photos, names, model, get_restore_preset("fast"), geometry="sfm", max_views=3)
+    report = built.geometry.summary()
+    assert report["brightening"] == "the model's restoration operator" and report["registered_views"] == 5
+    assert len(built.selected) == 3 and built.timings["network"] > 0
+    regression = build_scene(photos, names, build_model("tiny", seed=0).eval(), get_restore_preset("fast"),
+                             geometry="sfm", max_views=3)
+    assert regression.geometry.summary()["brightening"].startswith("auto-gamma")

@@ -22,18 +22,29 @@ from lumos3d_cli.io.file_digest import file_sha256
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.io.image_files import list_images
 from lumos3d_cli.io.images import ImageBatch, load_images
-from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.model.appearance.footprint import footprint_colours
 from lumos3d_cli.model.appearance.gaussian_colours import with_operator_colours
+from lumos3d_cli.model.appearance.operator import AppearanceOperator
 from lumos3d_cli.model.appearance.photo_restoration import restore_photos
+from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D, Lumos3DPrediction
 from lumos3d_cli.pipeline.model_loading import load_restoration_model
-from lumos3d_cli.pipeline.network_pass import even_subset, run_network
-from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, RestorePreset, get_restore_preset
+from lumos3d_cli.pipeline.network_pass import NetworkPass, even_subset, run_network
+from lumos3d_cli.pipeline.presets import (
+    DEFAULT_RESTORE_PRESET,
+    RestorePreset,
+    get_restore_preset,
+)
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
 from lumos3d_cli.pipeline.quality import QualityMeter, load_references, mean_metrics
 from lumos3d_cli.pipeline.sampling_filter import apply_sampling_filter
-from lumos3d_cli.pipeline.scene_geometry import SceneGeometry, check_geometry_source, place_views, register_views
+from lumos3d_cli.pipeline.scene_geometry import (
+    Brightened,
+    SceneGeometry,
+    check_geometry_source,
+    place_views,
+    register_views,
+)
 from lumos3d_cli.render.render import render
 
 logger = logging.getLogger(__name__)
@@ -132,6 +143,25 @@ def with_full_resolution_colours(prediction: Lumos3DPrediction, photos: torch.Te
     return replace(prediction, params=params)
 
 
+def _timed_network(model: Lumos3D, images: torch.Tensor, selected: list[int], preset: RestorePreset,
+                   timings: dict[str, float], progress: JobProgress) -> NetworkPass:
+    progress.start("network", 1)
+    started = time.perf_counter()
+    network = run_network(model, images[selected], preset)
+    timings["network"] += time.perf_counter() - started
+    progress.advance("network")
+    return network
+
+
+def _restored_photos(network: NetworkPass, photos: torch.Tensor) -> torch.Tensor:
+    """All photos [V, 3, H, W] through the scene's predicted operator (its curve and colour matrix;
+    the per-view local grids exist only for the views the network saw)."""
+    operator = network.prediction.appearance.scene(0)
+    global_operator = AppearanceOperator(operator.curve_slopes, operator.matrix, None)
+    with torch.no_grad():
+        return restore_photos(photos.to(operator.matrix.device), global_operator).cpu()
+
+
 def build_scene(
     images: torch.Tensor, names: list[str], model: Lumos3D, preset: RestorePreset, geometry: str = "auto",
     poses: Path | str | None = None, max_views: int | None = None, mode: str = "low-light",
@@ -148,19 +178,24 @@ def build_scene(
     """
     progress = progress or SilentProgress()
     check_geometry_source(geometry)
-    timings: dict[str, float] = {}
-    registration = register_views(images, names, geometry, poses, mode, progress)
-    timings.update(registration.seconds)
+    timings: dict[str, float] = {"network": 0.0}
     limit = max_views or preset.max_views
-    selected = even_subset(len(names), limit, required=[*required_views, *registration.views_needing_network()])
+    network, selected, brightened = None, [], None
+    if model.architecture.appearance == "operator" and geometry != "network":
+        # The model restores the photos itself: structure-from-motion sees its restoration, so the
+        # network runs first (on an even subset) and again only if SfM leaves views it must place.
+        selected = even_subset(len(names), limit, required=list(required_views))
+        network = _timed_network(model, images, selected, preset, timings, progress)
+        brightened = Brightened(_restored_photos(network, images), "the model's restoration operator")
+    registration = register_views(images, names, geometry, poses, mode, progress, brightened)
+    timings.update(registration.seconds)
+    unplaced = set(registration.views_needing_network()) - set(selected)
+    if network is None or unplaced:
+        selected = even_subset(len(names), limit, required=[*required_views, *registration.views_needing_network()])
+        network = _timed_network(model, images, selected, preset, timings, progress)
     if len(selected) < len(names):
         logger.info("%d views given; the network sees %d of them, chosen evenly (raise max_views to use more)",
                     len(names), len(selected))
-    progress.start("network", 1)
-    started = time.perf_counter()
-    network = run_network(model, images[selected], preset)
-    timings["network"] = time.perf_counter() - started
-    progress.advance("network")
     started = time.perf_counter()
     scene_geometry = place_views(registration, network, selected, names)
     prediction = with_full_resolution_colours(network.prediction, images[selected], model)

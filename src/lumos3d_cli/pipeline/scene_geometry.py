@@ -27,8 +27,15 @@ from lumos3d_cli.geometry.depth_alignment import MIN_POINTS, align_depth
 from lumos3d_cli.geometry.depth_correction import GRID as DEPTH_CORRECTION_GRID
 from lumos3d_cli.geometry.depth_correction import correct_depth
 from lumos3d_cli.geometry.given_poses import read_given_poses
-from lumos3d_cli.geometry.sfm import EXHAUSTIVE_MATCHING_LIMIT, Registration, register_photos
-from lumos3d_cli.geometry.similarity import fill_unregistered_views, fit_camera_similarity
+from lumos3d_cli.geometry.sfm import (
+    EXHAUSTIVE_MATCHING_LIMIT,
+    Registration,
+    register_photos,
+)
+from lumos3d_cli.geometry.similarity import (
+    fill_unregistered_views,
+    fit_camera_similarity,
+)
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.sparse_points import SparsePoints
 from lumos3d_cli.pipeline.network_pass import NetworkPass
@@ -59,6 +66,7 @@ class ViewRegistration:
     cameras: Cameras | None
     sfm: Registration | None
     seconds: dict[str, float] = field(default_factory=dict)
+    brightening: str | None = None
 
     def views_needing_network(self) -> list[int]:
         """Views the network must see because only it can place them."""
@@ -68,23 +76,41 @@ class ViewRegistration:
 
 
 def _structure_from_motion(images: torch.Tensor, names: list[str], progress: JobProgress) -> Registration:
+    """images: the photos already brightened (`Brightened`)."""
     progress.start("structure from motion", 1)
-    # The photos are dark (or washed out); SIFT finds far more features after a tone curve.
     # One thread makes COLMAP's result repeatable (with more, a small photo set can settle on
     # another focal length from run to run); above the exhaustive-matching range speed matters more.
     threads = 1 if len(names) <= EXHAUSTIVE_MATCHING_LIMIT else None
-    registration = register_photos(auto_gamma(images), names, threads=threads)
+    registration = register_photos(images, names, threads=threads)
     progress.advance("structure from motion")
     if not registration.failed and not registration.looks_like_one_scene:
         logger.warning("the photos may not show one scene: %s", registration.describe())
     return registration
 
 
+@dataclass
+class Brightened:
+    """The photos as structure-from-motion sees them: images [V, 3, H, W] and how they were made
+    (the model's restoration, or a blind tone curve). The photos are dark (or washed out); SIFT
+    finds far more features on restored ones."""
+
+    images: torch.Tensor
+    method: str
+
+    @staticmethod
+    def blind(photos: torch.Tensor) -> Brightened:
+        return Brightened(auto_gamma(photos), BRIGHTENING)
+
+
 def register_views(
     images: torch.Tensor, names: list[str], geometry: str, poses: Path | str | None, mode: str, progress: JobProgress,
+    brightened: Brightened | None = None,
 ) -> ViewRegistration:
-    """images [V, 3, H, W] (the photos) -> the cameras known before the network runs."""
+    """images [V, 3, H, W] (the photos) -> the cameras known before the network runs.
+    `brightened`: the photos as SfM should see them (default: the blind tone curve)."""
     check_geometry_source(geometry)
+    brightened = brightened if brightened is not None else Brightened.blind(images)
+    images = brightened.images
     count = len(names)
     size = (int(images.shape[-1]), int(images.shape[-2]))
     started = time.perf_counter()
@@ -92,7 +118,7 @@ def register_views(
         given = read_given_poses(poses, names, [size] * count)
         sfm = _structure_from_motion(images, names, progress) if geometry != "network" and count > 1 else None
         return ViewRegistration(geometry, "poses", torch.ones(count, dtype=torch.bool), given, sfm,
-                                {"sfm": time.perf_counter() - started})
+                                {"sfm": time.perf_counter() - started}, brightened.method)
     if geometry == "network":
         return ViewRegistration(geometry, "network", torch.zeros(count, dtype=torch.bool), None, None)
     if count < 2:
@@ -104,12 +130,13 @@ def register_views(
     seconds = {"sfm": time.perf_counter() - started}
     if registration.registered_count > AUTO_MIN_REGISTERED_SHARE * count:
         return ViewRegistration(geometry, "sfm", registration.registered.clone(), registration.cameras, registration,
-                                seconds)
+                                seconds, brightened.method)
     if geometry == "sfm":
         raise InputError(f"sfm: structure-from-motion {registration.describe()}; use geometry network or give poses",
                          parameter="geometry")
     logger.warning("structure-from-motion %s; using the network's cameras instead", registration.describe())
-    return ViewRegistration(geometry, "network", torch.zeros(count, dtype=torch.bool), None, registration, seconds)
+    return ViewRegistration(geometry, "network", torch.zeros(count, dtype=torch.bool), None, registration, seconds,
+                            brightened.method)
 
 
 @dataclass
@@ -249,7 +276,7 @@ def place_views(registration: ViewRegistration, network: NetworkPass, selected: 
         "requested": registration.requested,
         "registered_views": int(known.sum()) if registration.source == "sfm" else None,
         "views": len(names),
-        "brightening": BRIGHTENING if sfm is not None else None,
+        "brightening": registration.brightening if sfm is not None else None,
         "reprojection_error_px": sfm.reprojection_error if sfm is not None else None,
         "sparse_points": len(points),
         "models": sfm.model_sizes if sfm is not None else None,
