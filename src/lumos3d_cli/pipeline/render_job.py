@@ -1,0 +1,108 @@
+"""The render job: a Gaussian scene rendered from given cameras or along an orbit, written as PNG
+frames and optionally a video (H.264 or GIF), all or nothing."""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.atomic import atomic_directory, atomic_path
+from lumos3d_cli.io.camera_files import find_camera_source, read_cameras
+from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.gaussians import Gaussians
+from lumos3d_cli.io.image_write import write_image
+from lumos3d_cli.io.video import VideoWriter, probe_video, video_kind
+from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
+from lumos3d_cli.render.camera_paths import orbit_from_cameras, orbit_from_gaussians
+from lumos3d_cli.render.render import render
+
+DEFAULT_ORBIT_SIZE = 512
+MAX_SIDE = 16384
+
+
+def output_size(native: tuple[int, int], width: int | None, height: int | None) -> tuple[int, int]:
+    """The requested (width, height); one side alone keeps the native aspect ratio."""
+    for name, value in (("width", width), ("height", height)):
+        if value is not None and not 1 <= value <= MAX_SIDE:
+            raise InputError(f"{value}: use a size between 1 and {MAX_SIDE} pixels", parameter=name)
+    if width and height:
+        return width, height
+    if width:
+        return width, max(1, round(width * native[1] / native[0]))
+    if height:
+        return max(1, round(height * native[0] / native[1])), height
+    return native
+
+
+def render_cameras(
+    scene: Path, gaussians: Gaussians, poses: Path | None = None, orbit: int | None = None,
+    width: int | None = None, height: int | None = None,
+) -> tuple[Cameras, str]:
+    """The cameras to render `gaussians` (read from `scene`) from, and where they came from: the
+    camera file `poses`, or `orbit` frames around the cameras beside the scene (a restore output)
+    or, without any, around the scene's bounds."""
+    if (poses is None) == (orbit is None):
+        raise InputError("give exactly one of poses (a camera file) or orbit (a frame count)", parameter="poses")
+    if poses is not None:
+        cameras = read_cameras(poses)
+        return cameras.rescaled(*output_size(cameras.sizes[0], width, height)), str(find_camera_source(poses))
+    nearby = find_camera_source(scene.parent)
+    if nearby is not None:
+        scene_cameras = read_cameras(nearby)
+        size = output_size(scene_cameras.sizes[0], width, height)
+        return orbit_from_cameras(scene_cameras, orbit, *size, gaussians), f"orbit around the cameras in {nearby}"
+    if len(gaussians) == 0:
+        raise InputError(f"{scene}: the scene is empty and has no cameras beside it; give poses", parameter="scene")
+    size = output_size((DEFAULT_ORBIT_SIZE,) * 2, width, height)
+    return orbit_from_gaussians(gaussians, orbit, *size), "orbit around the scene bounds"
+
+
+@dataclass
+class RenderedFrames:
+    """frames written, their size (width, height), milliseconds per rendered frame, and the video
+    as ffmpeg reads it back (None without one)."""
+
+    frames: int
+    size: tuple[int, int]
+    render_ms_per_frame: float
+    video: dict | None
+
+
+def render_frames(
+    gaussians: Gaussians, cameras: Cameras, output: Path, video: Path | None = None, fps: int = 30,
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0), antialiased: bool = False,
+    progress: JobProgress | None = None,
+) -> RenderedFrames:
+    """Render every camera into `output`/00000.png ... (and `video`, .mp4 or .gif); the folder's
+    frames and the video appear when all are written (io.atomic)."""
+    progress = progress or SilentProgress()
+    kind = video_kind(video) if video is not None else None
+    frame_width, frame_height = cameras.sizes[0]
+    render_seconds = 0.0
+    progress.start("render", len(cameras))
+    with atomic_directory(output) as staging:
+        with atomic_path(video) if video is not None else contextlib.nullcontext() as video_temporary:
+            with (VideoWriter(video_temporary, frame_width, frame_height, fps, kind)
+                  if video_temporary is not None else contextlib.nullcontext()) as writer:
+                for index in range(len(cameras)):
+                    started = time.perf_counter()
+                    with torch.no_grad():
+                        image = render(gaussians, cameras[index], background=background, antialiased=antialiased).images[0]
+                    render_seconds += time.perf_counter() - started
+                    pixels = image.permute(1, 2, 0).numpy()
+                    write_image(staging / f"{index:05d}.png", pixels)
+                    if writer is not None:
+                        writer.write(pixels)
+                    progress.advance("render")
+    written = None
+    if video is not None:
+        # What the file holds as ffmpeg reads it back (H.264 pads odd sides).
+        stream = probe_video(video)
+        written = {"path": str(video), "codec": stream.codec, "pixel_format": stream.pixel_format,
+                   "width": stream.width, "height": stream.height, "frames": len(cameras), "fps": fps}
+    return RenderedFrames(len(cameras), (frame_width, frame_height), round(1000 * render_seconds / len(cameras), 2), written)
