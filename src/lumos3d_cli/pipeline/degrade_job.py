@@ -1,0 +1,77 @@
+"""The degrade job: photos on disk -> synthetic low-light or over-exposed copies on disk (a folder
+with degradation.json, or one file), all or nothing."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import torch
+
+from lumos3d_cli.data.degradations import MODES, Degradation, apply_degradation, sample_parameters
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.atomic import atomic_directory
+from lumos3d_cli.io.image_files import PHOTO_SUFFIXES
+from lumos3d_cli.io.image_write import write_image
+from lumos3d_cli.io.images import read_image, to_srgb
+from lumos3d_cli.io.output_paths import check_output_path
+from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
+
+SINGLE_FILE_SUFFIXES = (".png", ".jpg", ".jpeg")  # what io.image_write encodes
+BIT_DEPTHS = (8, 16)
+
+
+def check_degrade_output(inputs: list[Path], output: Path, bit_depth: int) -> bool:
+    """Validate the output before any image is read; True when it names a single output file
+    rather than a folder. Messages name the user's path (the files are written under temporary
+    names)."""
+    if bit_depth not in BIT_DEPTHS:
+        raise InputError(f"{bit_depth}: use 8 or 16", parameter="bit_depth")
+    suffix = output.suffix.lower()
+    if suffix in PHOTO_SUFFIXES:
+        if len(inputs) != 1:
+            raise InputError(f"{output}: names one file but there are {len(inputs)} inputs; give a folder", parameter="output")
+        if suffix not in SINGLE_FILE_SUFFIXES:
+            raise InputError(f"{output}: cannot write '{output.suffix}' files; use .png or .jpg", parameter="output")
+        if bit_depth != 8 and suffix != ".png":
+            raise InputError(f"{output}: JPEG holds 8 bits only; use .png for 16-bit output", parameter="output")
+        check_output_path(output, "output")
+        return True
+    check_output_path(output, "output", folder=True)
+    return False
+
+
+def degrade_files(
+    paths: list[Path], output: Path, mode: str = "low-light", seed: int = 0, noise: bool = False,
+    per_image: bool = False, bit_depth: int = 8, progress: JobProgress | None = None,
+) -> dict:
+    """Degrade every photo in `paths` into `output` (a folder of PNGs plus degradation.json, or one
+    .png/.jpg for one input) and return the summary: the parameters drawn for each image. One draw
+    is shared by all images (one camera setting) unless `per_image`."""
+    progress = progress or SilentProgress()
+    if mode not in MODES:
+        raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
+    single_file = check_degrade_output(paths, output, bit_depth)
+    degradation = Degradation(mode, noise=noise)
+    generator = torch.Generator().manual_seed(seed)
+    shared = None if per_image else sample_parameters(degradation, (), generator)
+    started = time.perf_counter()
+    records = []
+    progress.start(f"degrade ({mode})", len(paths))
+    with atomic_directory(output.parent if single_file else output) as staging:
+        for source in paths:
+            target = output if single_file else output / f"{source.stem}.png"
+            image = torch.from_numpy(to_srgb(read_image(source))).permute(2, 0, 1)
+            parameters = shared if shared is not None else sample_parameters(degradation, (), generator)
+            degraded = apply_degradation(image, mode, parameters, generator)
+            write_image(staging / target.name, degraded.permute(1, 2, 0).numpy(), bit_depth=bit_depth)
+            records.append({"input": str(source), "output": str(target), **parameters.as_dict()})
+            progress.advance(f"degrade ({mode})")
+        summary = {
+            "mode": mode, "seed": seed, "noise": noise, "shared_parameters": not per_image,
+            "count": len(records), "seconds": round(time.perf_counter() - started, 3), "images": records,
+        }
+        if not single_file:
+            (staging / "degradation.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return summary
