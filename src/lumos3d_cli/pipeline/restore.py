@@ -83,7 +83,8 @@ class RestoredScene:
         """The JSON summary of the run (summary.json)."""
         return {
             "scene": str(scene_path) if scene_path is not None else None,
-            "inputs": len(self.input_paths), "views": self.names, "input_paths": [str(p) for p in self.input_paths],
+            "inputs": len(self.input_paths), "views": self.names,
+            "input_paths": [str(path.resolve()) for path in self.input_paths],  # absolute: the viewer finds them
             "network_views": [self.input_paths[i].name for i in self.selected],
             "network_size": list(self.network_size), "preset": self.preset, "mode": self.mode, "device": self.device,
             "checkpoint": self.checkpoint, "geometry": self.geometry.summary(),
