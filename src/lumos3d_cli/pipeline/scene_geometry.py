@@ -269,7 +269,8 @@ def place_views(registration: ViewRegistration, network: NetworkPass, selected: 
     network_cameras = network.to_network(selected_cameras)
     points = _points_in_frame(registration)
     depth, alignment_report = _aligned_depth(network, selected, network_cameras, points, selected_names, selected_cameras)
-    consistency = depth_consistency(depth, network_cameras) if len(selected) > 1 else None
+    # float32 is ample for a 2 % test (the figure is reported, not used)
+    consistency = depth_consistency(depth.float(), network_cameras.to(torch.float32)) if len(selected) > 1 else None
     fuse_pixels = confirmed_pixels(depth, network_cameras)
     sfm = registration.sfm
     report = {
