@@ -12,14 +12,6 @@ from lumos3d_cli.train.distributed import setup_distributed
 from lumos3d_cli.train.trainer import Trainer
 
 
-@pytest.fixture(scope="module")
-def brackets(shared_data):
-    root = shared_data / "brackets"
-    if not (root / "brackets.json").is_file():
-        pytest.skip(f"no brackets at {root}")
-    return root
-
-
 def _trainer(path, overrides=()):
     return Trainer(load_config(path, list(overrides)), setup_distributed("cpu"))
 

@@ -89,6 +89,10 @@ class TrainConfig:
     loss: LossConfig = field(default_factory=LossConfig)
     optim: OptimConfig = field(default_factory=OptimConfig)
     brackets: BracketConfig = field(default_factory=BracketConfig)  # real exposure brackets (train/bracket_samples.py)
+    # top-level modules that train (e.g. [illumination_head]); empty: all (train/trainable.py)
+    trainable: list[str] = field(default_factory=list)
+    # false: no multi-view samples (nor teacher), each step is the bracket appearance loss only
+    multiview: bool = True
     batch_size: int = 1  # scenes per step per process
     seed: int = 0
     device: Literal["auto", "cpu", "cuda"] = "auto"
@@ -103,7 +107,9 @@ class TrainConfig:
     tensorboard: bool = False
 
     def __post_init__(self) -> None:
-        if self.stage == "student" and not self.teacher:
+        if not self.multiview and self.brackets.root is None:
+            raise ValueError("multiview: false leaves only the bracket samples: set brackets.root")
+        if self.stage == "student" and self.multiview and not self.teacher:
             raise ValueError("stage 'student' needs `teacher`: a checkpoint of the normal-light model")
         if self.batch_size < 1 or self.optim.steps < 1 or self.validation_samples < 1:
             raise ValueError("batch_size, optim.steps and validation_samples must be at least 1")

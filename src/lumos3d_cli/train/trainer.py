@@ -39,6 +39,7 @@ from lumos3d_cli.train.config import TrainConfig, config_to_yaml
 from lumos3d_cli.train.distributed import DistributedContext, all_reduce_mean, any_rank
 from lumos3d_cli.train.run_logs import RunLogs
 from lumos3d_cli.train.schedule import learning_rate_factor
+from lumos3d_cli.train.trainable import restrict_training
 from lumos3d_cli.train.validation import render_views, validate
 
 logger = logging.getLogger(__name__)
@@ -145,10 +146,11 @@ class Trainer:
         data = self.config.data
         if data.width % patch or data.height % patch:
             raise InputError(f"data.width x data.height = {data.width}x{data.height} must be multiples of the patch size {patch}")
+        restrict_training(model, self.config.trainable)
         return model.train()
 
     def _teacher(self) -> Lumos3D | None:
-        if self.config.stage != "student":
+        if self.config.stage != "student" or not self.config.multiview:
             return None
         teacher = load_model(self.config.teacher, device=self.device)
         return teacher.eval().requires_grad_(False)
@@ -206,6 +208,16 @@ class Trainer:
         return torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=enabled)
 
     def _losses(self, step: int) -> dict[str, torch.Tensor]:
+        """This step's loss terms (scalars) and their weighted sum "total"."""
+        terms = self._multiview_losses(step) if self.config.multiview else {}
+        if self.brackets is not None:  # one-view bracket samples: the appearance loss only
+            with self._autocast():
+                terms["brackets"] = self.brackets.loss(self.model, step, self.context.rank, self.context.world_size, self.device)
+            terms["total"] = terms.get("total", 0) + self.config.brackets.weight * terms["brackets"]
+        return terms
+
+    def _multiview_losses(self, step: int) -> dict[str, torch.Tensor]:
+        """The stage's objective (losses/objective.py) on this step's multi-view samples."""
         batch = self._load_batch(step)
         inputs, targets = self.inputs_and_targets(batch, step)
         with self._autocast():
@@ -217,12 +229,7 @@ class Trainer:
                     teacher = self.teacher(teacher_sees)
         renders, rendered_depth = render_views(output, self.config.loss.background)
         stage_batch = StageBatch(targets, batch["extrinsics"], batch["intrinsics"], batch["sparse_depth"], batch["has_poses"])
-        terms = self.objective(output, renders, rendered_depth, stage_batch, teacher)
-        if self.brackets is not None:  # one-view bracket samples: the appearance loss only
-            with self._autocast():
-                terms["brackets"] = self.brackets.loss(self.model, step, self.context.rank, self.context.world_size, self.device)
-            terms["total"] = terms["total"] + self.config.brackets.weight * terms["brackets"]
-        return terms
+        return self.objective(output, renders, rendered_depth, stage_batch, teacher)
 
     def step(self, step: int) -> StepReport:
         started = time.perf_counter()
