@@ -34,7 +34,9 @@ weights: $(STAMP)
 	$(BIN)/lumos3d train configs/default-low-light.yaml
 	$(BIN)/lumos3d train configs/default-over-exposure.yaml
 	$(BIN)/lumos3d convert runs/default-low-light/final.safetensors -o src/lumos3d_cli/weights/lumos3d-low-light.safetensors --dtype float16
-	$(BIN)/lumos3d convert runs/default-over-exposure/final.safetensors -o src/lumos3d_cli/weights/lumos3d-over-exposure.safetensors --dtype float16
+	# over-exposure ships with the appearance operator: a head-only stage on SICE brackets (issue 15)
+	$(BIN)/lumos3d train configs/operator-head-over-exposure.yaml
+	$(BIN)/lumos3d convert runs/operator-head-over-exposure/final.safetensors -o src/lumos3d_cli/weights/lumos3d-over-exposure.safetensors --dtype float16
 
 # Train the ablation students the model card reports (after `make weights`; hours on a CPU) and
 # rewrite its ablation table.
