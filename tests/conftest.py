@@ -25,6 +25,15 @@ def buu(shared_data: Path) -> Path:
     return shared_data / "lom" / "buu"
 
 
+@pytest.fixture(scope="session")
+def brackets(shared_data: Path) -> Path:
+    """The shared SICE exposure brackets folder (skips, like shared_data, when it is absent)."""
+    root = shared_data / "brackets"
+    if not (root / "brackets.json").is_file():
+        pytest.skip(f"no brackets at {root}")
+    return root
+
+
 @dataclass
 class CliResult:
     code: int

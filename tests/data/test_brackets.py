@@ -11,14 +11,6 @@ from lumos3d_cli.data.brackets import (
 from lumos3d_cli.errors import InputError
 
 
-@pytest.fixture(scope="module")
-def brackets(shared_data):
-    root = shared_data / "brackets"
-    if not (root / "brackets.json").is_file():
-        pytest.skip(f"no brackets at {root}")
-    return root
-
-
 def test_pairing_rule():
     frames = [("00.jpg", 0.05), ("01.jpg", 0.2), ("02.jpg", 0.3), ("03.jpg", 0.46), ("04.jpg", 0.7), ("05.jpg", 0.75), ("06.jpg", 0.95)]
     # target 03 (closest to 0.45); low-light: mean <= 0.23; over-exposure: 1 - mean <= 0.27.

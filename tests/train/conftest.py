@@ -2,15 +2,6 @@ import pytest
 import yaml
 
 
-@pytest.fixture(scope="module")
-def brackets(shared_data):
-    """The shared SICE brackets folder (skips when absent)."""
-    root = shared_data / "brackets"
-    if not (root / "brackets.json").is_file():
-        pytest.skip(f"no brackets at {root}")
-    return root
-
-
 @pytest.fixture
 def tiny_config(tmp_path, shared_data):
     """Write a small, fast training config and return its path; `changes` update it."""

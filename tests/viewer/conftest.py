@@ -72,7 +72,8 @@ def _decode_frame(frame: bytes) -> list[tuple[dict, list[bytes]]]:
 
 
 def binary_field(message: dict, buffers: list[bytes], *keys: str) -> np.ndarray:
-    """A numpy field of a message (a placeholder naming its buffer and dtype)."""
+    """A numpy field of a message: viser sends arrays as {"__binary_index", "dtype"}, which point into
+    the binary buffers that follow the frame's messages."""
     value = message
     for key in keys:
         value = value[key]

@@ -8,12 +8,8 @@ from __future__ import annotations
 import math
 
 import torch
-import torch.nn.functional as F
 
-SSIM_SIGMA = 1.5
-SSIM_RADIUS = 5  # int(3.5 * sigma + 0.5): an 11 x 11 window
-SSIM_K1 = 0.01
-SSIM_K2 = 0.03
+from lumos3d_cli.losses.ssim import ssim_map_mean
 
 
 def _flatten(images: torch.Tensor) -> torch.Tensor:
@@ -28,37 +24,11 @@ def psnr(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor:
     return (10 * torch.log10(1.0 / mse)).reshape(images.shape[:-3])
 
 
-def _gaussian_window() -> torch.Tensor:
-    positions = torch.arange(-SSIM_RADIUS, SSIM_RADIUS + 1, dtype=torch.float64)
-    kernel = torch.exp(-(positions**2) / (2 * SSIM_SIGMA**2))
-    return kernel / kernel.sum()
-
-
-def _blur(x: torch.Tensor) -> torch.Tensor:
-    """Separable Gaussian filter with reflected borders; x [N, C, H, W] float64."""
-    kernel = _gaussian_window().to(x.device)
-    channels = x.shape[1]
-    x = F.pad(x, (SSIM_RADIUS, SSIM_RADIUS, 0, 0), mode="reflect")
-    x = F.conv2d(x, kernel.view(1, 1, 1, -1).expand(channels, 1, 1, -1), groups=channels)
-    x = F.pad(x, (0, 0, SSIM_RADIUS, SSIM_RADIUS), mode="reflect")
-    return F.conv2d(x, kernel.view(1, 1, -1, 1).expand(channels, 1, -1, 1), groups=channels)
-
-
 def ssim(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor:
-    """[..., 3, H, W] in [0, 1] (H, W > 11) -> [...] mean SSIM over channels and pixels."""
+    """[..., 3, H, W] in [0, 1] (H, W > 11) -> [...] mean SSIM over channels and pixels, in float64
+    (the training loss's definition, losses/ssim.py, so that training optimises what is reported)."""
     a, b = _flatten(images), _flatten(references)
-    if min(a.shape[-2:]) <= 2 * SSIM_RADIUS:
-        raise ValueError(f"SSIM needs images larger than {2 * SSIM_RADIUS + 1} pixels, got {tuple(a.shape[-2:])}")
-    c1, c2 = (SSIM_K1 * 1.0) ** 2, (SSIM_K2 * 1.0) ** 2
-    mean_a, mean_b = _blur(a), _blur(b)
-    var_a = _blur(a * a) - mean_a**2
-    var_b = _blur(b * b) - mean_b**2
-    covariance = _blur(a * b) - mean_a * mean_b
-    numerator = (2 * mean_a * mean_b + c1) * (2 * covariance + c2)
-    denominator = (mean_a**2 + mean_b**2 + c1) * (var_a + var_b + c2)
-    r = SSIM_RADIUS
-    value = (numerator / denominator)[..., r:-r, r:-r].mean(dim=(1, 2, 3))
-    return value.reshape(images.shape[:-3])
+    return ssim_map_mean(a, b).reshape(images.shape[:-3])
 
 
 def auto_gamma(images: torch.Tensor, target_mean: float = 0.45) -> torch.Tensor:

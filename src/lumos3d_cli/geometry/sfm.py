@@ -33,7 +33,7 @@ import os
 import tempfile
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -43,8 +43,9 @@ import torch
 
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.sparse_points import SparsePoints
 from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.colmap import sparse_points_of
+from lumos3d_cli.io.sparse_points import SparsePoints
 
 logger = logging.getLogger(__name__)
 
@@ -174,23 +175,10 @@ def _read_model(
         torch.stack([intrinsics[i] for i in order]) if order else torch.zeros(0, 3, 3, dtype=torch.float64),
         [photo_size] * len(order), [names[i] for i in order],
     )
-    point_ids = sorted(model.points3D.keys())
-    position = {point_id: i for i, point_id in enumerate(point_ids)}
-    xyz = np.array([model.points3D[p].xyz for p in point_ids], dtype=np.float64).reshape(-1, 3)
-    rgb = np.array([model.points3D[p].color for p in point_ids], dtype=np.uint8).reshape(-1, 3)
-    error = np.array([model.points3D[p].error for p in point_ids], dtype=np.float64)
-    view, point, pixel = [], [], []
-    for image_id, index in view_of_image.items():
-        for observation in model.images[image_id].get_observation_points2D():
-            view.append(index)
-            point.append(position[observation.point3D_id])
-            pixel.append(observation.xy)
-    pixels = torch.tensor(np.array(pixel, dtype=np.float64).reshape(-1, 2)) * scale
+    # The model's pixels are SfM's (resized) pixels: back to the photos'.
+    at_sfm_size = sparse_points_of(model, view_of_image)
     mean_scale = float(scale.mean())
-    points = SparsePoints(
-        torch.from_numpy(xyz), torch.from_numpy(rgb), torch.from_numpy(error) * mean_scale,
-        torch.tensor(view, dtype=torch.int64), torch.tensor(point, dtype=torch.int64), pixels,
-    )
+    points = replace(at_sfm_size, error=at_sfm_size.error * mean_scale, pixel=at_sfm_size.pixel * scale)
     return cameras, registered, points, model.compute_mean_reprojection_error() * mean_scale
 
 

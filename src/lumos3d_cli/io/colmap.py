@@ -208,16 +208,10 @@ def read_colmap_points(path: Path | str) -> ColmapPoints:
     )
 
 
-def read_colmap_sparse_points(folder: Path | str, names: list[str]) -> SparsePoints:
-    """The points of a text or binary model with their observations; `view` indexes `names`
-    (image names, e.g. `read_colmap_model(folder).names`); observations of other images are
-    dropped."""
-    folder = Path(folder)
-    reconstruction = _read_reconstruction(folder)
-    view_of_image = {}
-    for image_id, image in reconstruction.images.items():
-        if image.name in names:
-            view_of_image[image_id] = names.index(image.name)
+def sparse_points_of(reconstruction: pycolmap.Reconstruction, view_of_image: dict[int, int]) -> SparsePoints:
+    """The points of a pycolmap reconstruction with the observations of the images in
+    `view_of_image` (COLMAP image id -> view index); pixels and errors in the model's own image
+    pixels. Observations of other images are dropped."""
     point_ids = sorted(reconstruction.points3D.keys())
     position = {point_id: index for index, point_id in enumerate(point_ids)}
     points = [reconstruction.points3D[point_id] for point_id in point_ids]
@@ -234,6 +228,16 @@ def read_colmap_sparse_points(folder: Path | str, names: list[str]) -> SparsePoi
         torch.tensor(view, dtype=torch.int64), torch.tensor(point, dtype=torch.int64),
         torch.tensor(np.array(pixel, dtype=np.float64).reshape(-1, 2)),
     )
+
+
+def read_colmap_sparse_points(folder: Path | str, names: list[str]) -> SparsePoints:
+    """The points of a text or binary model with their observations; `view` indexes `names`
+    (image names, e.g. `read_colmap_model(folder).names`); observations of other images are
+    dropped."""
+    reconstruction = _read_reconstruction(Path(folder))
+    view_of_image = {image_id: names.index(image.name) for image_id, image in reconstruction.images.items()
+                     if image.name in names}
+    return sparse_points_of(reconstruction, view_of_image)
 
 
 def _observation_lines(cameras: Cameras, points: SparsePoints | None) -> tuple[list[str], list[str]]:

@@ -13,11 +13,8 @@ from lumos3d_cli.model.appearance.operator import AppearanceOperator
 
 @pytest.mark.slow
 @pytest.mark.parametrize("mode", ["low-light", "over-exposure"])
-def test_fitted_operator_beats_auto_gamma_on_a_held_out_bracket(shared_data, mode):
-    root = shared_data / "brackets"
-    if not (root / "brackets.json").is_file():
-        pytest.skip(f"no brackets at {root}")
-    pair = bracket_pairs(root, mode, "validation")[0]
+def test_fitted_operator_beats_auto_gamma_on_a_held_out_bracket(brackets, mode):
+    pair = bracket_pairs(brackets, mode, "validation")[0]
     photo, target = read_srgb(pair.input_path)[None, None], read_srgb(pair.target_path)[None, None]
     small = [F.interpolate(x[0], size=(96, 96), mode="area")[None] for x in (photo, target)]
     raw = [torch.zeros(1, 3, CURVE_KNOTS - 1, requires_grad=True), torch.zeros(1, 3, 3, requires_grad=True)]
