@@ -168,3 +168,58 @@ def test_low_light_synthesis_is_in_the_range_of_lom(buu):
     assert real.mean().item() == pytest.approx(0.091, abs=0.005)
     assert 0.02 < darkest.mean().item() and brightest.mean().item() > 0.06
     assert degradation.ranges("low-light") == ModeRanges(exposure=(0.05, 0.1), gamma=(1.3, 1.4))
+
+
+def test_colour_cast_is_a_linear_gain_on_red_and_blue_only():
+    images = _images(3, 8, 8, seed=4) * 0.5 + 0.25
+    plain = DegradationParameters(torch.tensor(0.5, dtype=torch.float64), torch.tensor(1.0, dtype=torch.float64))
+    cast = DegradationParameters(plain.exposure, plain.gamma, cast=torch.tensor([0.8, 1.0, 1.25], dtype=torch.float64))
+    base = srgb_to_linear(apply_degradation(images.double(), "low-light", plain, torch.Generator()))
+    shifted = srgb_to_linear(apply_degradation(images.double(), "low-light", cast, torch.Generator()))
+    ratio = (shifted / base).mean(dim=(1, 2))
+    assert torch.allclose(ratio, torch.tensor([0.8, 1.0, 1.25], dtype=torch.float64), atol=1e-6)
+
+
+def test_sampled_casts_are_log_uniform_in_range_with_green_fixed():
+    parameters = sample_parameters(Degradation("low-light", colour_cast=(0.8, 1.25)), (4000,), torch.Generator().manual_seed(1))
+    assert torch.all(parameters.cast[:, 1] == 1)
+    red_blue = parameters.cast[:, [0, 2]]
+    assert red_blue.min() >= 0.8 and red_blue.max() <= 1.25
+    assert abs(float(red_blue.log().mean())) < 0.01  # log-symmetric: a gain and its inverse equally likely
+
+
+def test_quantisation_leaves_eight_bit_levels():
+    parameters = DegradationParameters(torch.tensor(0.05, dtype=torch.float64), torch.tensor(1.3, dtype=torch.float64), quantize=True)
+    out = apply_degradation(_images(3, 16, 16, seed=2), "low-light", parameters, torch.Generator())
+    levels = out * 255
+    assert torch.allclose(levels, levels.round(), atol=1e-4)
+    assert levels.max() < 64  # a dark 8-bit photo holds few levels: what banding is made of
+
+
+def test_jpeg_matches_opencv_round_trip():
+    image = _images(3, 32, 48, seed=5)
+    parameters = DegradationParameters(torch.tensor(1.0, dtype=torch.float64), torch.tensor(1.0, dtype=torch.float64),
+                                       jpeg_quality=torch.tensor(80.0, dtype=torch.float64))
+    out = apply_degradation(image.double(), "low-light", parameters, torch.Generator())
+    plain = apply_degradation(image.double(), "low-light", DegradationParameters(parameters.exposure, parameters.gamma), torch.Generator())
+    pixels = (plain.permute(1, 2, 0).numpy() * 255).round().astype(np.uint8)
+    _, encoded = cv2.imencode(".jpg", pixels[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 80])
+    expected = cv2.imdecode(encoded, cv2.IMREAD_COLOR)[..., ::-1] / 255.0
+    assert np.array_equal(out.permute(1, 2, 0).numpy(), expected)
+
+
+def test_camera_pipeline_draws_are_reproducible_and_recorded():
+    settings = Degradation("low-light", noise=True, colour_cast=(0.8, 1.25), quantize=True, jpeg_quality=(75, 98))
+    images = _images(2, 3, 3, 16, 16, seed=6)
+    first, parameters = degrade(images, settings, torch.Generator().manual_seed(9))
+    second, _ = degrade(images, settings, torch.Generator().manual_seed(9))
+    assert torch.equal(first, second)
+    record = parameters.as_dict((0, 0))
+    assert 75 <= record["jpeg_quality"] <= 98 and record["bits"] == 8 and len(record["colour_cast"]) == 3
+
+
+@pytest.mark.parametrize("field, value", [("colour_cast", (0.0, 1.0)), ("colour_cast", (1.2, 1.1)), ("jpeg_quality", (0, 90)),
+                                          ("jpeg_quality", (95, 90))])
+def test_camera_pipeline_settings_are_checked(field, value):
+    with pytest.raises(ValueError, match=field):
+        Degradation("low-light", **{field: value})

@@ -37,3 +37,20 @@ def test_trainable_names_modules_of_the_model(tiny_config):
 def test_dropping_the_multiview_objective_needs_brackets(tiny_config):
     with pytest.raises(InputError, match="brackets.root"):
         load_config(tiny_config(stage="student", multiview=False))
+
+
+def test_the_appearance_loss_of_multiview_samples_trains_the_head_without_a_teacher(tiny_config):
+    config = tiny_config(stage="student", name="head-mv", appearance="operator", trainable=["illumination_head"],
+                         multiview_loss="appearance", optim__warmup_steps=0)
+    trainer = _trainer(config)
+    assert trainer.teacher is None
+    before = {name: value.clone() for name, value in trainer.model.state_dict().items()}
+    report = trainer.step(0)
+    assert not report.skipped and set(report.terms) == {"appearance", "total"} and report.terms["appearance"] > 0
+    moved = {name for name in before if not torch.equal(before[name], trainer.model.state_dict()[name])}
+    assert moved and all(name.startswith("illumination_head.") for name in moved)
+
+
+def test_the_appearance_loss_of_multiview_samples_needs_an_operator(tiny_config):
+    with pytest.raises(InputError, match="appearance: operator"):
+        _trainer(tiny_config(stage="student", name="reg-mv", multiview_loss="appearance"))

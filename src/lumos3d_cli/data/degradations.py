@@ -9,6 +9,11 @@ The over-exposure curve pushes the scene up an exponential saturation shoulder, 
 roll off into white rather than clipping at one level, then lifts the mid-tones; its parameter
 ranges were fitted to LOM's `buu` `high/` -> `over_exp/` pairs (docs/formats.md has the numbers).
 
+The full camera pipeline adds, when configured: a colour cast (a per-channel gain on red and blue
+in linear light, on the degraded photo only: a wrong white balance the restoration must undo),
+8-bit quantisation (the shadows of a dark 8-bit photo hold a few levels, which an amplifying
+restoration turns into banding) and JPEG compression at a drawn quality (OpenCV's encoder).
+
 Sensor noise (optional) is the heteroscedastic Gaussian approximation of Poisson-Gaussian noise,
 added to the exposed linear signal: y += sqrt(shot * y + read) * n, n ~ N(0, 1), with
 log(shot) ~ U(log 1e-4, log 1.2e-2) and log(read) = 2.18 log(shot) + 1.2 + N(0, 0.26^2)
@@ -21,6 +26,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal
 
+import cv2
+import numpy as np
 import torch
 
 from lumos3d_cli.checks import require_finite
@@ -64,7 +71,10 @@ class Degradation:
     `mixed` draws low-light or over-exposure with equal probability per call of `degrade`, with
     the ranges of `low_light` and `over_exposure`; the single modes use `exposure` and `gamma`.
     `consistent_views` shares one draw among the views of a scene (one camera setting);
-    `white_balance` is the per-channel linear gain range of `white_balance_shift`.
+    `white_balance` is the per-channel linear gain range of `white_balance_shift` (targets and
+    inputs alike); `colour_cast` the range of the red and blue linear gains applied to the degraded
+    image only; `quantize` rounds the result to 8 bits; `jpeg_quality` (low, high) compresses it
+    as JPEG at a quality drawn from that range (None: no JPEG; JPEG implies 8 bits).
     """
 
     mode: Literal["low-light", "over-exposure", "mixed"] = "low-light"
@@ -75,10 +85,17 @@ class Degradation:
     noise: bool = False
     consistent_views: bool = True
     white_balance: tuple[float, float] = (1.0, 1.0)
+    colour_cast: tuple[float, float] = (1.0, 1.0)
+    quantize: bool = False
+    jpeg_quality: tuple[int, int] | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in (*MODES, "mixed"):
             raise ValueError(f"unknown degradation mode {self.mode!r}; use one of {', '.join(MODES)} or mixed")
+        if not 0 < self.colour_cast[0] <= self.colour_cast[1]:
+            raise ValueError(f"colour_cast={self.colour_cast} must satisfy 0 < low <= high")
+        if self.jpeg_quality is not None and not 1 <= self.jpeg_quality[0] <= self.jpeg_quality[1] <= 100:
+            raise ValueError(f"jpeg_quality={self.jpeg_quality} must satisfy 1 <= low <= high <= 100")
         if self.mode == "mixed" and (self.exposure is not None or self.gamma is not None):
             raise ValueError("degrade.mode=mixed takes its ranges from degrade.low_light and degrade.over_exposure; "
                              "remove degrade.exposure and degrade.gamma")
@@ -104,17 +121,27 @@ class Degradation:
 
 @dataclass
 class DegradationParameters:
-    """Drawn parameters, broadcastable to the images' batch shape [...] (float64)."""
+    """Drawn parameters, broadcastable to the images' batch shape [...] (float64); cast [..., 3]
+    linear gains (green 1); jpeg_quality [...] (None: no JPEG); quantize: round to 8 bits."""
 
     exposure: torch.Tensor
     gamma: torch.Tensor
     shot: torch.Tensor | None = None
     read: torch.Tensor | None = None
+    cast: torch.Tensor | None = None
+    jpeg_quality: torch.Tensor | None = None
+    quantize: bool = False
 
-    def as_dict(self, index: tuple[int, ...] = ()) -> dict[str, float]:
-        """Plain floats of one image (for logs and JSON)."""
-        values = {"exposure": self.exposure, "gamma": self.gamma, "shot_noise": self.shot, "read_noise": self.read}
-        return {name: float(v[index]) for name, v in values.items() if v is not None}
+    def as_dict(self, index: tuple[int, ...] = ()) -> dict:
+        """Plain numbers of one image (for logs and JSON)."""
+        values = {"exposure": self.exposure, "gamma": self.gamma, "shot_noise": self.shot, "read_noise": self.read,
+                  "jpeg_quality": self.jpeg_quality}
+        found = {name: float(v[index]) for name, v in values.items() if v is not None}
+        if self.cast is not None:
+            found["colour_cast"] = [float(g) for g in self.cast[index]]
+        if self.quantize or self.jpeg_quality is not None:
+            found["bits"] = 8
+        return found
 
 
 def _uniform(shape, low: float, high: float, generator: torch.Generator) -> torch.Tensor:
@@ -129,13 +156,40 @@ def sample_parameters(
     ranges = degradation.ranges(mode or degradation.mode)
     exposure = _uniform(shape, *ranges.exposure, generator)
     gamma = _uniform(shape, *ranges.gamma, generator)
-    if not degradation.noise:
-        return DegradationParameters(exposure, gamma)
-    noise = SENSOR_NOISE
-    log_shot = _uniform(shape, *(math.log(v) for v in noise.shot_range), generator)
-    jitter = noise.read_jitter * torch.randn(shape, generator=generator, device=generator.device, dtype=torch.float64)
-    log_read = noise.read_slope * log_shot + noise.read_intercept + jitter
-    return DegradationParameters(exposure, gamma, log_shot.exp(), log_read.exp())
+    parameters = DegradationParameters(exposure, gamma, quantize=degradation.quantize)
+    if degradation.noise:
+        noise = SENSOR_NOISE
+        log_shot = _uniform(shape, *(math.log(v) for v in noise.shot_range), generator)
+        jitter = noise.read_jitter * torch.randn(shape, generator=generator, device=generator.device, dtype=torch.float64)
+        log_read = noise.read_slope * log_shot + noise.read_intercept + jitter
+        parameters.shot, parameters.read = log_shot.exp(), log_read.exp()
+    if degradation.colour_cast != (1.0, 1.0):
+        # log-uniform, so a gain and its inverse are equally likely
+        low, high = (math.log(v) for v in degradation.colour_cast)
+        cast = _uniform((*shape, 3), low, high, generator).exp()
+        cast[..., 1] = 1.0
+        parameters.cast = cast
+    if degradation.jpeg_quality is not None:
+        low, high = degradation.jpeg_quality
+        parameters.jpeg_quality = torch.randint(low, high + 1, shape, generator=generator, device=generator.device).double()
+    return parameters
+
+
+def _jpeg(images: torch.Tensor, quality: torch.Tensor) -> torch.Tensor:
+    """sRGB images [..., 3, H, W] through OpenCV's JPEG encoder and decoder at `quality`
+    (broadcast over the batch dims), back as float in [0, 1]."""
+    batch_shape = images.shape[:-3]
+    qualities = quality.expand(batch_shape).reshape(-1).tolist()
+    flat = images.reshape(-1, *images.shape[-3:])
+    decoded = []
+    for image, level in zip(flat, qualities):
+        pixels = (image.permute(1, 2, 0).cpu().numpy() * 255).round().clip(0, 255).astype(np.uint8)
+        ok, encoded = cv2.imencode(".jpg", pixels[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, int(level)])
+        if not ok:
+            raise RuntimeError(f"OpenCV could not encode a JPEG at quality {level}")
+        back = cv2.imdecode(encoded, cv2.IMREAD_COLOR)[..., ::-1].copy()
+        decoded.append(torch.from_numpy(back).permute(2, 0, 1))
+    return (torch.stack(decoded).reshape(images.shape).to(images.device, images.dtype) / 255.0)
 
 
 def apply_degradation(
@@ -152,6 +206,9 @@ def apply_degradation(
         return values.expand(images.shape[:-3])[..., None, None, None]
 
     exposed = srgb_to_linear(images.clamp(0.0, 1.0)) * per_image(parameters.exposure)
+    if parameters.cast is not None:
+        exposed = exposed * parameters.cast.to(device=images.device, dtype=images.dtype).expand(
+            (*images.shape[:-3], 3))[..., None, None]
     if parameters.shot is not None and parameters.read is not None:
         variance = per_image(parameters.shot) * exposed + per_image(parameters.read)
         normal = torch.randn(images.shape, generator=generator, device=generator.device, dtype=images.dtype)
@@ -162,7 +219,12 @@ def apply_degradation(
         toned = (-torch.expm1(-exposed)) ** (1.0 / per_image(parameters.gamma))
     else:
         raise ValueError(f"unknown degradation mode {mode!r}; use one of {', '.join(MODES)}")
-    return linear_to_srgb(toned.clamp(0.0, 1.0))
+    encoded = linear_to_srgb(toned.clamp(0.0, 1.0))
+    if parameters.jpeg_quality is not None:
+        return _jpeg(encoded, parameters.jpeg_quality)
+    if parameters.quantize:
+        return torch.round(encoded * 255.0) / 255.0
+    return encoded
 
 
 def degrade(

@@ -1,12 +1,15 @@
 """Image-quality metrics: PSNR on [0, 1]; SSIM with an 11x11 Gaussian window (sigma 1.5),
 K1 = 0.01, K2 = 0.03, population covariances, reflected borders cropped before averaging (the
 settings of scikit-image's `structural_similarity(gaussian_weights=True, sigma=1.5,
-use_sample_covariance=False)`, which the tests use as the oracle); LPIPS (losses/lpips.py)."""
+use_sample_covariance=False)`, which the tests use as the oracle); sharpness, the high-frequency
+energy of an image over its reference's; LPIPS (losses/lpips.py)."""
 
 from __future__ import annotations
 
 import math
 
+import cv2
+import numpy as np
 import torch
 
 from lumos3d_cli.losses.ssim import ssim_map_mean
@@ -39,3 +42,35 @@ def auto_gamma(images: torch.Tensor, target_mean: float = 0.45) -> torch.Tensor:
     gammas = math.log(target_mean) / torch.log(means)
     corrected = flat.clamp_min(0.0) ** gammas[:, None, None, None]
     return corrected.clamp(0, 1).to(images.dtype).reshape(images.shape)
+
+
+SHARPNESS_SIGMAS = (0.7, 2.0)  # the band of a difference of Gaussians: pixel-scale detail, not shading
+LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)  # Rec. 709
+
+
+def _difference_of_gaussians(luminance: np.ndarray) -> np.ndarray:
+    """[H, W] float64 -> G(sigma 0.7) - G(sigma 2.0), kernels truncated at 4 sigma, edges repeated
+    (scikit-image's `difference_of_gaussians` defaults, which the tests use as the oracle)."""
+    blurred = [cv2.GaussianBlur(luminance, (2 * int(4 * s + 0.5) + 1,) * 2, s, borderType=cv2.BORDER_REPLICATE)
+               for s in SHARPNESS_SIGMAS]
+    return blurred[0] - blurred[1]
+
+
+def sharpness(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor:
+    """[..., 3, H, W] in [0, 1] -> [...] the mean absolute difference of Gaussians (sigma 0.7 and
+    2.0) of each image's luminance over its reference's, after matching the image's luminance mean
+    and deviation to the reference's (so exposure and contrast do not count, only detail).
+
+    1 is as sharp as the reference; a blur scores below 1, noise or ringing above. A flat image
+    scores 0; a flat reference gives NaN (nothing to compare against).
+    """
+    weights = torch.tensor(LUMINANCE_WEIGHTS, dtype=torch.float64)[:, None, None]
+    ours = (_flatten(images) * weights).sum(dim=1).numpy()
+    theirs = (_flatten(references) * weights).sum(dim=1).numpy()
+    ratios = []
+    for image, reference in zip(ours, theirs):
+        spread = image.std()
+        matched = (image - image.mean()) * (reference.std() / spread if spread > 1e-12 else 0.0) + reference.mean()
+        detail = np.abs(_difference_of_gaussians(reference)).mean()
+        ratios.append(np.abs(_difference_of_gaussians(matched)).mean() / detail if detail > 1e-12 else math.nan)
+    return torch.tensor(ratios, dtype=torch.float64).reshape(images.shape[:-3])

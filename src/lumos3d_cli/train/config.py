@@ -93,6 +93,11 @@ class TrainConfig:
     trainable: list[str] = field(default_factory=list)
     # false: no multi-view samples (nor teacher), each step is the bracket appearance loss only
     multiview: bool = True
+    # how multi-view samples are scored: "objective" (the stage's full objective: render, teacher,
+    # Lumos loss) or "appearance" (the predicted operator applied to the degraded views against the
+    # normal-light views with the appearance loss alone: no rendering, no teacher; for stages that
+    # train only the illumination head)
+    multiview_loss: Literal["objective", "appearance"] = "objective"
     batch_size: int = 1  # scenes per step per process
     seed: int = 0
     device: Literal["auto", "cpu", "cuda"] = "auto"
@@ -109,8 +114,10 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if not self.multiview and self.brackets.root is None:
             raise ValueError("multiview: false leaves only the bracket samples: set brackets.root")
-        if self.stage == "student" and self.multiview and not self.teacher:
+        if self.stage == "student" and self.multiview and self.multiview_loss == "objective" and not self.teacher:
             raise ValueError("stage 'student' needs `teacher`: a checkpoint of the normal-light model")
+        if self.multiview_loss == "appearance" and self.stage != "student":
+            raise ValueError("multiview_loss: appearance scores a restoration: it needs stage 'student'")
         if self.batch_size < 1 or self.optim.steps < 1 or self.validation_samples < 1:
             raise ValueError("batch_size, optim.steps and validation_samples must be at least 1")
 

@@ -22,6 +22,7 @@ from lumos3d_cli.data.degradations import degrade, white_balance_shift
 from lumos3d_cli.data.multiview_dataset import MultiViewDataset
 from lumos3d_cli.data.scene_records import scan_dl3dv, scan_scene_folders
 from lumos3d_cli.errors import InputError, NonFiniteError, RunError
+from lumos3d_cli.losses.appearance import appearance_loss
 from lumos3d_cli.losses.objective import StageBatch, TrainingObjective
 from lumos3d_cli.model.appearance.conversion import with_appearance
 from lumos3d_cli.model.architectures import ARCHITECTURES
@@ -97,6 +98,7 @@ class Trainer:
         self.model.set_gradient_checkpointing(config.gradient_checkpointing)
         self.teacher = self._teacher()
         self.brackets = self._brackets()
+        self._check_multiview_loss()
         self.objective = TrainingObjective(config.loss, config.stage).to(self.device)
         self.optimizer = torch.optim.AdamW(
             self._parameter_groups(), lr=config.optim.lr, betas=config.optim.betas, weight_decay=config.optim.weight_decay
@@ -150,7 +152,7 @@ class Trainer:
         return model.train()
 
     def _teacher(self) -> Lumos3D | None:
-        if self.config.stage != "student" or not self.config.multiview:
+        if self.config.stage != "student" or not self.config.multiview or self.config.multiview_loss != "objective":
             return None
         teacher = load_model(self.config.teacher, device=self.device)
         return teacher.eval().requires_grad_(False)
@@ -209,7 +211,11 @@ class Trainer:
 
     def _losses(self, step: int) -> dict[str, torch.Tensor]:
         """This step's loss terms (scalars) and their weighted sum "total"."""
-        terms = self._multiview_losses(step) if self.config.multiview else {}
+        terms = {}
+        if self.config.multiview and self.config.multiview_loss == "appearance":
+            terms = self._multiview_appearance_losses(step)
+        elif self.config.multiview:
+            terms = self._multiview_losses(step)
         if self.brackets is not None:  # one-view bracket samples: the appearance loss only
             with self._autocast():
                 terms["brackets"] = self.brackets.loss(self.model, step, self.context.rank, self.context.world_size, self.device)
@@ -230,6 +236,21 @@ class Trainer:
         renders, rendered_depth = render_views(output, self.config.loss.background)
         stage_batch = StageBatch(targets, batch["extrinsics"], batch["intrinsics"], batch["sparse_depth"], batch["has_poses"])
         return self.objective(output, renders, rendered_depth, stage_batch, teacher)
+
+    def _multiview_appearance_losses(self, step: int) -> dict[str, torch.Tensor]:
+        """The appearance loss of the operator predicted from this step's degraded multi-view
+        samples, applied to them, against their normal-light views (no render, no teacher)."""
+        batch = self._load_batch(step)
+        inputs, targets = self.inputs_and_targets(batch, step)
+        with self._autocast():
+            operator = self.model.predict_appearance(inputs)
+            loss = appearance_loss(operator.apply(inputs), targets, self.config.brackets.ssim_weight)
+        return {"appearance": loss, "total": loss}
+
+    def _check_multiview_loss(self) -> None:
+        if self.config.multiview_loss == "appearance" and self.model.illumination_head is None:
+            raise InputError(f"multiview_loss: appearance trains the restoration operator, but architecture "
+                             f"'{self.model.architecture.name}' regresses colours: set `appearance: operator`")
 
     def step(self, step: int) -> StepReport:
         started = time.perf_counter()
