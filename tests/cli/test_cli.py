@@ -71,6 +71,19 @@ def test_degrade_over_exposure_16_bit_per_image(run_cli, buu, tmp_path):
     assert image.dtype == np.uint16 and image.mean() / 65535 > 0.7
 
 
+def test_degrade_with_the_camera_pipeline_records_its_draws(run_cli, buu, tmp_path):
+    inputs = _copy_images(buu / "high", tmp_path / "high", 1)
+    result = run_cli("degrade", inputs, "-o", tmp_path / "dark", "--noise", "--colour-cast", "1.25",
+                     "--jpeg-quality", "80", "--json")
+    assert result.code == 0, result.err
+    record = json.loads(result.out)["images"][0]
+    assert record["jpeg_quality"] == 80 and record["colour_cast"][1] == 1
+    assert all(0.8 <= gain <= 1.25 for gain in record["colour_cast"])
+    plain = run_cli("degrade", inputs, "-o", tmp_path / "plain", "--noise")
+    assert plain.code == 0
+    assert cv2.imread(str(tmp_path / "dark" / "1.png")).shape == cv2.imread(str(tmp_path / "plain" / "1.png")).shape
+
+
 def test_degrade_single_file_and_raw(run_cli, shared_data, tmp_path):
     result = run_cli("degrade", shared_data / "raw" / "Blackmagic.dng", "-o", tmp_path / "dark.png", "--quiet")
     assert result.code == 0, result.err
@@ -125,6 +138,8 @@ def test_degrade_bad_values(run_cli, buu, tmp_path):
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--bit-depth", "12"), "--bit-depth 12")
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o.jpg", "--bit-depth", "16"), "JPEG holds 8 bits only")
     expect_input_error(run_cli("degrade", buu / "high", "-o", tmp_path / "one.png"), "names one file but there are 25 inputs")
+    expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--colour-cast", "0.5"), "--colour-cast 0.5", "at least 1")
+    expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--jpeg-quality", "0"), "--jpeg-quality 0", "1 to 100")
 
 
 def test_info_on_a_scene_file(run_cli, tmp_path):

@@ -16,6 +16,7 @@ from lumos3d_cli.pipeline.degrade_job import check_degrade_output, degrade_files
 EXAMPLES = """
   lumos3d degrade photos/ -o dark/ --mode low-light --seed 0
   lumos3d degrade photo.jpg -o dark.png --noise
+  lumos3d degrade photos/ -o dark/ --noise --colour-cast 1.25 --jpeg-quality 85
   lumos3d degrade photos/ -o bright/ --mode over-exposure --per-image --bit-depth 16
 """
 
@@ -30,6 +31,10 @@ def degrade_command(
         False, "--per-image", help="Draw exposure/gamma per image (default: one draw shared by all, like one camera setting)."
     ),
     bit_depth: int = typer.Option(8, "--bit-depth", help="8 or 16 bits per channel (16 needs .png)."),
+    colour_cast: float = typer.Option(
+        1.0, "--colour-cast", help="Largest wrong white-balance gain: red and blue scaled by [1/G, G] in linear light (1: none)."
+    ),
+    jpeg_quality: int | None = typer.Option(None, "--jpeg-quality", help="Compress as JPEG at this quality (1-100) before writing."),
     json_output: bool = typer.Option(False, "--json", help="Print a JSON summary on stdout."),
 ) -> None:
     """Synthesise low-light (the paper's model) or over-exposed images from normal-light ones."""
@@ -38,7 +43,8 @@ def degrade_command(
     paths = list_images(inputs)
     check_degrade_output(paths, output, bit_depth)
     with progress_bar() as bars:
-        summary = degrade_files(paths, output, mode, seed, noise, per_image, bit_depth, ProgressBars(bars))
+        summary = degrade_files(paths, output, mode, seed, noise, per_image, bit_depth, ProgressBars(bars),
+                                colour_cast, jpeg_quality)
     if json_output:
         print_json(summary)
     else:
