@@ -80,6 +80,9 @@ class TrainConfig:
     model: str = "tiny"  # architecture name (random init) or checkpoint to start from
     # switch the starting model's appearance ('regression' | 'operator'; model/appearance/conversion.py)
     appearance: str | None = None
+    # with `appearance: operator`: channels of the per-view local gain grid (0: none; None: the
+    # architecture's own)
+    local_correction_channels: int | None = None
     teacher: str | None = None  # frozen teacher checkpoint (student stage)
     # what the frozen teacher sees: the normal-light images (the paper's cross-illumination
     # distillation) or the student's own degraded input (the paper's ablation)

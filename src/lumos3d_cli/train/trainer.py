@@ -143,7 +143,7 @@ class Trainer:
         else:
             model = load_model(source)
         if self.config.appearance is not None:
-            model = with_appearance(model, self.config.appearance)
+            model = with_appearance(model, self.config.appearance, self.config.local_correction_channels)
         patch = model.architecture.patch_size
         data = self.config.data
         if data.width % patch or data.height % patch:
