@@ -1,13 +1,14 @@
 """Faults and bad input through the real command in a child process (issue 17): runs stopped by a
 signal leave nothing half-written and say so in one line; a killed run's leftovers are removed by
 the next; a re-run replaces the output set; bad inputs are refused before any work, naming the
-file or value."""
+file or value; photos of different sizes are restored each at its own size, without stretching."""
 
 import json
 import shutil
 import signal
 import struct
 
+import cv2
 import numpy as np
 import OpenImageIO as oiio
 import pytest
@@ -16,6 +17,7 @@ import torch
 from lumos3d_cli.io.ply import write_ply
 from lumos3d_cli.model.checkpoints import save_checkpoint
 from lumos3d_cli.model.lumos3d import build_model
+from lumos3d_cli.viewer.scene_folder import load_viewer_scene
 
 from assertions import expect_input_error
 from factories import random_gaussians
@@ -250,3 +252,78 @@ def test_degrade_output_messages_name_the_users_path(tmp_path, buu):
         expect_input_error(result, f"{tmp_path / target}: {fragment}")
         assert ".tmp" not in result.err
     assert list(tmp_path.iterdir()) == []
+
+
+# -- row 17: photos of different sizes -----------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def mixed_sizes_restore(tmp_path_factory, buu):
+    """`lumos3d restore` (the bundled model, structure-from-motion) of buu's photos 1-7 as they are
+    (500x375), 7 once more centre-cropped to 300x375 (the same camera and viewpoint, a narrower
+    view) and 8 shrunk to 400x300 (the same view, fewer pixels)."""
+    folder = tmp_path_factory.mktemp("mixed") / "photos"
+    folder.mkdir()
+    for number in range(1, 8):
+        shutil.copy(buu / "low" / f"{number}.JPG", folder / f"{number}.JPG")
+    photo7 = cv2.imread(str(buu / "low" / "7.JPG"))
+    cv2.imwrite(str(folder / "7crop.png"), photo7[:, 100:400])
+    cv2.imwrite(str(folder / "8.png"), cv2.resize(cv2.imread(str(buu / "low" / "8.JPG")), (400, 300),
+                                                  interpolation=cv2.INTER_AREA))
+    out = folder.parent / "out"
+    result = run_lumos3d("restore", folder, "-o", out / "scene.ply", "--geometry", "sfm")
+    assert result.code == 0, result.err
+    sizes = {path.name: (cv2.imread(str(path)).shape[1], cv2.imread(str(path)).shape[0]) for path in folder.iterdir()}
+    return out, sizes, result
+
+
+def _psnr(a, b):
+    return 10 * np.log10(1 / np.mean((a.astype(np.float64) / 255 - b.astype(np.float64) / 255) ** 2))
+
+
+def test_photos_of_different_sizes_are_restored_each_at_its_own_size(mixed_sizes_restore):
+    out, sizes, result = mixed_sizes_restore
+    assert sizes["7crop.png"] == (300, 375) and sizes["8.png"] == (400, 300) and sizes["1.JPG"] == (500, 375)
+    assert "2 of 9 photos differ in size from 500x375 (7crop.png, 8.png)" in result.err
+    restored = {path.stem: cv2.imread(str(path)) for path in (out / "restored").iterdir()}
+    assert {stem: (image.shape[1], image.shape[0]) for stem, image in restored.items()} == {
+        name.split(".")[0]: size for name, size in sizes.items()}
+    frames = {frame["file_path"]: frame for frame in json.loads((out / "cameras.json").read_text())["frames"]}
+    assert sorted(frames) == sorted(sizes)
+    colmap = (out / "colmap" / "cameras.txt").read_text().splitlines()
+    colmap_sizes = sorted((int(line.split()[2]), int(line.split()[3])) for line in colmap if line and line[0] != "#")
+    assert colmap_sizes == sorted(sizes.values())
+    for name, (width, height) in sizes.items():
+        frame = frames[name]
+        assert (frame["w"], frame["h"]) == (width, height), name
+        # structure-from-motion saw each photo at its own aspect ratio with a centred pinhole:
+        # square pixels and the principal point in the middle of the photo, not of a stretched copy
+        assert frame["cx"] == pytest.approx(width / 2) and frame["cy"] == pytest.approx(height / 2), name
+        assert frame["fl_y"] == pytest.approx(frame["fl_x"], rel=1e-9), name
+    # A crop keeps the focal length in pixels; shrinking by 0.8 scales it by 0.8.
+    assert frames["7crop.png"]["fl_x"] == pytest.approx(frames["7.JPG"]["fl_x"], rel=0.03)
+    assert frames["8.png"]["fl_x"] == pytest.approx(0.8 * frames["1.JPG"]["fl_x"], rel=0.03)
+    crop_pose, full_pose = (np.array(frames[name]["transform_matrix"]) for name in ("7crop.png", "7.JPG"))
+    angle = np.degrees(np.arccos(np.clip((np.trace(crop_pose[:3, :3].T @ full_pose[:3, :3]) - 1) / 2, -1, 1)))
+    assert angle < 1.0
+    # The crop's restored view is the middle of the full photo's restored view, not a squeezed copy.
+    middle = restored["7"][:, 100:400]
+    assert _psnr(restored["7crop"], middle) > 25
+    squeezed = cv2.resize(restored["7"], (300, 375), interpolation=cv2.INTER_AREA)
+    assert _psnr(restored["7crop"], squeezed) < _psnr(restored["7crop"], middle) - 5
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["geometry"]["source"] == "sfm" and summary["geometry"]["registered_views"] == 9
+    assert cv2.imread(str(out / "contact_sheet.png")) is not None
+
+
+def test_a_restore_of_photos_of_different_sizes_renders_and_opens_in_the_viewer(tmp_path, mixed_sizes_restore):
+    out, sizes, _ = mixed_sizes_restore
+    scene = shutil.copytree(out, tmp_path / "out")
+    poses = run_lumos3d("render", scene / "scene.ply", "--poses", scene / "cameras.json", "-o", tmp_path / "frames",
+                        "--width", 200)
+    assert poses.code == 0, poses.err
+    assert len(list((tmp_path / "frames").glob("*.png"))) == len(sizes)
+    orbit = run_lumos3d("render", scene / "scene.ply", "--orbit", 2, "-o", tmp_path / "orbit", "--width", 100)
+    assert orbit.code == 0, orbit.err
+    viewer = load_viewer_scene(scene)
+    assert sorted(viewer.cameras.sizes) == sorted(sizes.values()) and viewer.notes == []

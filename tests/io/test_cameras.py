@@ -128,6 +128,25 @@ def test_rescale_and_relative_frame():
     torch.testing.assert_close(relative_pixels, original_pixels)
 
 
+def test_rescaled_to_per_view_sizes_maps_pixels_by_each_views_stretch():
+    """A photo stretched from w x h to W x H moves every pixel (u, v) to (u W/w, v H/h) (pixel
+    corners at integers): the rescaled camera must project a point exactly there."""
+    cameras = random_cameras(3)  # 320 x 241
+    sizes = [(500, 375), (160, 241), (320, 100)]
+    stretched = cameras.rescaled_to(sizes)
+    assert stretched.sizes == sizes and stretched.names == cameras.names
+    torch.testing.assert_close(stretched.extrinsics, cameras.extrinsics)
+    points = torch.randn(5, 3, dtype=torch.float64) + torch.tensor([0.0, 0.0, 4.0], dtype=torch.float64)
+    before, depth_before = cameras.project(points)
+    after, depth_after = stretched.project(points)
+    factors = torch.tensor([[w / 320, h / 241] for w, h in sizes], dtype=torch.float64)
+    torch.testing.assert_close(after, before * factors[:, None, :], atol=1e-9, rtol=0)
+    torch.testing.assert_close(depth_after, depth_before)
+    torch.testing.assert_close(stretched.rescaled_to(cameras.sizes).intrinsics, cameras.intrinsics, atol=1e-12, rtol=0)
+    with pytest.raises(ValueError, match="2 image sizes for 3 cameras"):
+        cameras.rescaled_to(sizes[:2])
+
+
 def test_camera_angle_only_and_missing_size(tmp_path):
     import cv2
 

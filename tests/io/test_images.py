@@ -177,16 +177,32 @@ def test_load_images_of_a_real_scene(shared_data):
     np.testing.assert_array_equal(batch.images[5].permute(1, 2, 0).numpy(), reference)
 
 
-def test_mixed_sizes_are_resized_with_a_warning(tmp_path, caplog):
+def test_mixed_sizes_are_stretched_to_the_most_common_and_keep_their_own_sizes(tmp_path, caplog):
     cv2.imwrite(str(tmp_path / "1.png"), np.full((20, 30, 3), 100, np.uint8))
     cv2.imwrite(str(tmp_path / "2.png"), np.full((20, 30, 3), 100, np.uint8))
-    cv2.imwrite(str(tmp_path / "3.png"), np.full((40, 60, 3), 100, np.uint8))
-    with caplog.at_level(logging.WARNING):
+    left_right = np.zeros((40, 20, 3), np.uint8)  # a portrait photo: dark left half, bright right half
+    left_right[:, 10:] = 200
+    cv2.imwrite(str(tmp_path / "3.png"), left_right)
+    with caplog.at_level(logging.INFO, logger="lumos3d_cli.io.images"):
         batch = load_images(tmp_path)
-    assert batch.images.shape == (3, 3, 20, 30)
-    assert batch.original_sizes == [(30, 20), (30, 20), (60, 40)]
-    assert "resized to 30x20: 3.png" in caplog.text
-    np.testing.assert_allclose(batch.images[2].numpy(), 100 / 255, atol=1e-6)
+    assert batch.images.shape == (3, 3, 20, 30) and batch.size == (30, 20) and batch.mixed_sizes
+    assert batch.original_sizes == [(30, 20), (30, 20), (20, 40)]
+    assert "stretched to 30x20: 3.png" in caplog.text
+    np.testing.assert_allclose(batch.images[0].numpy(), 100 / 255, atol=1e-6)
+    # stretched: the boundary between the halves stays in the middle of the 30 columns
+    np.testing.assert_allclose(batch.images[2, :, :, :14].numpy(), 0, atol=1e-6)
+    np.testing.assert_allclose(batch.images[2, :, :, 16:].numpy(), 200 / 255, atol=1e-6)
+    photo = batch.photo(2)  # back at its own size
+    assert photo.shape == (3, 40, 20)
+    np.testing.assert_allclose(photo[:, :, :9].numpy(), 0, atol=1e-6)
+    np.testing.assert_allclose(photo[:, :, 11:].numpy(), 200 / 255, atol=1e-6)
+    assert torch.equal(batch.photo(0), batch.images[0])
+
+
+def test_photos_of_one_size_are_not_mixed(tmp_path):
+    for name in ("1.png", "2.png"):
+        cv2.imwrite(str(tmp_path / name), np.full((20, 30, 3), 100, np.uint8))
+    assert not load_images(tmp_path).mixed_sizes
 
 
 def test_linear_sources_are_encoded_once_and_clipped(tmp_path):

@@ -98,7 +98,7 @@ def test_restore_bad_inputs_leave_nothing(run_cli, buu, tmp_path, random_checkpo
         cv2.imwrite(str(small / f"{name}.png"), np.zeros((10, 10, 3), np.uint8))
     expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--reference", small,
                                "--geometry", "network"),
-                  "images are 10x10, the inputs 500x375")
+                  f"{small / '1.png'}: 10x10, but input 1.JPG is 500x375; give references of the same size")
     assert not (tmp_path / "out").exists()
 
 

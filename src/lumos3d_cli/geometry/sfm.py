@@ -1,8 +1,9 @@
 """Structure-from-motion with pycolmap: SIFT features, matching, incremental mapping, on the CPU.
 
-The photos go in already brightened (SIFT finds few features in a dark photo); they are resized
-so that their long side is at most `long_side`, written as PNGs into a temporary folder, and
-registered there. Cameras, sparse points and observations come back in pixels of the photos.
+The photos go in already brightened (SIFT finds few features in a dark photo); each is resized
+so that its long side is at most `long_side` at its own aspect ratio (a photo stretched into a
+common tensor is un-stretched here), written as a PNG into a temporary folder, and registered
+there. Cameras, sparse points and observations come back in pixels of each photo at its own size.
 
 Choices, measured on LOM buu (500x375) and the Strecha scenes (768x512) on 2 CPU cores
 (benchmarks/sfm.py; docs/performance.md, "Structure-from-motion"; the seconds there were taken
@@ -21,6 +22,8 @@ with the cores shared by other jobs):
 - one shared SIMPLE_PINHOLE camera (one focal length, principal point at the image centre, no
   distortion) when the photos come from one camera: the renderer is a pinhole, and one focal
   length is better constrained than two. It lands within 0.5 % of fountain's calibrated focal.
+  Photos of different sizes get one such camera per size: a focal length in pixels and a
+  principal point at the image centre hold for one size only.
 
 COLMAP runs multi-threaded and is then not bit-reproducible; with few photos (about 6) its focal
 length can settle in a wrong minimum on some runs. `threads=1` makes a run deterministic.
@@ -45,6 +48,7 @@ from lumos3d_cli.checks import require_finite
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.colmap import sparse_points_of
+from lumos3d_cli.io.images import common_size
 from lumos3d_cli.io.sparse_points import SparsePoints
 
 logger = logging.getLogger(__name__)
@@ -67,8 +71,8 @@ class Registration:
     (observations index the V photos); reprojection_error: mean over observations, in pixels of
     the photos (nan when nothing registered); model_sizes: views of the largest model, then the
     views each disconnected further model adds (empty when none was found); matching:
-    "exhaustive" or "sequential"; sfm_size: (width, height) SfM ran at; seconds: the whole run,
-    stage_seconds: features, matching, mapping.
+    "exhaustive" or "sequential"; sfm_sizes: (width, height) SfM ran each photo at; seconds: the
+    whole run, stage_seconds: features, matching, mapping.
     """
 
     cameras: Cameras
@@ -77,9 +81,14 @@ class Registration:
     reprojection_error: float
     model_sizes: list[int]
     matching: str
-    sfm_size: tuple[int, int]
+    sfm_sizes: list[tuple[int, int]]
     seconds: float
     stage_seconds: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def sfm_size(self) -> tuple[int, int]:
+        """The (width, height) SfM ran most photos at."""
+        return common_size(self.sfm_sizes)
 
     @property
     def registered_count(self) -> int:
@@ -129,7 +138,7 @@ def sfm_size(width: int, height: int, long_side: int | None) -> tuple[int, int]:
     return max(1, round(width * factor)), max(1, round(height * factor))
 
 
-def _options(threads: int, max_features: int, shared_camera: bool, views: int):
+def _options(threads: int, max_features: int, views: int):
     reader = pycolmap.ImageReaderOptions()
     reader.camera_model = "SIMPLE_PINHOLE"
     extraction = pycolmap.FeatureExtractionOptions()
@@ -147,15 +156,42 @@ def _options(threads: int, max_features: int, shared_camera: bool, views: int):
         # viewpoints: with these settings 4 of 4 buu pairs registered (0.5-1.2 degrees), else none.
         mapping.triangulation.ignore_two_view_tracks = False
         mapping.mapper.init_min_tri_angle = 4.0
-    mode = pycolmap.CameraMode.SINGLE if shared_camera else pycolmap.CameraMode.PER_IMAGE
-    return reader, extraction, matching, mapping, mode
+    return reader, extraction, matching, mapping
+
+
+def _image_files(photo_sizes: Sequence[tuple[int, int]], shared_camera: bool
+                 ) -> tuple[list[str], pycolmap.CameraMode]:
+    """Each photo's file in SfM's folder (named by input index) and how COLMAP assigns cameras:
+    one for all photos of one camera; one per photo size when the sizes differ, a sub-folder
+    each (COLMAP's single camera refuses other image sizes); else one per photo."""
+    files = [f"{index:05d}.png" for index in range(len(photo_sizes))]
+    if not shared_camera:
+        return files, pycolmap.CameraMode.PER_IMAGE
+    if len(set(photo_sizes)) == 1:
+        return files, pycolmap.CameraMode.SINGLE
+    folders = [f"{width}x{height}/{file}" for (width, height), file in zip(photo_sizes, files)]
+    return folders, pycolmap.CameraMode.PER_FOLDER
+
+
+def _group_means(values: torch.Tensor, groups: torch.Tensor, count: int) -> torch.Tensor:
+    """[count] means of values [N] by group index [N]; a group whose values are all equal gets
+    that value exactly (photos of one size keep COLMAP's figures scaled exactly as one factor)."""
+    low = values.new_full((count,), float("inf")).scatter_reduce(0, groups, values, "amin")
+    high = values.new_full((count,), float("-inf")).scatter_reduce(0, groups, values, "amax")
+    mean = values.new_zeros(count).index_add(0, groups, values) / torch.bincount(groups, minlength=count).clamp(min=1)
+    return torch.where(low == high, low, mean)
 
 
 def _read_model(
-    model: pycolmap.Reconstruction, views: int, names: Sequence[str], photo_size: tuple[int, int], size: tuple[int, int]
+    model: pycolmap.Reconstruction, names: Sequence[str], photo_sizes: Sequence[tuple[int, int]],
+    sfm_sizes: Sequence[tuple[int, int]],
 ) -> tuple[Cameras, torch.Tensor, SparsePoints, float]:
-    """The model's cameras, registered mask [V], points and mean error, in pixels of the photos."""
-    scale = torch.tensor([photo_size[0] / size[0], photo_size[1] / size[1]], dtype=torch.float64)
+    """The model's cameras, registered mask [V], points and mean error, in pixels of each photo at
+    its own size."""
+    views = len(names)
+    # [V, 2] photo pixels per SfM pixel, along x and y
+    scale = torch.tensor([[width / sfm_width, height / sfm_height] for (width, height), (sfm_width, sfm_height)
+                          in zip(photo_sizes, sfm_sizes)], dtype=torch.float64)
     registered = torch.zeros(views, dtype=torch.bool)
     extrinsics, intrinsics = {}, {}
     view_of_image = {}
@@ -167,19 +203,23 @@ def _read_model(
         registered[index] = True
         extrinsics[index] = torch.from_numpy(image.cam_from_world().matrix()).double()
         calibration = torch.from_numpy(model.cameras[image.camera_id].calibration_matrix()).double()
-        calibration[:2] *= scale[:, None]
+        calibration[:2] *= scale[index][:, None]
         intrinsics[index] = calibration
     order = sorted(extrinsics)
     cameras = Cameras(
         torch.stack([extrinsics[i] for i in order]) if order else torch.zeros(0, 3, 4, dtype=torch.float64),
         torch.stack([intrinsics[i] for i in order]) if order else torch.zeros(0, 3, 3, dtype=torch.float64),
-        [photo_size] * len(order), [names[i] for i in order],
+        [photo_sizes[i] for i in order], [names[i] for i in order],
     )
-    # The model's pixels are SfM's (resized) pixels: back to the photos'.
+    # The model's pixels are SfM's (resized) pixels: back to the photos'. An error (a length)
+    # scales by the mean of the x and y factors of the views that measured it.
     at_sfm_size = sparse_points_of(model, view_of_image)
-    mean_scale = float(scale.mean())
-    points = replace(at_sfm_size, error=at_sfm_size.error * mean_scale, pixel=at_sfm_size.pixel * scale)
-    return cameras, registered, points, model.compute_mean_reprojection_error() * mean_scale
+    factor = scale.mean(dim=1)[at_sfm_size.view]  # [O]
+    point_factor = _group_means(factor, at_sfm_size.point, len(at_sfm_size))
+    mean_factor = float(_group_means(factor, torch.zeros_like(at_sfm_size.view), 1)[0])
+    points = replace(at_sfm_size, error=at_sfm_size.error * point_factor,
+                     pixel=at_sfm_size.pixel * scale[at_sfm_size.view])
+    return cameras, registered, points, model.compute_mean_reprojection_error() * mean_factor
 
 
 def _registered_names(model: pycolmap.Reconstruction) -> set[str]:
@@ -206,15 +246,18 @@ def register_photos(
     shared_camera: bool = True,
     threads: int | None = None,
     max_features: int = MAX_FEATURES,
+    sizes: Sequence[tuple[int, int]] | None = None,
 ) -> Registration:
     """Register brightened photos [V, 3, H, W] (sRGB in [0, 1]) named `names` (file names).
 
-    Returns the largest model SfM found; a Registration with `failed` set (not an exception) when
-    fewer than two views register (blank, textureless or unrelated photos), so that a caller can
-    fall back to other cameras. `shared_camera`: the photos come from one camera with one focal
-    length (set it False for photos that were of different sizes before loading). `threads`:
-    CPU threads (None: all cores). InputError for fewer than 2 photos, a name count that does not
-    match, or non-finite pixels.
+    `sizes`: (width, height) of each photo before it was stretched to the tensor's size (None:
+    the tensor's size); SfM sees each photo at its own aspect ratio and returns its camera at its
+    own size. Returns the largest model SfM found; a Registration with `failed` set (not an
+    exception) when fewer than two views register (blank, textureless or unrelated photos), so
+    that a caller can fall back to other cameras. `shared_camera`: the photos come from one camera
+    with one focal length (photos of different sizes then share one camera per size; False: one
+    camera per photo). `threads`: CPU threads (None: all cores). InputError for fewer than 2
+    photos, a name or size count that does not match, or non-finite pixels.
     """
     if images.dim() != 4 or images.shape[1] != 3:
         raise InputError(f"structure-from-motion needs images [V, 3, H, W], got {tuple(images.shape)}")
@@ -223,10 +266,14 @@ def register_photos(
         raise InputError(f"structure-from-motion needs at least 2 photos of the scene, got {views}")
     if len(names) != views:
         raise InputError(f"{len(names)} names for {views} photos")
+    photo_sizes = [(int(w), int(h)) for w, h in sizes] if sizes is not None else [(width, height)] * views
+    if len(photo_sizes) != views:
+        raise InputError(f"{len(photo_sizes)} photo sizes for {views} photos")
     require_finite("photos for structure-from-motion", images)
-    size = sfm_size(width, height, long_side)
+    sfm_sizes = [sfm_size(w, h, long_side) for w, h in photo_sizes]
     threads = threads or os.cpu_count() or 1
-    reader, extraction, matching_options, mapping, mode = _options(threads, max_features, shared_camera, views)
+    reader, extraction, matching_options, mapping = _options(threads, max_features, views)
+    files, mode = _image_files(photo_sizes, shared_camera)
     matching = "exhaustive" if views <= exhaustive_limit else "sequential"
     stage_seconds = {}
     started = time.perf_counter()
@@ -236,9 +283,10 @@ def register_photos(
         with tempfile.TemporaryDirectory(prefix="lumos3d-sfm-") as work:
             folder, database = Path(work) / "images", Path(work) / "database.db"
             folder.mkdir()
-            files = [f"{index:05d}.png" for index in range(views)]
             for index, file in enumerate(files):
-                cv2.imwrite(str(folder / file), _to_uint8(images[index], *size), [cv2.IMWRITE_PNG_COMPRESSION, 1])
+                (folder / file).parent.mkdir(exist_ok=True)
+                cv2.imwrite(str(folder / file), _to_uint8(images[index], *sfm_sizes[index]),
+                            [cv2.IMWRITE_PNG_COMPRESSION, 1])
             pycolmap.set_random_seed(0)
             pycolmap.extract_features(database, folder, files, camera_mode=mode, reader_options=reader,
                                       extraction_options=extraction, device=pycolmap.Device.cpu)
@@ -254,20 +302,22 @@ def register_photos(
             (Path(work) / "models").mkdir()
             models = pycolmap.incremental_mapping(database, folder, Path(work) / "models", mapping)
             stage_seconds["mapping"] = time.perf_counter() - started - stage_seconds["features"] - stage_seconds["matching"]
-            sizes = _model_sizes(list(models.values()))
-            if sizes:
+            model_sizes = _model_sizes(list(models.values()))
+            if model_sizes:
                 largest = max(models.values(), key=lambda model: model.num_reg_images())
-                cameras, registered, points, error = _read_model(largest, views, names, (width, height), size)
+                cameras, registered, points, error = _read_model(largest, names, photo_sizes, sfm_sizes)
             else:
                 empty = torch.zeros(0, 3, 4, dtype=torch.float64)
                 cameras = Cameras(empty, torch.zeros(0, 3, 3, dtype=torch.float64), [], [])
                 registered, points, error = torch.zeros(views, dtype=torch.bool), SparsePoints.empty(), float("nan")
     finally:
         pycolmap.logging.minloglevel = previous_level
-    registration = Registration(cameras, registered, points, error, sizes, matching, size,
+    registration = Registration(cameras, registered, points, error, model_sizes, matching, sfm_sizes,
                                 time.perf_counter() - started, stage_seconds)
     if len(cameras):
         cameras.require_valid("structure-from-motion cameras")
-    logger.info("structure-from-motion: %s in %.1f s (%s matching at %dx%d; %d points, %.2f px)",
-                registration.describe(), registration.seconds, matching, *size, len(points), error)
+    others = len(set(sfm_sizes)) - 1
+    logger.info("structure-from-motion: %s in %.1f s (%s matching at %dx%d%s; %d points, %.2f px)",
+                registration.describe(), registration.seconds, matching, *registration.sfm_size,
+                f" and {others} other size(s)" if others else "", len(points), error)
     return registration

@@ -122,11 +122,19 @@ class Cameras:
 
     def rescaled(self, width: int, height: int) -> Cameras:
         """The same cameras for images resized to width x height."""
+        return self.rescaled_to([(width, height)] * len(self))
+
+    def rescaled_to(self, sizes: Sequence[tuple[int, int]]) -> Cameras:
+        """The same cameras for images resized to `sizes` (width, height), one per camera. A
+        change of aspect ratio scales fx, cx and fy, cy by different factors: the camera of a
+        stretched image stays exact."""
+        if len(sizes) != len(self):
+            raise ValueError(f"{len(sizes)} image sizes for {len(self)} cameras")
         intrinsics = self.intrinsics.clone()
-        for i, (w, h) in enumerate(self.sizes):
+        for i, ((w, h), (width, height)) in enumerate(zip(self.sizes, sizes)):
             intrinsics[i, 0, :] *= width / w
             intrinsics[i, 1, :] *= height / h
-        return Cameras(self.extrinsics.clone(), intrinsics, [(width, height)] * len(self), list(self.names))
+        return Cameras(self.extrinsics.clone(), intrinsics, list(sizes), list(self.names))
 
     def relative_to(self, index: int = 0) -> Cameras:
         """Re-express in the frame of camera `index` (that camera gets identity extrinsics)."""

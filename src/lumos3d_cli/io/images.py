@@ -58,9 +58,11 @@ def resize_image(pixels: np.ndarray, width: int, height: int) -> np.ndarray:
 
 @dataclass
 class ImageBatch:
-    """Images of one scene at a common size.
+    """Images of one scene in one working tensor.
 
-    images: [V, 3, H, W] float32 sRGB in [0, 1].
+    images: [V, 3, H, W] float32 sRGB in [0, 1], every photo at the most common size; a photo of
+    another size is stretched to it (its aspect ratio changes: whatever measures geometry in it
+    must map its pixels back with `original_sizes`, which the stretch keeps exact).
     original_sizes: (width, height) of each file before any resize.
     """
 
@@ -74,6 +76,20 @@ class ImageBatch:
         """(width, height) of the tensor."""
         return int(self.images.shape[-1]), int(self.images.shape[-2])
 
+    @property
+    def mixed_sizes(self) -> bool:
+        """True when some photo was stretched to the tensor's size."""
+        return any(size != self.size for size in self.original_sizes)
+
+    def photo(self, index: int) -> torch.Tensor:
+        """[3, h, w] photo `index` at its own size (the working image resized back when it was
+        stretched)."""
+        width, height = self.original_sizes[index]
+        if (width, height) == self.size:
+            return self.images[index]
+        pixels = resize_image(np.ascontiguousarray(self.images[index].permute(1, 2, 0).numpy()), width, height)
+        return torch.from_numpy(pixels).permute(2, 0, 1)
+
 
 def common_size(sizes: Sequence[tuple[int, int]]) -> tuple[int, int]:
     """The most frequent (width, height); ties go to the one seen first."""
@@ -86,8 +102,8 @@ def load_images(
     inputs: Path | str | Sequence[Path | str],
     progress: Callable[[Path], None] | None = None,
 ) -> ImageBatch:
-    """Load a folder or list of files into one batch; mixed sizes are resized to the most common
-    size with a warning. `progress` is called after each file."""
+    """Load a folder or list of files into one batch; photos of other sizes are stretched to the
+    most common size (`ImageBatch`). `progress` is called after each file."""
     paths = list_images(inputs)
     pixels: list[np.ndarray] = []
     kinds: list[str] = []
@@ -102,8 +118,8 @@ def load_images(
     mismatched = [path.name for path, size in zip(paths, sizes) if size != (width, height)]
     if mismatched:
         shown = ", ".join(mismatched[:5]) + (" ..." if len(mismatched) > 5 else "")
-        logger.warning(
-            "%d of %d images differ in size and were resized to %dx%d: %s",
+        logger.info(
+            "%d of %d images differ in size and were stretched to %dx%d: %s",
             len(mismatched), len(paths), width, height, shown,
         )
     stacked = np.stack([resize_image(p, width, height) for p in pixels])

@@ -36,8 +36,8 @@ PROTOCOLS = ("context", "holdout")
 @dataclass
 class SceneEvaluation:
     """Per test frame: metrics of ours and of the baseline; the images for the contact sheet
-    (inputs, ours, baseline, references [T, 3, H, W]); the accuracy of the predicted cameras of
-    all views used (None without reference cameras)."""
+    (inputs, baseline, references [T, 3, H, W]; renders, ours, per frame [3, H, W]); the accuracy
+    of the predicted cameras of all views used (None without reference cameras)."""
 
     scene: str
     protocol: str
@@ -47,7 +47,7 @@ class SceneEvaluation:
     baseline: list[dict]
     seconds: float
     inputs: torch.Tensor
-    renders: torch.Tensor
+    renders: list[torch.Tensor]
     baseline_images: torch.Tensor
     references: torch.Tensor
     pose: PoseAccuracy | None = None

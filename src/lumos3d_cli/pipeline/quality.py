@@ -3,22 +3,25 @@ LPIPS; LPIPS reports why it is missing instead of a number."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.eval.metrics import psnr, ssim
 from lumos3d_cli.io.image_files import list_images
-from lumos3d_cli.io.images import load_images
+from lumos3d_cli.io.images import read_image, to_srgb
 from lumos3d_cli.losses.lpips import LPIPS
 
 
 @dataclass
 class QualityMeter:
-    """Computes metrics for [N, 3, H, W] batches; lpips is None when it cannot be computed, with
-    `lpips_note` saying why."""
+    """Computes metrics of N images against N references (a [N, 3, H, W] batch or a sequence of
+    [3, H, W], each image the size of its reference); lpips is None when it cannot be computed,
+    with `lpips_note` saying why."""
 
     lpips: LPIPS | None
     lpips_note: str
@@ -34,7 +37,22 @@ class QualityMeter:
         except Exception as error:  # noqa: BLE001 - surfaced to the user as a clear message
             raise InputError(f"{lpips_weights}: {error}", parameter="lpips_weights") from error
 
-    def measure(self, images: torch.Tensor, references: torch.Tensor) -> list[dict[str, float | None]]:
+    def measure(self, images: Sequence[torch.Tensor],
+                references: Sequence[torch.Tensor]) -> list[dict[str, float | None]]:
+        """Per image {psnr, ssim, lpips}, in order; images of one size are measured as one batch."""
+        if len(images) != len(references):
+            raise ValueError(f"{len(images)} images for {len(references)} references")
+        rows: list[dict[str, float | None]] = [{} for _ in images]
+        for size in dict.fromkeys(tuple(image.shape) for image in images):
+            group = [i for i, image in enumerate(images) if tuple(image.shape) == size]
+            measured = self._measure_batch(torch.stack([images[i] for i in group]),
+                                           torch.stack([references[i] for i in group]))
+            for i, row in zip(group, measured):
+                rows[i] = row
+        return rows
+
+    def _measure_batch(self, images: torch.Tensor, references: torch.Tensor) -> list[dict[str, float | None]]:
+        """images, references [N, 3, H, W]."""
         values_psnr = psnr(images, references).tolist()
         values_ssim = ssim(images, references).tolist()
         if self.lpips is not None:
@@ -50,9 +68,9 @@ def mean_metrics(rows: list[dict[str, float | None]], keys: tuple[str, ...] = ("
     return {k: (sum(r[k] for r in rows) / len(rows) if rows and all(r[k] is not None for r in rows) else None) for k in keys}
 
 
-def load_references(folder: Path | str, names: list[str], size: tuple[int, int]) -> torch.Tensor:
-    """Reference photos with the same file stems as `names`, [V, 3, H, W]; they must have the
-    restored views' size (width, height)."""
+def load_references(folder: Path | str, names: list[str], sizes: Sequence[tuple[int, int]]) -> list[torch.Tensor]:
+    """Reference photos with the same file stems as `names`, per view [3, H, W]; each must have
+    its restored view's size (width, height) in `sizes`."""
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(f"{folder}: no such folder", parameter="reference")
@@ -63,9 +81,11 @@ def load_references(folder: Path | str, names: list[str], size: tuple[int, int])
         if stem not in available:
             raise InputError(f"{folder}: no image named {stem}.* for input {name}", parameter="reference")
         paths.append(available[stem])
-    batch = load_images(paths)
-    if batch.size != size or len(set(batch.original_sizes)) != 1:
-        width, height = batch.original_sizes[0]
-        raise InputError(f"{folder}: images are {width}x{height}, the inputs {size[0]}x{size[1]}; give references of the "
-                         "same size", parameter="reference")
-    return batch.images
+    references = []
+    for name, path, (width, height) in zip(names, paths, sizes):
+        pixels = to_srgb(read_image(path))
+        if pixels.shape[:2] != (height, width):
+            raise InputError(f"{path}: {pixels.shape[1]}x{pixels.shape[0]}, but input {name} is {width}x{height}; give "
+                             "references of the same size", parameter="reference")
+        references.append(torch.from_numpy(np.ascontiguousarray(pixels)).permute(2, 0, 1))
+    return references

@@ -1,5 +1,5 @@
 """The restore job: degraded photos -> registered cameras, one forward pass of the network, fused
-Gaussians, and every input view rendered back at its own camera and the photos' resolution.
+Gaussians, and every input view rendered back at its own camera and its photo's own size.
 
 `restore` runs the whole job from files (what `lumos3d restore` does); `restore_scene` runs it on
 loaded images and a loaded model; `pipeline.restore_outputs.write_restored_scene` writes it."""
@@ -55,16 +55,17 @@ class RestoredScene:
     """One restored scene.
 
     gaussians: the fused scene (world frame of the geometry source); cameras: one per restored
-    view at the photos' resolution; restored [V, 3, H, W] renders at those cameras; inputs
-    [V, 3, H, W] the photos; names of the views; selected: indices (into the inputs) of the views
-    the network saw; geometry: where the cameras came from and how well depth agrees;
-    metrics/references when reference photos were given; timings in seconds per stage.
+    view at its photo's own size; restored: per view [3, H, W], the render at its camera (photos
+    of different sizes give views of different sizes); inputs: per view [3, H, W] the photo;
+    names of the views; selected: indices (into the inputs) of the views the network saw;
+    geometry: where the cameras came from and how well depth agrees; metrics/references (per
+    view [3, H, W]) when reference photos were given; timings in seconds per stage.
     """
 
     gaussians: Gaussians
     cameras: Cameras
-    restored: torch.Tensor
-    inputs: torch.Tensor
+    restored: list[torch.Tensor]
+    inputs: list[torch.Tensor]
     names: list[str]
     input_paths: list[Path]
     selected: list[int]
@@ -76,7 +77,7 @@ class RestoredScene:
     device: str = "cpu"
     checkpoint: dict = field(default_factory=dict)
     metrics: dict | None = None
-    references: torch.Tensor | None = None
+    references: list[torch.Tensor] | None = None
     timings: dict[str, float] = field(default_factory=dict)
 
     def summary(self, scene_path: Path | str | None = None) -> dict:
@@ -97,8 +98,9 @@ class RestoredScene:
 
 
 def render_views(gaussians: Gaussians, cameras: Cameras, sh_degree: int | None,
-                 progress: JobProgress | None = None) -> torch.Tensor:
-    """[V, 3, H, W] renders, one view at a time (bounded memory at full resolution)."""
+                 progress: JobProgress | None = None) -> list[torch.Tensor]:
+    """Per camera a [3, H, W] render at its own size, one view at a time (bounded memory at full
+    resolution)."""
     degree = gaussians.sh_degree if sh_degree is None else min(sh_degree, gaussians.sh_degree)
     views = []
     for index in range(len(cameras)):
@@ -106,7 +108,7 @@ def render_views(gaussians: Gaussians, cameras: Cameras, sh_degree: int | None,
             views.append(render(gaussians, cameras[index], sh_degree=degree).images[0].cpu())
         if progress is not None:
             progress.advance("render views")
-    return torch.stack(views)
+    return views
 
 
 def _limit_sh(gaussians: Gaussians, sh_degree: int | None) -> Gaussians:
@@ -167,8 +169,11 @@ def build_scene(
     images: torch.Tensor, names: list[str], model: Lumos3D, preset: RestorePreset, geometry: str = "auto",
     poses: Path | str | None = None, max_views: int | None = None, mode: str = "low-light",
     progress: JobProgress | None = None, required_views: Sequence[int] = (), fuse_views: Sequence[bool] | None = None,
+    sizes: Sequence[tuple[int, int]] | None = None,
 ) -> BuiltScene:
-    """photos [V, 3, H, W] named `names` -> cameras and fused Gaussians.
+    """photos [V, 3, H, W] named `names` -> cameras and fused Gaussians. `sizes`: each photo's own
+    (width, height) when it was stretched into `images` (`io.images.ImageBatch`; None: the
+    tensor's size): the cameras are at those sizes, the network works on the tensor.
 
     geometry: "network" (the network's cameras and depth), "sfm" (structure-from-motion on the
     brightened photos, the network's depth aligned to its points), "auto" (sfm when it registers
@@ -188,7 +193,7 @@ def build_scene(
         selected = even_subset(len(names), limit, required=list(required_views))
         network = _timed_network(model, images, selected, preset, timings, progress)
         brightened = Brightened(_restored_photos(network, images), "the model's restoration operator")
-    registration = register_views(images, names, geometry, poses, mode, progress, brightened)
+    registration = register_views(images, names, geometry, poses, mode, progress, brightened, sizes)
     timings.update(registration.seconds)
     unplaced = set(registration.views_needing_network()) - set(selected)
     if network is None or unplaced:
@@ -222,10 +227,16 @@ def restore_scene(
     max_views: int | None = None, mode: str = "low-light", progress: JobProgress | None = None,
 ) -> RestoredScene:
     """The job on loaded photos and a loaded model (`build_scene`), then every view that has a
-    camera rendered at it, at the photos' resolution."""
+    camera rendered at it, at its photo's own size."""
     progress = progress or SilentProgress()
     names = [path.name for path in batch.paths]
-    built = build_scene(batch.images, names, model, preset, geometry, poses, max_views, mode, progress)
+    if batch.mixed_sizes:
+        odd = [name for name, size in zip(names, batch.original_sizes) if size != batch.size]
+        logger.warning("%d of %d photos differ in size from %dx%d (%s): the network sees them stretched to it, their "
+                       "cameras and restored views keep each photo's own size and aspect ratio", len(odd), len(names),
+                       *batch.size, ", ".join(odd[:5]) + (" ..." if len(odd) > 5 else ""))
+    built = build_scene(batch.images, names, model, preset, geometry, poses, max_views, mode, progress,
+                        sizes=batch.original_sizes)
     cameras = built.geometry.cameras
     missing = [name for name in names if name not in cameras.names]
     if missing:
@@ -235,9 +246,9 @@ def restore_scene(
     started = time.perf_counter()
     restored = render_views(built.gaussians, cameras, preset.sh_degree, progress)
     timings = built.timings | {"render": time.perf_counter() - started}
-    rendered = [names.index(name) for name in cameras.names]
+    inputs = [batch.photo(names.index(name)) for name in cameras.names]
     return RestoredScene(
-        built.gaussians, cameras, restored, batch.images[rendered], list(cameras.names), list(batch.paths),
+        built.gaussians, cameras, restored, inputs, list(cameras.names), list(batch.paths),
         built.selected, built.counts, built.network_size, built.geometry, preset.name, mode, timings=timings,
     )
 
@@ -275,7 +286,7 @@ def restore(
     scene.checkpoint = {"name": weights.name, "sha256": file_sha256(weights)}
     if reference is not None:
         stage_started = time.perf_counter()
-        scene.references = load_references(reference, scene.names, batch.size)
+        scene.references = load_references(reference, scene.names, scene.cameras.sizes)
         per_view = meter.measure(scene.restored, scene.references)
         scene.metrics = {"views": dict(zip(scene.names, per_view)), "mean": mean_metrics(per_view),
                          "lpips_note": meter.lpips_note}

@@ -1,5 +1,6 @@
 """Write a restored scene to disk: the `.ply`, the cameras (transforms.json and a COLMAP model),
-the restored views, a contact sheet, a point preview and summary.json — all or nothing."""
+the restored views (each at its photo's own size), a contact sheet, a point preview and
+summary.json — all or nothing."""
 
 from __future__ import annotations
 

@@ -8,12 +8,17 @@ motion — when it works — only supplies the points the depth is aligned to).
 
 `register_views` runs before the network (so that views without a camera can be sent through the
 network), `place_views` after it.
+
+Cameras are in pixels of each photo at its own size; the network sees the photos in one working
+tensor (photos of other sizes stretched to it), so its cameras are mapped through each photo's
+stretch (anisotropic intrinsics: the geometry stays exact).
 """
 
 from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -56,11 +61,13 @@ def check_geometry_source(geometry: str) -> None:
 
 @dataclass
 class ViewRegistration:
-    """Cameras known before the network runs: `source` ("sfm", "poses" or "network"), the
-    cameras of the views that have one (photo resolution; `known` [V] bool says which), and the
-    structure-from-motion result behind them (None when it did not run)."""
+    """Cameras known before the network runs: `source` ("sfm", "poses" or "network"), each
+    photo's own (width, height), the cameras of the views that have one (at their photos' sizes;
+    `known` [V] bool says which), and the structure-from-motion result behind them (None when it
+    did not run)."""
 
     requested: str
+    sizes: list[tuple[int, int]]
     source: str
     known: torch.Tensor
     cameras: Cameras | None
@@ -75,13 +82,14 @@ class ViewRegistration:
         return [int(i) for i in torch.nonzero(~self.known).flatten()]
 
 
-def _structure_from_motion(images: torch.Tensor, names: list[str], progress: JobProgress) -> Registration:
-    """images: the photos already brightened (`Brightened`)."""
+def _structure_from_motion(images: torch.Tensor, names: list[str], sizes: list[tuple[int, int]],
+                           progress: JobProgress) -> Registration:
+    """images: the photos already brightened (`Brightened`); sizes: each photo's own size."""
     progress.start("structure from motion", 1)
     # One thread makes COLMAP's result repeatable (with more, a small photo set can settle on
     # another focal length from run to run); above the exhaustive-matching range speed matters more.
     threads = 1 if len(names) <= EXHAUSTIVE_MATCHING_LIMIT else None
-    registration = register_photos(images, names, threads=threads)
+    registration = register_photos(images, names, threads=threads, sizes=sizes)
     progress.advance("structure from motion")
     if not registration.failed and not registration.looks_like_one_scene:
         logger.warning("the photos may not show one scene: %s", registration.describe())
@@ -104,46 +112,48 @@ class Brightened:
 
 def register_views(
     images: torch.Tensor, names: list[str], geometry: str, poses: Path | str | None, mode: str, progress: JobProgress,
-    brightened: Brightened | None = None,
+    brightened: Brightened | None = None, sizes: Sequence[tuple[int, int]] | None = None,
 ) -> ViewRegistration:
-    """images [V, 3, H, W] (the photos) -> the cameras known before the network runs.
-    `brightened`: the photos as SfM should see them (default: the blind tone curve)."""
+    """images [V, 3, H, W] (the photos in the working tensor) -> the cameras known before the
+    network runs. `brightened`: the photos as SfM should see them (default: the blind tone
+    curve); `sizes`: each photo's own (width, height) before it was stretched into `images`
+    (None: the tensor's size)."""
     check_geometry_source(geometry)
     brightened = brightened if brightened is not None else Brightened.blind(images)
     images = brightened.images
     count = len(names)
-    size = (int(images.shape[-1]), int(images.shape[-2]))
+    sizes = list(sizes) if sizes is not None else [(int(images.shape[-1]), int(images.shape[-2]))] * count
     started = time.perf_counter()
     if poses is not None:
-        given = read_given_poses(poses, names, [size] * count)
-        sfm = _structure_from_motion(images, names, progress) if geometry != "network" and count > 1 else None
-        return ViewRegistration(geometry, "poses", torch.ones(count, dtype=torch.bool), given, sfm,
+        given = read_given_poses(poses, names, sizes)
+        sfm = _structure_from_motion(images, names, sizes, progress) if geometry != "network" and count > 1 else None
+        return ViewRegistration(geometry, sizes, "poses", torch.ones(count, dtype=torch.bool), given, sfm,
                                 {"sfm": time.perf_counter() - started}, brightened.method)
     if geometry == "network":
-        return ViewRegistration(geometry, "network", torch.zeros(count, dtype=torch.bool), None, None)
+        return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, None)
     if count < 2:
         if geometry == "sfm":
             raise InputError("sfm: structure-from-motion needs at least two photos; use geometry network",
                              parameter="geometry")
-        return ViewRegistration(geometry, "network", torch.zeros(count, dtype=torch.bool), None, None)
-    registration = _structure_from_motion(images, names, progress)
+        return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, None)
+    registration = _structure_from_motion(images, names, sizes, progress)
     seconds = {"sfm": time.perf_counter() - started}
     if registration.registered_count > AUTO_MIN_REGISTERED_SHARE * count:
-        return ViewRegistration(geometry, "sfm", registration.registered.clone(), registration.cameras, registration,
-                                seconds, brightened.method)
+        return ViewRegistration(geometry, sizes, "sfm", registration.registered.clone(), registration.cameras,
+                                registration, seconds, brightened.method)
     if geometry == "sfm":
         raise InputError(f"sfm: structure-from-motion {registration.describe()}; use geometry network or give poses",
                          parameter="geometry")
     logger.warning("structure-from-motion %s; using the network's cameras instead", registration.describe())
-    return ViewRegistration(geometry, "network", torch.zeros(count, dtype=torch.bool), None, registration, seconds,
-                            brightened.method)
+    return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, registration,
+                            seconds, brightened.method)
 
 
 @dataclass
 class SceneGeometry:
     """The cameras and depth a scene is built from.
 
-    cameras: one per view that can be rendered (photo resolution, names set); network_extrinsics
+    cameras: one per view that can be rendered (at its photo's own size, names set); network_extrinsics
     [S, 3, 4], network_intrinsics [S, 3, 3] (network pixels) and depth [S, h, w] of the S views
     the network saw, in the scene's frame; points: the sparse structure (empty without SfM);
     `report` the figures summary.json records; fuse_pixels [S, h, w] bool: the pixels whose depth
@@ -163,8 +173,20 @@ class SceneGeometry:
         return {"source": self.source, **self.report}
 
 
-def _network_geometry(registration: ViewRegistration, network: NetworkPass, names: list[str]) -> SceneGeometry:
-    cameras = network.network_cameras(names)
+def _photo_cameras(network: NetworkPass, names: list[str], sizes: list[tuple[int, int]]) -> Cameras:
+    """The network's own cameras of the selected views `names`, at their photos' own `sizes`."""
+    return network.network_cameras(names).rescaled_to(sizes)
+
+
+def _to_network(network: NetworkPass, cameras: Cameras) -> Cameras:
+    """Cameras at their photos' own sizes -> the same cameras in network pixels (through the
+    working tensor the network's images were made from)."""
+    return network.to_network(cameras.rescaled(*network.prepared.original_size))
+
+
+def _network_geometry(registration: ViewRegistration, network: NetworkPass, selected: list[int],
+                      names: list[str]) -> SceneGeometry:
+    cameras = _photo_cameras(network, names, [registration.sizes[i] for i in selected])
     prediction = network.prediction
     report = {"requested": registration.requested, "registered_views": 0, "brightening": None}
     if registration.sfm is not None:
@@ -238,7 +260,7 @@ def place_views(registration: ViewRegistration, network: NetworkPass, selected: 
     is aligned to the sparse points."""
     selected_names = [names[i] for i in selected]
     if registration.source == "network":
-        return _network_geometry(registration, network, selected_names)
+        return _network_geometry(registration, network, selected, selected_names)
     known = registration.known
     row_of_view = {view: row for row, view in enumerate(torch.nonzero(known).flatten().tolist())}
     known_selected = known[selected]
@@ -251,8 +273,9 @@ def place_views(registration: ViewRegistration, network: NetworkPass, selected: 
                              "the others", parameter="geometry")
         # The network's cameras of views SfM could not place, carried into the SfM frame by the
         # similarity between the network's and SfM's cameras of the views both placed.
-        selected_cameras = fill_unregistered_views(registration.cameras[selected_rows], known_selected,
-                                                   network.network_cameras(selected_names))
+        selected_cameras = fill_unregistered_views(
+            registration.cameras[selected_rows], known_selected,
+            _photo_cameras(network, selected_names, [registration.sizes[i] for i in selected]))
         unplaced = [names[view] for view in selected if not bool(known[view])]
         logger.warning("%d view(s) not registered by structure-from-motion were placed with the network's cameras: %s",
                        len(unplaced), ", ".join(unplaced))
@@ -266,7 +289,7 @@ def place_views(registration: ViewRegistration, network: NetworkPass, selected: 
     cameras = Cameras.concatenate(parts)
     cameras = Cameras(cameras.extrinsics.double(), cameras.intrinsics.double(), cameras.sizes,
                       [name for view, name in enumerate(names) if view in position_of_view or bool(known[view])])
-    network_cameras = network.to_network(selected_cameras)
+    network_cameras = _to_network(network, selected_cameras)
     points = _points_in_frame(registration)
     depth, alignment_report = _aligned_depth(network, selected, network_cameras, points, selected_names, selected_cameras)
     # float32 is ample for a 2 % test (the figure is reported, not used)
