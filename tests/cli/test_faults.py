@@ -323,6 +323,12 @@ def test_a_restore_of_photos_of_different_sizes_renders_and_opens_in_the_viewer(
                         "--width", 200)
     assert poses.code == 0, poses.err
     assert len(list((tmp_path / "frames").glob("*.png"))) == len(sizes)
+    # without --width/--height every camera renders at its own size, in cameras.json's order
+    own = run_lumos3d("render", scene / "scene.ply", "--poses", scene / "cameras.json", "-o", tmp_path / "own")
+    assert own.code == 0, own.err
+    order = [frame["file_path"] for frame in json.loads((scene / "cameras.json").read_text())["frames"]]
+    written = [cv2.imread(str(path)).shape[1::-1] for path in sorted((tmp_path / "own").glob("*.png"))]
+    assert written == [sizes[name] for name in order]
     orbit = run_lumos3d("render", scene / "scene.ply", "--orbit", 2, "-o", tmp_path / "orbit", "--width", 100)
     assert orbit.code == 0, orbit.err
     viewer = load_viewer_scene(scene)

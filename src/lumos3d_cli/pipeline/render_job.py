@@ -4,6 +4,7 @@ frames and optionally a video (H.264 or GIF), all or nothing."""
 from __future__ import annotations
 
 import contextlib
+import logging
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +21,8 @@ from lumos3d_cli.io.video import VideoWriter, probe_video, video_kind
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
 from lumos3d_cli.render.camera_paths import orbit_from_cameras, orbit_from_gaussians
 from lumos3d_cli.render.render import render
+
+logger = logging.getLogger(__name__)
 
 DEFAULT_ORBIT_SIZE = 512
 MAX_SIDE = 16384
@@ -50,6 +53,8 @@ def render_cameras(
         raise InputError("give exactly one of poses (a camera file) or orbit (a frame count)", parameter="poses")
     if poses is not None:
         cameras = read_cameras(poses)
+        if width is None and height is None:  # every camera at its own size (photos may differ)
+            return cameras, str(find_camera_source(poses))
         return cameras.rescaled(*output_size(cameras.sizes[0], width, height)), str(find_camera_source(poses))
     nearby = find_camera_source(scene.parent)
     if nearby is not None:
@@ -64,8 +69,8 @@ def render_cameras(
 
 @dataclass
 class RenderedFrames:
-    """frames written, their size (width, height), milliseconds per rendered frame, and the video
-    as ffmpeg reads it back (None without one)."""
+    """frames written, their size (width, height; the first frame's when sizes differ),
+    milliseconds per rendered frame, and the video as ffmpeg reads it back (None without one)."""
 
     frames: int
     size: tuple[int, int]
@@ -78,10 +83,15 @@ def render_frames(
     background: tuple[float, float, float] = (0.0, 0.0, 0.0), antialiased: bool = False,
     progress: JobProgress | None = None,
 ) -> RenderedFrames:
-    """Render every camera into `output`/00000.png ... (and `video`, .mp4 or .gif); the folder's
-    frames and the video appear when all are written (io.atomic)."""
+    """Render every camera, each at its own size, into `output`/00000.png ... (and `video`, .mp4 or
+    .gif, whose frames share the first camera's size); the folder's frames and the video appear
+    when all are written (io.atomic)."""
     progress = progress or SilentProgress()
     kind = video_kind(video) if video is not None else None
+    if video is not None and len(set(cameras.sizes)) > 1:
+        logger.warning("the cameras have %d different image sizes; a video has one: every frame is rendered at %dx%d",
+                       len(set(cameras.sizes)), *cameras.sizes[0])
+        cameras = cameras.rescaled(*cameras.sizes[0])
     frame_width, frame_height = cameras.sizes[0]
     render_seconds = 0.0
     progress.start("render", len(cameras))
