@@ -32,10 +32,11 @@ def _print_report(report: EvalReport, out: Path) -> None:
     document = report.document
     table = Table(title=f"LOM {document['mode']}, protocol {document['protocol']}, preset {document['preset']}, "
                         f"geometry {document['geometry']} ({document['lpips']})")
-    for column in ("scene", "method", "PSNR ↑", "SSIM ↑", "LPIPS ↓", "time s"):
+    for column in ("scene", "method", "PSNR ↑", "SSIM ↑", "sharpness (1 = ref)", "LPIPS ↓", "time s"):
         table.add_column(column, justify="left" if column in ("scene", "method") else "right")
     for row in report.rows:
-        table.add_row(row["scene"], row["method"], _cell(row["psnr"], 2), _cell(row["ssim"], 3), _cell(row["lpips"], 3),
+        table.add_row(row["scene"], row["method"], _cell(row["psnr"], 2), _cell(row["ssim"], 3),
+                      _cell(row["sharpness"], 2), _cell(row["lpips"], 3),
                       _cell(row["seconds"], 1), end_section=row["scene"] == "mean" and row["method"] == report.methods[-1])
     console = stdout_console()
     console.print(table)
@@ -60,6 +61,8 @@ def eval_command(
     preset: str = typer.Option(DEFAULT_RESTORE_PRESET, "--preset", help="Speed/accuracy: fast, balanced or best."),
     geometry: str = typer.Option("auto", "--geometry", help=f"Cameras from: {', '.join(GEOMETRY_SOURCES)}."),
     max_views: int | None = typer.Option(None, "--max-views", help="Views per scene through the network (default: the preset's)."),
+    refine_steps: int | None = typer.Option(
+        None, "--refine-steps", help="Test-time refinement steps after the forward pass (default: the preset's; 0: none)."),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     out: Path = typer.Option(Path("report"), "--out", help="Report folder (metrics.json, metrics.csv, contact sheets)."),
     baseline: str = typer.Option("gamma", "--baseline", help="gamma (blind auto-gamma row) or none."),
@@ -73,7 +76,7 @@ def eval_command(
         task = bars.add_task(f"eval ({protocol})", total=len(names) if names else None)
         report = evaluate_lom(
             root, names, mode=mode, protocol=protocol, checkpoint=checkpoint, preset=preset, geometry=geometry,
-            max_views=max_views, device=device, baseline=baseline, lpips_weights=lpips_weights,
+            max_views=max_views, refine_steps=refine_steps, device=device, baseline=baseline, lpips_weights=lpips_weights,
             on_scene=lambda _: bars.advance(task),
         )
     write_eval_report(report, out)

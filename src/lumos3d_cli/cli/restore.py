@@ -39,6 +39,8 @@ def restore_command(
     geometry: str = typer.Option("auto", "--geometry", help=f"Cameras from: {', '.join(GEOMETRY_SOURCES)} (auto: sfm when it registers most views, else network)."),
     poses: Path | None = typer.Option(None, "--poses", help="Known cameras: a transforms.json or a COLMAP model folder (matched by file stem)."),
     max_views: int | None = typer.Option(None, "--max-views", help="Views the network sees (default: the preset's)."),
+    refine_steps: int | None = typer.Option(
+        None, "--refine-steps", help="Test-time refinement steps after the forward pass (default: the preset's; 0: none)."),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     reference: Path | None = typer.Option(None, "--reference", help="Normal-light photos of the same views (metrics)."),
     lpips_weights: Path | None = typer.Option(None, "--lpips-weights", help="torchvision vgg16 weights for LPIPS."),
@@ -59,7 +61,7 @@ def restore_command(
     with progress_bar() as bars:
         scene = restore(
             photos, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,
-            max_views=max_views, device=device, reference=reference, lpips_weights=lpips_weights,
+            max_views=max_views, refine_steps=refine_steps, device=device, reference=reference, lpips_weights=lpips_weights,
             progress=ProgressBars(bars),
         )
         summary = write_restored_scene(scene, output, output_format)

@@ -27,7 +27,7 @@ from lumos3d_cli.pipeline.quality import QualityMeter, mean_metrics
 from lumos3d_cli.pipeline.scene_geometry import check_geometry_source
 
 BASELINES = ("gamma", "none")
-METRIC_KEYS = ("psnr", "ssim", "lpips", "seconds")
+METRIC_KEYS = ("psnr", "ssim", "sharpness", "lpips", "seconds")
 
 
 @dataclass
@@ -61,10 +61,11 @@ def evaluate_lom(
     root: Path | str, scenes: list[str] | None = None, mode: str = "low-light", protocol: str = "context",
     checkpoint: Path | str | None = None, preset: str = DEFAULT_RESTORE_PRESET, geometry: str = "auto",
     max_views: int | None = None, device: str = "cpu", baseline: str = "gamma", lpips_weights: Path | str | None = None,
-    on_scene: Callable[[str], None] | None = None,
+    on_scene: Callable[[str], None] | None = None, refine_steps: int | None = None,
 ) -> EvalReport:
     """Evaluate restoration on the LOM-layout scenes under `root` (all, or those named) with the
-    paper's protocol; `on_scene(name)` is called after each scene."""
+    paper's protocol; `on_scene(name)` is called after each scene. `refine_steps` overrides the
+    preset's test-time refinement (fitted to the views in the scene, never to held-out ones)."""
     if mode not in MODES:
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
     if protocol not in PROTOCOLS:
@@ -72,7 +73,7 @@ def evaluate_lom(
     if baseline not in BASELINES:
         raise InputError(f"{baseline!r}: use one of {', '.join(BASELINES)}", parameter="baseline")
     check_geometry_source(geometry)
-    settings = get_restore_preset(preset)
+    settings = get_restore_preset(preset, refine_steps)
     limit = max_views or settings.max_views
     found = find_lom_scenes(root, mode, scenes)
     weights = resolve_checkpoint(checkpoint, mode)
@@ -87,6 +88,7 @@ def evaluate_lom(
     rows = _rows(results, methods)
     document = {
         "root": str(root), "mode": mode, "protocol": protocol, "preset": settings.name, "geometry": geometry,
+        "refine_steps": settings.refine_steps,
         "max_views": limit, "checkpoint": {"name": weights.name, "sha256": file_sha256(weights)},
         "lpips": meter.lpips_note, "rows": rows,
         "frames": {r.scene: {"test": r.test_frames, "views_used": r.views_used, "lumos3d": r.ours, "gamma": r.baseline}

@@ -1,10 +1,10 @@
 """Speed/accuracy presets of `lumos3d restore` and `lumos3d eval`: how many views the network
-sees, at which resolution (relative to the model's), the SH degree written and rendered, and
-the voxel size (relative to the model's)."""
+sees, at which resolution (relative to the model's), the SH degree written and rendered, the
+voxel size (relative to the model's) and the steps of test-time refinement (pipeline.scene_refinement)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from lumos3d_cli.errors import InputError
 
@@ -16,6 +16,7 @@ class RestorePreset:
     resolution: float  # multiplier of the architecture's image size
     sh_degree: int | None  # None: the model's full degree
     voxel_scale: float  # multiplier of the architecture's voxel size
+    refine_steps: int = 0  # test-time refinement steps (0: the forward pass as it is)
 
     def network_image_size(self, model_image_size: int, patch_size: int) -> int:
         """The longer network side: a patch multiple, at least one patch."""
@@ -25,13 +26,19 @@ class RestorePreset:
 RESTORE_PRESETS = {
     "fast": RestorePreset("fast", max_views=8, resolution=0.75, sh_degree=0, voxel_scale=2.0),
     "balanced": RestorePreset("balanced", max_views=16, resolution=1.0, sh_degree=None, voxel_scale=1.0),
-    "best": RestorePreset("best", max_views=32, resolution=1.25, sh_degree=None, voxel_scale=0.5),
+    "best": RestorePreset("best", max_views=32, resolution=1.25, sh_degree=None, voxel_scale=0.5, refine_steps=100),
 }
 DEFAULT_RESTORE_PRESET = "balanced"
 
 
-def get_restore_preset(name: str) -> RestorePreset:
+def get_restore_preset(name: str, refine_steps: int | None = None) -> RestorePreset:
+    """The preset `name`, with its refinement steps replaced by `refine_steps` when given."""
     try:
-        return RESTORE_PRESETS[name]
+        preset = RESTORE_PRESETS[name]
     except KeyError:
         raise InputError(f"{name!r}: use one of {', '.join(RESTORE_PRESETS)}", parameter="preset") from None
+    if refine_steps is None:
+        return preset
+    if refine_steps < 0:
+        raise InputError(f"{refine_steps}: use 0 (no refinement) or more steps", parameter="refine_steps")
+    return replace(preset, refine_steps=refine_steps)

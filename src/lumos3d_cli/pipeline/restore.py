@@ -45,6 +45,7 @@ from lumos3d_cli.pipeline.scene_geometry import (
     place_views,
     register_views,
 )
+from lumos3d_cli.pipeline.scene_refinement import refine_scene, refinement_targets
 from lumos3d_cli.render.render import render
 
 logger = logging.getLogger(__name__)
@@ -79,6 +80,7 @@ class RestoredScene:
     metrics: dict | None = None
     references: list[torch.Tensor] | None = None
     timings: dict[str, float] = field(default_factory=dict)
+    refinement: dict | None = None  # the refinement's steps, loss curve, SH degree (None: not refined)
 
     def summary(self, scene_path: Path | str | None = None) -> dict:
         """The JSON summary of the run (summary.json)."""
@@ -93,6 +95,7 @@ class RestoredScene:
                           "pruned": self.counts.pruned, "kept": len(self.gaussians)},
             "seconds": {name: round(value, 3) for name, value in self.timings.items()},
             "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
+            "refinement": self.refinement,
             "metrics": self.metrics,
         }
 
@@ -122,7 +125,7 @@ def _limit_sh(gaussians: Gaussians, sh_degree: int | None) -> Gaussians:
 class BuiltScene:
     """The scene before rendering: fused Gaussians, the geometry (cameras of every view that has
     one), the views the network saw (indices into the photos), counts, the network image size
-    (width, height) and seconds per stage."""
+    (width, height), seconds per stage, and the refinement's summary (None: not refined)."""
 
     gaussians: Gaussians
     geometry: SceneGeometry
@@ -130,6 +133,7 @@ class BuiltScene:
     counts: GaussianCounts
     network_size: tuple[int, int]
     timings: dict[str, float]
+    refinement: dict | None = None  # refine.RefinementResult.summary() when the scene was refined
 
 
 def with_full_resolution_colours(prediction: Lumos3DPrediction, photos: torch.Tensor, model: Lumos3D) -> Lumos3DPrediction:
@@ -218,8 +222,18 @@ def build_scene(
                               [network.network_size] * len(selected))
     gaussians = apply_sampling_filter(output.gaussians[0].detach().to(device="cpu"), network_cameras)
     timings["fuse"] = time.perf_counter() - started
-    return BuiltScene(_limit_sh(gaussians, preset.sh_degree), scene_geometry, selected, output.counts[0],
-                      network.network_size, timings)
+    gaussians, refinement = _limit_sh(gaussians, preset.sh_degree), None
+    if preset.refine_steps > 0:
+        started = time.perf_counter()
+        restored = None
+        if model.architecture.appearance == "operator":
+            restored = brightened.images if brightened is not None else _restored_photos(network, images)
+        targets, cameras = refinement_targets(network, model, images, restored, selected, names,
+                                              scene_geometry.cameras, fuse_views)
+        result = refine_scene(gaussians, targets, cameras, preset.refine_steps, progress)
+        gaussians, refinement = result.gaussians, result.summary()
+        timings["refine"] = time.perf_counter() - started
+    return BuiltScene(gaussians, scene_geometry, selected, output.counts[0], network.network_size, timings, refinement)
 
 
 def restore_scene(
@@ -250,6 +264,7 @@ def restore_scene(
     return RestoredScene(
         built.gaussians, cameras, restored, inputs, list(cameras.names), list(batch.paths),
         built.selected, built.counts, built.network_size, built.geometry, preset.name, mode, timings=timings,
+        refinement=built.refinement,
     )
 
 
@@ -257,18 +272,19 @@ def restore(
     photos: Path | str | Sequence[Path | str], mode: str = "low-light", checkpoint: Path | str | None = None,
     preset: str = DEFAULT_RESTORE_PRESET, geometry: str = "auto", poses: Path | str | None = None,
     max_views: int | None = None, device: str = "cpu", reference: Path | str | None = None,
-    lpips_weights: Path | str | None = None, progress: JobProgress | None = None,
+    lpips_weights: Path | str | None = None, progress: JobProgress | None = None, refine_steps: int | None = None,
 ) -> RestoredScene:
     """The whole restore job from files: photos (a folder or files: photos, camera RAW, EXR),
     the bundled model of `mode` or `checkpoint`, and optionally reference photos of the same
-    views (same file stems) for PSNR/SSIM/LPIPS. Write the result with `write_restored_scene`."""
+    views (same file stems) for PSNR/SSIM/LPIPS. `refine_steps` overrides the preset's
+    test-time refinement (0: none). Write the result with `write_restored_scene`."""
     progress = progress or SilentProgress()
     started = time.perf_counter()
     if mode not in MODES:
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
     if max_views is not None and max_views < 1:
         raise InputError(f"{max_views}: use at least 1", parameter="max_views")
-    settings = get_restore_preset(preset)
+    settings = get_restore_preset(preset, refine_steps)
     check_geometry_source(geometry)
     weights = resolve_checkpoint(checkpoint, mode)
     meter = QualityMeter.create(lpips_weights) if reference is not None else None

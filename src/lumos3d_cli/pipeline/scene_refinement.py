@@ -1,0 +1,69 @@
+"""Test-time refinement inside the restore and eval jobs: the fused Gaussians optimised against
+the model's own restoration of the photos they were built from (`refine.refine_gaussians`).
+
+The targets are what the forward pass says each view should look like in normal light: for a
+model with a restoration operator, the operator applied to the full-resolution photo (every view
+with a camera); for a colour-regression model, the network's per-pixel colours of the views it
+saw, upsampled to the photos' size (the network image is the whole photo resized: nothing is
+cropped). Held-out views (evaluation's holdout protocol) are never fitted.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import torch
+import torch.nn.functional as F
+
+from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.gaussians import SH_C0, Gaussians, sh_coefficient_count
+from lumos3d_cli.model.gaussian_adapter import SH_START
+from lumos3d_cli.model.lumos3d import Lumos3D
+from lumos3d_cli.pipeline.network_pass import NetworkPass
+from lumos3d_cli.pipeline.progress import JobProgress
+from lumos3d_cli.refine.refinement import RefinementResult, refine_gaussians
+from lumos3d_cli.refine.settings import RefineSettings
+
+logger = logging.getLogger(__name__)
+
+
+def network_colours(network: NetworkPass, model: Lumos3D, size: tuple[int, int]) -> torch.Tensor:
+    """The regression network's colours of the views it saw (the DC term of each pixel Gaussian),
+    [S, 3, H, W] in [0, 1] at `size` (height, width)."""
+    count = sh_coefficient_count(model.architecture.sh_degree)
+    params = network.prediction.params[0].detach().float().cpu()  # [S, h, w, C-1], colour-major SH, DC first
+    colours = 0.5 + SH_C0 * torch.stack([params[..., SH_START + c * count] for c in range(3)], dim=1)
+    return F.interpolate(colours, size=size, mode="bilinear", align_corners=False).clamp(0, 1)
+
+
+def refinement_targets(
+    network: NetworkPass, model: Lumos3D, photos: torch.Tensor, restored_photos: torch.Tensor | None,
+    selected: Sequence[int], names: Sequence[str], cameras: Cameras, fitted: Sequence[bool] | None,
+) -> tuple[torch.Tensor, Cameras]:
+    """(targets [T, 3, H, W], their cameras) for the views that have a camera, a target and are
+    fitted. photos [V, 3, H, W] (the working copy); restored_photos [V, 3, H, W] the operator's
+    restoration of all photos, or None for a regression model (then only the `selected` views,
+    which the network saw, have a target); fitted [V] bool (None: all)."""
+    if restored_photos is not None:
+        sources = {name: restored_photos[index] for index, name in enumerate(names)}
+    else:
+        colours = network_colours(network, model, tuple(photos.shape[-2:]))
+        sources = {names[index]: colours[position] for position, index in enumerate(selected)}
+    keep = [i for i, name in enumerate(cameras.names)
+            if name in sources and (fitted is None or fitted[list(names).index(name)])]
+    return torch.stack([sources[cameras.names[i]] for i in keep]), cameras[keep]
+
+
+def refine_scene(
+    gaussians: Gaussians, targets: torch.Tensor, cameras: Cameras, steps: int, progress: JobProgress,
+) -> RefinementResult:
+    """`steps` of refinement (fewer when the loss stops falling) with the default settings, shown
+    as a "refine" progress bar."""
+    progress.start("refine", steps)
+    result = refine_gaussians(gaussians, cameras, targets, RefineSettings(steps=steps),
+                              on_step=lambda step, loss: progress.advance("refine"))
+    logger.info("refinement: %d steps (%s), loss %.4f -> %.4f, SH degree %d", result.steps_run,
+                "stopped early" if result.stopped_early else "all asked", result.loss_curve[0] if result.loss_curve else 0.0,
+                result.loss_curve[-1] if result.loss_curve else 0.0, result.sh_degree)
+    return result

@@ -1,0 +1,74 @@
+"""Test-time refinement inside the restore and eval jobs (pipeline/scene_refinement.py)."""
+
+import json
+import shutil
+
+import pytest
+import torch
+from assertions import expect_input_error
+
+from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.model.lumos3d import build_model
+from lumos3d_cli.pipeline.network_pass import run_network
+from lumos3d_cli.pipeline.presets import RESTORE_PRESETS, get_restore_preset
+from lumos3d_cli.pipeline.scene_refinement import network_colours, refinement_targets
+
+
+def _photos(buu, tmp_path, names):
+    target = tmp_path / "photos"
+    target.mkdir()
+    for name in names:
+        shutil.copy(buu / "low" / name, target / name)
+    return target
+
+
+def test_restore_refines_and_reports_the_loss_curve(run_cli, buu, tmp_path, random_checkpoint):
+    photos = _photos(buu, tmp_path, ["1.JPG", "2.JPG", "3.JPG"])
+    result = run_cli("restore", photos, "-o", tmp_path / "out" / "scene.ply", "--checkpoint", random_checkpoint,
+                     "--geometry", "network", "--refine-steps", 4, "--json")
+    assert result.code == 0, result.err
+    refinement = json.loads(result.out)["refinement"]
+    assert refinement["steps"] == 4 and len(refinement["loss_curve"]) == 4
+    assert all(value > 0 for value in refinement["loss_curve"]) and refinement["sh_degree"] in (0, 1)
+    plain = run_cli("restore", photos, "-o", tmp_path / "plain" / "scene.ply", "--checkpoint", random_checkpoint,
+                    "--geometry", "network", "--json")
+    assert json.loads(plain.out)["refinement"] is None  # balanced does not refine
+
+
+def test_refine_steps_are_checked(run_cli, buu, tmp_path, random_checkpoint):
+    photos = _photos(buu, tmp_path, ["1.JPG"])
+    expect_input_error(run_cli("restore", photos, "-o", tmp_path / "o" / "scene.ply", "--checkpoint", random_checkpoint,
+                               "--refine-steps", -1), "--refine-steps -1")
+    assert not (tmp_path / "o").exists()
+
+
+def test_presets_refine_only_in_best_and_the_option_overrides():
+    assert [RESTORE_PRESETS[name].refine_steps > 0 for name in ("fast", "balanced", "best")] == [False, False, True]
+    assert get_restore_preset("best", 0).refine_steps == 0 and get_restore_preset("fast", 7).refine_steps == 7
+
+
+def test_targets_leave_out_held_out_views_and_follow_the_cameras(buu):
+    model = build_model("tiny", seed=0).eval()
+    photos = torch.rand(3, 3, 42, 56, generator=torch.Generator().manual_seed(0))
+    network = run_network(model, photos, get_restore_preset("fast"))
+    names = ["a.png", "b.png", "c.png"]
+    cameras = Cameras(torch.eye(4)[:3].repeat(3, 1, 1), torch.eye(3).repeat(3, 1, 1), [(56, 42)] * 3, ["c.png", "a.png", "b.png"])
+    restored = torch.stack([torch.full((3, 42, 56), float(i)) for i in range(3)])
+    targets, fitted = refinement_targets(network, model, photos, restored, [0, 1, 2], names, cameras, [True, False, True])
+    assert fitted.names == ["c.png", "a.png"]  # in the cameras' order, b held out
+    assert torch.equal(targets[:, 0, 0, 0], torch.tensor([2.0, 0.0]))
+    # a regression model has targets only for the views the network saw: its own colours
+    targets, fitted = refinement_targets(network, model, photos, None, [0, 2], ["a.png", "b.png", "c.png"], cameras, None)
+    assert fitted.names == ["c.png", "a.png"] and targets.shape == (2, 3, 42, 56)
+    colours = network_colours(network, model, (42, 56))
+    assert torch.equal(targets[1], colours[0]) and 0 <= float(colours.min()) <= float(colours.max()) <= 1
+
+
+@pytest.mark.parametrize("steps", [0, 3])
+def test_a_single_photo_refines_or_not_and_stays_finite(run_cli, buu, tmp_path, random_checkpoint, steps):
+    photos = _photos(buu, tmp_path, ["5.JPG"])
+    result = run_cli("restore", photos, "-o", tmp_path / "out" / "scene.ply", "--checkpoint", random_checkpoint,
+                     "--refine-steps", steps, "--json")
+    assert result.code == 0, result.err
+    summary = json.loads(result.out)
+    assert (summary["refinement"] is None) == (steps == 0)
