@@ -169,6 +169,17 @@ def _restored_photos(network: NetworkPass, photos: torch.Tensor) -> torch.Tensor
         return restore_photos(photos.to(operator.matrix.device), global_operator).cpu()
 
 
+def _operator_restoration(network: NetworkPass, photos: torch.Tensor, selected: list[int],
+                          brightened: Brightened | None) -> torch.Tensor:
+    """All photos [V, 3, H, W] restored as the Gaussians' colours are: the whole operator (with
+    its per-view local grid) for the views the network saw, its curve and matrix for the rest."""
+    restored = (brightened.images if brightened is not None else _restored_photos(network, photos)).clone()
+    with torch.no_grad():
+        operator = network.prediction.appearance.scene(0)
+        restored[selected] = restore_photos(photos[selected].to(operator.matrix.device), operator).cpu()
+    return restored
+
+
 def build_scene(
     images: torch.Tensor, names: list[str], model: Lumos3D, preset: RestorePreset, geometry: str = "auto",
     poses: Path | str | None = None, max_views: int | None = None, mode: str = "low-light",
@@ -227,7 +238,7 @@ def build_scene(
         started = time.perf_counter()
         restored = None
         if model.architecture.appearance == "operator":
-            restored = brightened.images if brightened is not None else _restored_photos(network, images)
+            restored = _operator_restoration(network, images, selected, brightened)
         targets, cameras = refinement_targets(network, model, images, restored, selected, names,
                                               scene_geometry.cameras, fuse_views)
         result = refine_scene(gaussians, targets, cameras, preset.refine_steps, progress)
