@@ -88,8 +88,8 @@ def test_format_version_1_names_the_architecture_preset_and_the_bundled_files_lo
     config = _config(bundled)
     assert config["format_version"] == 1 and "architecture" not in config
     architecture = read_checkpoint(bundled).architecture
-    shipped = {"low-light": "tiny", "over-exposure": "tiny-operator"}[mode]  # model-card.md
-    assert architecture == from_dict(Architecture, config["preset"]) == ARCHITECTURES[shipped]
+    # both modes ship the appearance operator (model-card.md)
+    assert architecture == from_dict(Architecture, config["preset"]) == ARCHITECTURES["tiny-operator"]
     written = save_checkpoint(source, tmp_path / "new.safetensors")
     assert from_dict(Architecture, _config(written)["preset"]) == REDUCED
 
