@@ -185,6 +185,33 @@ def test_voxel_size_override_sets_the_fusion_grain(model):
     assert coarse.counts[0].voxels <= default.counts[0].voxels <= fine.counts[0].voxels
 
 
+def test_footprint_voxels_through_assemble(model):
+    images = torch.rand(1, 3, 3, 28, 42, generator=torch.Generator().manual_seed(8))
+    with torch.no_grad():
+        prediction = model.predict(images)
+        fixed = model.assemble(prediction)
+        explicit = model.assemble(prediction, voxel_size=model.architecture.voxel_size)
+        fine = model.assemble(prediction, footprint_scale=1e-9)
+        coarse = model.assemble(prediction, footprint_scale=1e9)
+        held = model.assemble(prediction, footprint_scale=1.0, fuse_views=torch.tensor([True, False, True]))
+    # Without footprint_scale nothing changes: the architecture's one voxel size, as in training.
+    assert fixed.counts == explicit.counts and torch.equal(fixed.gaussians[0].means, explicit.gaussians[0].means)
+    assert fine.counts[0].voxels == fine.counts[0].pixels
+    assert coarse.counts[0].voxels < fixed.counts[0].voxels
+    assert held.counts[0].pixels == 2 * 28 * 42
+    for output in (fine, coarse, held):
+        _check_fused(output)
+    with pytest.raises(ValueError, match="not both"):
+        model.assemble(prediction, voxel_size=0.01, footprint_scale=1.0)
+
+
+def _check_fused(output: Lumos3DOutput) -> None:
+    gaussians = output.gaussians[0]
+    assert len(gaussians) == output.counts[0].kept > 0
+    assert all(torch.isfinite(t).all() for t in gaussians.tensors().values()) and (gaussians.scales > 0).all()
+    torch.testing.assert_close(gaussians.quats.norm(dim=1), torch.ones(len(gaussians)))
+
+
 def test_rendering_the_model_output_reaches_the_weights(model):
     """The training path: forward -> fused Gaussians -> rasterizer -> loss -> every head's weights."""
     from lumos3d_cli.render.render import render

@@ -22,9 +22,10 @@ from lumos3d_cli.model.geometry import scene_scale, unproject_depth
 from lumos3d_cli.model.heads.camera import CameraHead
 from lumos3d_cli.model.heads.dpt import DepthHead
 from lumos3d_cli.model.heads.gaussian import GaussianHead
+from lumos3d_cli.model.pixel_footprint import footprint_voxel_sizes, pixel_footprint
 from lumos3d_cli.model.pose_encoding import decode_pose
 from lumos3d_cli.model.preprocess import PreparedImages, prepare_images
-from lumos3d_cli.model.voxelize import voxelize
+from lumos3d_cli.model.voxelize import covering_shapes, voxelize
 
 logger = logging.getLogger(__name__)
 
@@ -151,15 +152,19 @@ class Lumos3D(nn.Module):
 
     def fuse_scene(
         self, points: torch.Tensor, params: torch.Tensor, confidence: torch.Tensor, scale: torch.Tensor,
-        voxel_size: float | None = None, fuse_views: torch.Tensor | None = None, fuse_pixels: torch.Tensor | None = None,
+        voxel_size: float | torch.Tensor | None = None, fuse_views: torch.Tensor | None = None,
+        fuse_pixels: torch.Tensor | None = None, covering: bool = False,
     ) -> tuple[Gaussians, Gaussians, GaussianCounts]:
         """One scene: points [V, H, W, 3], raw parameters [V, H, W, K-1], confidence [V, H, W],
         scene scale -> (pixel Gaussians, fused and pruned Gaussians, counts).
 
-        voxel_size overrides the architecture's (relative to the scene scale); fuse_views [V] bool keeps
+        voxel_size overrides the architecture's (relative to the scene scale): one number, or
+        [V, H, W] one per pixel (`model.pixel_footprint`); fuse_views [V] bool keeps
         only those views' pixel Gaussians in the fused scene (the others still shaped the cameras
         and depth; evaluation's holdout protocol uses this); fuse_pixels [V, H, W] bool keeps only
-        those pixels (e.g. the ones whose depth other views confirm)."""
+        those pixels (e.g. the ones whose depth other views confirm); covering: voxels of several
+        members take the shape that spans them (`voxelize.covering_shapes`, not differentiated)
+        instead of the mean shape."""
         mask = None if fuse_views is None else fuse_views[:, None, None].expand(points.shape[:3])
         if fuse_pixels is not None:
             mask = fuse_pixels if mask is None else mask & fuse_pixels
@@ -167,12 +172,18 @@ class Lumos3D(nn.Module):
             if not bool(mask.any()):
                 raise ValueError("fuse_views / fuse_pixels selects no view or pixel")
             points, params, confidence = points[mask], params[mask], confidence[mask]
+            if isinstance(voxel_size, torch.Tensor):
+                voxel_size = voxel_size[mask]
         points = points.reshape(-1, 3)
         params = params.reshape(points.shape[0], -1)
         relative = self.architecture.voxel_size if voxel_size is None else voxel_size
+        if isinstance(relative, torch.Tensor):
+            relative = relative.reshape(-1)
         pixels = activate_gaussians(points, params, scale, self.architecture)
         fused = voxelize(points, params, confidence.reshape(-1), relative * scale)
         voxels = activate_gaussians(fused.points, fused.features, scale, self.architecture)
+        if covering:
+            voxels = covering_shapes(voxels, pixels, fused, self.architecture.gaussian_scale_min * scale)
         keep = voxels.opacities >= self.architecture.opacity_threshold
         return pixels, voxels.select(keep), GaussianCounts(points.shape[0], len(fused), int((~keep).sum()))
 
@@ -220,12 +231,22 @@ class Lumos3D(nn.Module):
         self, prediction: Lumos3DPrediction, extrinsics: torch.Tensor | None = None,
         intrinsics: torch.Tensor | None = None, depth: torch.Tensor | None = None,
         voxel_size: float | None = None, fuse_views: torch.Tensor | None = None, fuse_pixels: torch.Tensor | None = None,
+        footprint_scale: float | None = None,
     ) -> Lumos3DOutput:
         """Place and fuse the Gaussians of `prediction`. By default they sit on the predicted depth
         seen from the predicted cameras; a caller with better geometry (registered cameras
         extrinsics [B, V, 3, 4] and intrinsics [B, V, 3, 3] in network pixels, depth [B, V, H, W]
         aligned to them) passes it instead. `voxel_size`, `fuse_views` [V] and `fuse_pixels`
-        [B, V, H, W] (bool) are passed to `fuse_scene`. Runs in float32."""
+        [B, V, H, W] (bool) are passed to `fuse_scene`. Runs in float32.
+
+        The voxels are one size, `voxel_size` (default: the architecture's; training relies on
+        it), unless `footprint_scale` is given: then each pixel Gaussian's voxel is that multiple
+        of its pixel footprint, the world size of one network pixel in the finest fused view that
+        holds it, rounded to a power of two of the scene scale (`model.pixel_footprint`), and a
+        voxel that merges several pixels takes the shape that spans them (`fuse_scene` covering;
+        not differentiated, for inference)."""
+        if footprint_scale is not None and voxel_size is not None:
+            raise ValueError("give voxel_size or footprint_scale, not both")
         with torch.autocast(prediction.depth.device.type, enabled=False):
             extrinsics = prediction.extrinsics if extrinsics is None else extrinsics.to(prediction.depth)
             intrinsics = prediction.intrinsics if intrinsics is None else intrinsics.to(prediction.depth)
@@ -235,9 +256,21 @@ class Lumos3D(nn.Module):
             # field of view to a degenerate extreme (docs/model.md, "Geometry").
             world_points = unproject_depth(depth, extrinsics.detach(), intrinsics.detach())
             scales = scene_scale(depth)
+            sizes = [voxel_size] * depth.shape[0]
+            if footprint_scale is not None:
+                views = slice(None) if fuse_views is None else fuse_views
+                height, width = depth.shape[-2:]
+                sizes = [
+                    footprint_voxel_sizes(
+                        pixel_footprint(world_points[b].detach().reshape(-1, 3), extrinsics[b, views].detach(),
+                                        intrinsics[b, views].detach(), (width, height)).reshape(depth.shape[1:]),
+                        footprint_scale, scales[b],
+                    )
+                    for b in range(depth.shape[0])
+                ]
             scenes = [
-                self.fuse_scene(world_points[b], prediction.params[b], prediction.confidence[b], scales[b], voxel_size,
-                                fuse_views, None if fuse_pixels is None else fuse_pixels[b])
+                self.fuse_scene(world_points[b], prediction.params[b], prediction.confidence[b], scales[b], sizes[b],
+                                fuse_views, None if fuse_pixels is None else fuse_pixels[b], footprint_scale is not None)
                 for b in range(depth.shape[0])
             ]
         pixel_gaussians, gaussians, counts = (list(column) for column in zip(*scenes))

@@ -1,5 +1,6 @@
 """The CPU rasterizer as a torch.autograd.Function: projection, binning and compositing run in
-numba kernels; the backward pass is hand-written (see kernels/)."""
+numba kernels; the backward pass is hand-written (see kernels/). `rasterize_with_weights` is the
+same forward pass without gradients that also sums each Gaussian's rendered weight."""
 
 from __future__ import annotations
 
@@ -55,6 +56,48 @@ def project(means, quats, scales, opacities, sh, viewmat, intrinsics, settings: 
     return outputs
 
 
+def composite(means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings, entry_weights: bool):
+    """Projection, binning and front-to-back compositing of one camera (numpy, no gradients).
+
+    Returns (projected, tiles, colour [H,W,3], depth [H,W], transmittance [H,W], last [H,W],
+    weights): `projected` and `tiles` as `project` and `bin_and_sort` return them, the images as
+    `rasterize_forward` writes them, and weights [N] float64 — each Gaussian's rendered weight,
+    the sum over pixels of alpha x transmittance — when `entry_weights`, else None."""
+    _use_torch_thread_count(means.shape[0], settings.width * settings.height)
+    numpy_dtype = np.float64 if means.dtype == torch.float64 else np.float32
+    width, height = settings.width, settings.height
+    projected = project(means, quats, scales, opacities, sh, viewmat, intrinsics, settings)
+    means2d, conics, depths, opacities_eff, colours, radii = projected
+    tile_offsets, entries, tiles_x, _ = bin_and_sort(
+        means2d, radii, depths, width, height, numba.get_num_threads() * _CHUNKS_PER_THREAD
+    )
+    colour = np.zeros((height, width, 3), numpy_dtype)
+    depth = np.zeros((height, width), numpy_dtype)
+    transmittance = np.ones((height, width), numpy_dtype)
+    last = np.full((height, width), -1, np.int64)
+    per_entry = np.zeros(entries.shape[0], np.float64) if entry_weights else None
+    rasterize_forward(
+        tile_offsets, entries, tiles_x, width, height, means2d, conics, opacities_eff, colours, depths, radii,
+        colour, depth, transmittance, last, per_entry,
+    )
+    # bincount adds in entry order: the sums do not depend on thread scheduling.
+    weights = np.bincount(entries, weights=per_entry, minlength=means.shape[0]) if entry_weights else None
+    return projected, (tile_offsets, entries, tiles_x), colour, depth, transmittance, last, weights
+
+
+def rasterize_with_weights(means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
+    """The forward pass of RasterizeGaussians without gradients, plus each Gaussian's rendered
+    weight: (colour [H,W,3], alpha [H,W], depth [H,W], radii [N,2], weights [N]) with weights
+    = sum over pixels of alpha x transmittance (0: never drawn), in the inputs' dtype."""
+    projected, _, colour, depth, transmittance, _, weights = composite(
+        means, quats, scales, opacities, sh, viewmat, intrinsics, settings, entry_weights=True
+    )
+    return (
+        torch.from_numpy(colour), torch.from_numpy(1.0 - transmittance), torch.from_numpy(depth),
+        torch.from_numpy(projected[5]), torch.from_numpy(weights).to(means.dtype),
+    )
+
+
 class RasterizeGaussians(torch.autograd.Function):
     """One camera. Inputs: means [N,3], quats [N,4] wxyz, scales [N,3], opacities [N],
     sh [N,K,3]; viewmat [3,4] world->camera (float64), intrinsics (fx, fy, cx, cy).
@@ -63,31 +106,17 @@ class RasterizeGaussians(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
-        _use_torch_thread_count(means.shape[0], settings.width * settings.height)
-        numpy_dtype = np.float64 if means.dtype == torch.float64 else np.float32
-        width, height = settings.width, settings.height
-        means2d, conics, depths, opacities_eff, colours, radii = project(
-            means, quats, scales, opacities, sh, viewmat, intrinsics, settings
-        )
-        tile_offsets, entries, tiles_x, _ = bin_and_sort(
-            means2d, radii, depths, width, height, numba.get_num_threads() * _CHUNKS_PER_THREAD
-        )
-        colour = np.zeros((height, width, 3), numpy_dtype)
-        depth = np.zeros((height, width), numpy_dtype)
-        transmittance = np.ones((height, width), numpy_dtype)
-        last = np.full((height, width), -1, np.int64)
-        rasterize_forward(
-            tile_offsets, entries, tiles_x, width, height, means2d, conics, opacities_eff, colours, depths, radii,
-            colour, depth, transmittance, last,
+        projected, tiles, colour, depth, transmittance, last, _ = composite(
+            means, quats, scales, opacities, sh, viewmat, intrinsics, settings, entry_weights=False
         )
         ctx.settings = settings
         ctx.intrinsics = tuple(float(v) for v in intrinsics)
         ctx.view = np.ascontiguousarray(_array(viewmat), dtype=np.float64)
-        ctx.projected = (means2d, conics, depths, opacities_eff, colours, radii)
-        ctx.tiles = (tile_offsets, entries, tiles_x)
+        ctx.projected = projected
+        ctx.tiles = tiles
         ctx.pixels = (transmittance, last)
         ctx.save_for_backward(means, quats, scales, opacities, sh)
-        radii_tensor = torch.from_numpy(radii)
+        radii_tensor = torch.from_numpy(projected[5])
         ctx.mark_non_differentiable(radii_tensor)
         alpha = torch.from_numpy(1.0 - transmittance)
         return torch.from_numpy(colour), alpha, torch.from_numpy(depth), radii_tensor

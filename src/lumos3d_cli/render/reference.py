@@ -136,9 +136,10 @@ def project_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, 
     return means2d, conics, z, opacity, colours, radii
 
 
-def rasterize_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
-    """Same outputs as RasterizeGaussians: colour [H,W,3], alpha [H,W], depth [H,W] (sum of w z),
-    radii [N,2]."""
+def _composite_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
+    """Dense front-to-back compositing of one camera: (colour [H,W,3], alpha [H,W], depth [H,W],
+    radii [N,2], weights [H*W, M] = alpha x transmittance of every pixel and drawn Gaussian,
+    order [M] the indices of those Gaussians, nearest first)."""
     means2d, conics, depths, opacity, colours, radii = project_reference(
         means, quats, scales, opacities, sh, viewmat, intrinsics, settings
     )
@@ -167,4 +168,21 @@ def rasterize_reference(means, quats, scales, opacities, sh, viewmat, intrinsics
     colour = (weights @ colours[order]).reshape(height, width, 3)
     depth = (weights @ depths[order]).reshape(height, width)
     final = transmittance[:, -1] if order.numel() else torch.ones(height * width, dtype=dtype)
-    return colour, (1 - final).reshape(height, width), depth, radii
+    return colour, (1 - final).reshape(height, width), depth, radii, weights, order
+
+
+def rasterize_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
+    """Same outputs as RasterizeGaussians: colour [H,W,3], alpha [H,W], depth [H,W] (sum of w z),
+    radii [N,2]."""
+    return _composite_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, settings)[:4]
+
+
+def rasterize_with_weights_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
+    """Same outputs as `rasterizer.rasterize_with_weights` (no gradients): colour, alpha, depth,
+    radii and weights [N] = each Gaussian's sum over pixels of alpha x transmittance."""
+    with torch.no_grad():
+        colour, alpha, depth, radii, weights, order = _composite_reference(
+            means, quats, scales, opacities, sh, viewmat, intrinsics, settings
+        )
+        per_gaussian = torch.zeros(means.shape[0], dtype=means.dtype).index_add(0, order, weights.sum(dim=0))
+    return colour, alpha, depth, radii, per_gaussian

@@ -14,8 +14,8 @@ from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import MAX_SH_DEGREE, Gaussians
 from lumos3d_cli.render.constants import EPS2D, FAR_PLANE, NEAR_PLANE
 from lumos3d_cli.render.gsplat_backend import gsplat_available, render_with_gsplat
-from lumos3d_cli.render.rasterizer import RasterizeGaussians
-from lumos3d_cli.render.reference import rasterize_reference
+from lumos3d_cli.render.rasterizer import RasterizeGaussians, rasterize_with_weights
+from lumos3d_cli.render.reference import rasterize_reference, rasterize_with_weights_reference
 from lumos3d_cli.render.settings import RasterSettings
 
 logger = logging.getLogger(__name__)
@@ -26,12 +26,15 @@ Backend = Literal["auto", "cpu", "reference", "gsplat"]
 @dataclass
 class RenderOutput:
     """images [V,3,H,W] with the background composited; alphas [V,H,W]; depths [V,H,W] expected
-    camera-space depth (0 where nothing was hit); radii [V,N,2] int32 (0: not drawn)."""
+    camera-space depth (0 where nothing was hit); radii [V,N,2] int32 (0: not drawn); weights
+    [V,N] each Gaussian's rendered weight, the sum over the view's pixels of alpha x
+    transmittance (only when asked for)."""
 
     images: torch.Tensor
     alphas: torch.Tensor
     depths: torch.Tensor
     radii: torch.Tensor
+    weights: torch.Tensor | None = None
 
     @property
     def visible(self) -> torch.Tensor:
@@ -50,23 +53,30 @@ def _check_inputs(gaussians: Gaussians, cameras: Cameras, sh_degree: int) -> tup
     return cameras.sizes[0]
 
 
-def _render_cpu(gaussians, cameras, settings, background, use_reference: bool):
+def _render_cpu(gaussians, cameras, settings, background, use_reference: bool, weights: bool):
     device = gaussians.means.device
     g = gaussians.to(device="cpu")
-    images, alphas, depths, radii = [], [], [], []
-    rasterize = rasterize_reference if use_reference else RasterizeGaussians.apply
+    images, alphas, depths, radii, per_view_weights = [], [], [], [], []
+    if weights:
+        rasterize = rasterize_with_weights_reference if use_reference else rasterize_with_weights
+    else:
+        rasterize = rasterize_reference if use_reference else RasterizeGaussians.apply
     for index in range(len(cameras)):
         viewmat = cameras.extrinsics[index].detach().to(device="cpu", dtype=torch.float64)
         k = cameras.intrinsics[index].detach().double()
         intrinsics = (k[0, 0].item(), k[1, 1].item(), k[0, 2].item(), k[1, 2].item())
-        colour, alpha, depth, radius = rasterize(g.means, g.quats, g.scales, g.opacities, g.sh, viewmat, intrinsics, settings)
+        colour, alpha, depth, radius, *weight = rasterize(
+            g.means, g.quats, g.scales, g.opacities, g.sh, viewmat, intrinsics, settings
+        )
         images.append(colour + (1 - alpha)[..., None] * background.to(colour))
         alphas.append(alpha)
         depths.append(depth / alpha.clamp_min(1e-10))
         radii.append(radius)
+        per_view_weights += weight
     return RenderOutput(
         torch.stack(images).permute(0, 3, 1, 2).to(device), torch.stack(alphas).to(device),
         torch.stack(depths).to(device), torch.stack(radii).to(device),
+        torch.stack(per_view_weights).to(device) if weights else None,
     )
 
 
@@ -81,12 +91,15 @@ def render(
     far: float = FAR_PLANE,
     eps2d: float = EPS2D,
     backend: Backend = "auto",
+    weights: bool = False,
 ) -> RenderOutput:
     """Render every camera (all of the same image size, taken from `cameras.sizes`).
 
     backend: "auto" = our CPU kernel for CPU tensors, gsplat for CUDA tensors when it imports
     (else our kernel on the CPU, with a warning); "cpu", "gsplat" or "reference" (the dense twin)
-    force one. Differentiable w.r.t. every Gaussian tensor and the background.
+    force one. Differentiable w.r.t. every Gaussian tensor and the background, except with
+    `weights`: then a forward-only pass of the CPU kernel (or the twin) also returns each
+    Gaussian's rendered weight per view (RenderOutput.weights), and nothing carries gradients.
     """
     degree = gaussians.sh_degree if sh_degree is None else sh_degree
     width, height = _check_inputs(gaussians, cameras, degree)
@@ -95,8 +108,12 @@ def render(
     background = torch.zeros(3) if background is None else torch.as_tensor(background)
     background = background.to(device=device, dtype=dtype)
     require_finite("background", background)
+    if weights and backend == "gsplat":
+        raise ValueError("per-Gaussian weights come from the cpu or reference backend, not gsplat")
     if backend == "auto":
-        if device.type == "cuda":
+        if weights:
+            backend = "cpu"
+        elif device.type == "cuda":
             if gsplat_available():
                 backend = "gsplat"
             else:
@@ -108,4 +125,4 @@ def render(
         return RenderOutput(*render_with_gsplat(gaussians, cameras, settings, background))
     if backend not in ("cpu", "reference"):
         raise ValueError(f"unknown backend {backend!r}")
-    return _render_cpu(gaussians, cameras, settings, background, use_reference=backend == "reference")
+    return _render_cpu(gaussians, cameras, settings, background, backend == "reference", weights)

@@ -1,4 +1,5 @@
-"""Front-to-back alpha compositing per 16x16 tile (forward) and its hand-written backward.
+"""Front-to-back alpha compositing per 16x16 tile (forward, optionally with each tile entry's
+rendered weight) and its hand-written backward.
 
 Work is parallel over tiles. Inside a tile the loop runs over the tile's Gaussians (sorted
 front to back) and, for each, over the pixels inside its bounding box only: outside the box its
@@ -33,10 +34,14 @@ def _pixel_box(u, v, rx, ry, x0, y0, x_end, y_end):
 @njit(cache=True, parallel=True)
 def rasterize_forward(
     tile_offsets, entries, tiles_x, width, height, means2d, conics, opacities, colours, depths, radii,
-    out_colour, out_depth, out_transmittance, out_last,
+    out_colour, out_depth, out_transmittance, out_last, out_entry_weights,
 ):
     """out_colour [H,W,3] = sum w c; out_depth [H,W] = sum w z; out_transmittance [H,W] = T after
-    the last contributor; out_last [H,W] = entry index of the last contributor (-1: none)."""
+    the last contributor; out_last [H,W] = entry index of the last contributor (-1: none);
+    out_entry_weights [I] = sum over the entry's tile pixels of w = alpha T (each entry belongs
+    to one tile, so the slots need no atomics), or None: numba then compiles a version without
+    the `is not None` branches, and the unused sum disappears with them (the plain render's
+    speed)."""
     for tile in prange(tile_offsets.shape[0] - 1):
         x0 = (tile % tiles_x) * TILE_SIZE
         y0 = (tile // tiles_x) * TILE_SIZE
@@ -65,6 +70,7 @@ def rasterize_forward(
             gr = float(colours[g, 1])
             b = float(colours[g, 2])
             z = float(depths[g])
+            drawn = 0.0
             for i in range(i0, i1):
                 dy = v - (i + 0.5)
                 for j in range(j0, j1):
@@ -89,8 +95,11 @@ def rasterize_forward(
                     colour[p, 1] += weight * gr
                     colour[p, 2] += weight * b
                     depth[p] += weight * z
+                    drawn += weight
                     transmittance[p] = next_t
                     last[p] = e
+            if out_entry_weights is not None:
+                out_entry_weights[e] = drawn
         for i in range(y0, y_end):
             for j in range(x0, x_end):
                 p = (i - y0) * TILE_SIZE + (j - x0)

@@ -1,0 +1,36 @@
+"""How much each Gaussian shows in a set of views: its rendered weight, the sum over every
+pixel of every view of alpha x transmittance (the share of the pixel's colour it supplies).
+
+A Gaussian that no view draws (outside every image, behind every camera, or with an alpha
+under the threshold everywhere) has weight 0; one hidden behind opaque surfaces has a weight near
+0: either can go without changing any render much.
+The weights of one view sum to its total alpha, so they are in pixels: a weight of 0.5 is half
+a pixel's colour, spread over the views.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.gaussians import Gaussians
+from lumos3d_cli.render.render import render
+
+
+def rendered_weights(gaussians: Gaussians, cameras: Cameras, resolution: float = 1.0) -> torch.Tensor:
+    """[N] each Gaussian's rendered weight summed over `cameras`, in pixels of the cameras' own
+    images. `resolution` < 1 renders smaller images (faster) and scales the weights back by the
+    pixel area, so the result estimates the full-resolution weight."""
+    if not 0 < resolution <= 1:
+        raise ValueError(f"resolution {resolution} must be in (0, 1]")
+    total = torch.zeros(len(gaussians), dtype=torch.float64)
+    for index in range(len(cameras)):
+        camera = cameras[index]
+        width, height = camera.sizes[0]
+        small = (max(1, round(width * resolution)), max(1, round(height * resolution)))
+        if small != (width, height):
+            camera = camera.rescaled(*small)
+        # Weights do not depend on colour: degree 0 skips the view-dependent SH terms.
+        output = render(gaussians, camera, sh_degree=0, weights=True, backend="cpu")
+        total += output.weights[0].double().cpu() * (width * height) / (small[0] * small[1])
+    return total
