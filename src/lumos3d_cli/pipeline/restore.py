@@ -169,14 +169,16 @@ def _restored_photos(network: NetworkPass, photos: torch.Tensor) -> torch.Tensor
         return restore_photos(photos.to(operator.matrix.device), global_operator).cpu()
 
 
-def _operator_restoration(network: NetworkPass, photos: torch.Tensor, selected: list[int],
-                          brightened: Brightened | None) -> torch.Tensor:
+def _operator_restoration(network: NetworkPass, photos: torch.Tensor, selected: list[int]) -> torch.Tensor:
     """All photos [V, 3, H, W] restored as the Gaussians' colours are: the whole operator (with
     its per-view local grid) for the views the network saw, its curve and matrix for the rest."""
-    restored = (brightened.images if brightened is not None else _restored_photos(network, photos)).clone()
+    operator = network.prediction.appearance.scene(0)
+    others = sorted(set(range(len(photos))) - set(selected))
+    restored = torch.empty(photos.shape, dtype=torch.float32)
     with torch.no_grad():
-        operator = network.prediction.appearance.scene(0)
         restored[selected] = restore_photos(photos[selected].to(operator.matrix.device), operator).cpu()
+    if others:
+        restored[others] = _restored_photos(network, photos[others])
     return restored
 
 
@@ -238,7 +240,7 @@ def build_scene(
         started = time.perf_counter()
         restored = None
         if model.architecture.appearance == "operator":
-            restored = _operator_restoration(network, images, selected, brightened)
+            restored = _operator_restoration(network, images, selected)
         targets, cameras = refinement_targets(network, model, images, restored, selected, names,
                                               scene_geometry.cameras, fuse_views)
         result = refine_scene(gaussians, targets, cameras, preset.refine_steps, progress)
