@@ -45,3 +45,39 @@ def test_the_bundled_model_brightens_the_example_towards_normal_light(run_cli, b
     error_restored = (restored - references).abs().mean()
     error_inputs = (inputs - references).abs().mean()
     assert error_restored < 0.6 * error_inputs
+
+
+def _luminance_correlation(first: torch.Tensor, second: torch.Tensor) -> float:
+    """Pearson correlation of the luminance of two [3, H, W] images."""
+    weights = torch.tensor([0.2126, 0.7152, 0.0722])[:, None, None]
+    a, b = (first * weights).sum(0).flatten(), (second * weights).sum(0).flatten()
+    return float(torch.corrcoef(torch.stack([a, b]))[0, 1])
+
+
+def test_one_photo_restores_as_2d_restoration(run_cli, shared_data, buu, tmp_path):
+    """One photo is a scene of one view: the bundled model restores it in 2D. A real night photo
+    on which the camera head predicts a field of view of 0 once collapsed to one flat colour."""
+    night = shared_data / "lowlight_single" / "003.jpg"
+    out = tmp_path / "night" / "scene.ply"
+    result = run_cli("restore", night, "-o", out, "--json")
+    assert result.code == 0, result.err
+    assert "field of view no lens has" in result.err
+    summary = json.loads(result.out)
+    photo = load_images([night]).images[0]
+    restored = load_images([out.parent / "restored" / "003.png"]).images[0]
+    assert restored.shape == photo.shape
+    assert summary["gaussians"]["kept"] > 0.9 * summary["gaussians"]["pixel"]  # no pile-up in a few voxels
+    assert _luminance_correlation(restored, photo) > 0.85  # the same picture, not a flat colour (it scored 0.03)
+    assert restored.mean() >= photo.mean()
+
+    view = EXAMPLE / "4.jpg"
+    out = tmp_path / "buu" / "scene.ply"
+    result = run_cli("restore", view, "-o", out, "--json")
+    assert result.code == 0, result.err
+    restored = load_images([out.parent / "restored" / "4.png"]).images[0]
+    photo = load_images([view]).images[0]
+    reference = load_images([buu / "high" / "4.JPG"]).images[0]
+    reference = torch.nn.functional.interpolate(reference[None], size=restored.shape[-2:], mode="area")[0]
+    assert restored.mean() > 2 * photo.mean()
+    assert (restored - reference).abs().mean() < 0.6 * (photo - reference).abs().mean()
+    assert _luminance_correlation(restored, reference) > 0.8

@@ -52,6 +52,26 @@ def test_restore_writes_every_output(run_cli, buu, tmp_path, random_checkpoint):
     assert len(summary["checkpoint"]["sha256"]) == 64 and set(summary["seconds"]) >= {"load", "network", "render", "write"}
     assert summary["geometry"]["source"] == "network"
     assert summary["input_paths"] == [str((photos / n).resolve()) for n in ("1.JPG", "2.JPG", "3.JPG")]
+    budget = summary["gaussians"]["budget"]
+    assert budget["kept"] == vertex.count and budget["max_gaussians"] is None and budget["capped"] == 0
+    assert summary["gaussians"]["ply_mib"] == round(out.stat().st_size / 2**20, 3)
+
+
+def test_max_gaussians_caps_the_scene(run_cli, buu, tmp_path, random_checkpoint):
+    photos = _copy(buu, tmp_path, ["1.JPG", "2.JPG"])
+    out = tmp_path / "out" / "scene.ply"
+    result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "network",
+                     "--max-gaussians", "5000", "--json")
+    assert result.code == 0, result.err
+    summary = json.loads(result.out)
+    budget = summary["gaussians"]["budget"]
+    assert PlyData.read(str(out))["vertex"].count == summary["gaussians"]["kept"] == budget["kept"] == 5000
+    assert budget["max_gaussians"] == 5000 and budget["capped"] > 0
+    assert summary["gaussians"]["voxels"] - summary["gaussians"]["pruned"] == (
+        budget["kept"] + budget["dropped_unseen"] + budget["dropped_weak"] + budget["capped"])
+    expect_input_error(run_cli("restore", photos, "-o", tmp_path / "bad" / "scene.ply", "--checkpoint", random_checkpoint,
+                               "--max-gaussians", "0"), "--max-gaussians 0")
+    assert not (tmp_path / "bad").exists()
 
 
 def test_one_view_and_high_bit_depth_outputs(run_cli, buu, tmp_path, random_checkpoint):

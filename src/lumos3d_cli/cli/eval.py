@@ -63,6 +63,8 @@ def eval_command(
     max_views: int | None = typer.Option(None, "--max-views", help="Views per scene through the network (default: the preset's)."),
     refine_steps: int | None = typer.Option(
         None, "--refine-steps", help="Test-time refinement steps after the forward pass (default: the preset's; 0: none)."),
+    max_gaussians: int | None = typer.Option(
+        None, "--max-gaussians", help="Keep at most this many Gaussians, the ones the views draw most (default: all that the views show)."),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     out: Path = typer.Option(Path("report"), "--out", help="Report folder (metrics.json, metrics.csv, contact sheets)."),
     baseline: str = typer.Option("gamma", "--baseline", help="gamma (blind auto-gamma row) or none."),
@@ -76,7 +78,7 @@ def eval_command(
         task = bars.add_task(f"eval ({protocol})", total=len(names) if names else None)
         report = evaluate_lom(
             root, names, mode=mode, protocol=protocol, checkpoint=checkpoint, preset=preset, geometry=geometry,
-            max_views=max_views, refine_steps=refine_steps, device=device, baseline=baseline, lpips_weights=lpips_weights,
+            max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, device=device, baseline=baseline, lpips_weights=lpips_weights,
             on_scene=lambda _: bars.advance(task),
         )
     write_eval_report(report, out)

@@ -41,6 +41,8 @@ def restore_command(
     max_views: int | None = typer.Option(None, "--max-views", help="Views the network sees (default: the preset's)."),
     refine_steps: int | None = typer.Option(
         None, "--refine-steps", help="Test-time refinement steps after the forward pass (default: the preset's; 0: none)."),
+    max_gaussians: int | None = typer.Option(
+        None, "--max-gaussians", help="Keep at most this many Gaussians, the ones the views draw most (default: all that the views show)."),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     reference: Path | None = typer.Option(None, "--reference", help="Normal-light photos of the same views (metrics)."),
     lpips_weights: Path | None = typer.Option(None, "--lpips-weights", help="torchvision vgg16 weights for LPIPS."),
@@ -61,7 +63,7 @@ def restore_command(
     with progress_bar() as bars:
         scene = restore(
             photos, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,
-            max_views=max_views, refine_steps=refine_steps, device=device, reference=reference, lpips_weights=lpips_weights,
+            max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, device=device, reference=reference, lpips_weights=lpips_weights,
             progress=ProgressBars(bars),
         )
         summary = write_restored_scene(scene, output, output_format)

@@ -61,11 +61,12 @@ def evaluate_lom(
     root: Path | str, scenes: list[str] | None = None, mode: str = "low-light", protocol: str = "context",
     checkpoint: Path | str | None = None, preset: str = DEFAULT_RESTORE_PRESET, geometry: str = "auto",
     max_views: int | None = None, device: str = "cpu", baseline: str = "gamma", lpips_weights: Path | str | None = None,
-    on_scene: Callable[[str], None] | None = None, refine_steps: int | None = None,
+    on_scene: Callable[[str], None] | None = None, refine_steps: int | None = None, max_gaussians: int | None = None,
 ) -> EvalReport:
     """Evaluate restoration on the LOM-layout scenes under `root` (all, or those named) with the
     paper's protocol; `on_scene(name)` is called after each scene. `refine_steps` overrides the
-    preset's test-time refinement (fitted to the views in the scene, never to held-out ones)."""
+    preset's test-time refinement (fitted to the views in the scene, never to held-out ones),
+    `max_gaussians` its Gaussian cap."""
     if mode not in MODES:
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
     if protocol not in PROTOCOLS:
@@ -73,7 +74,7 @@ def evaluate_lom(
     if baseline not in BASELINES:
         raise InputError(f"{baseline!r}: use one of {', '.join(BASELINES)}", parameter="baseline")
     check_geometry_source(geometry)
-    settings = get_restore_preset(preset, refine_steps)
+    settings = get_restore_preset(preset, refine_steps, max_gaussians)
     limit = max_views or settings.max_views
     found = find_lom_scenes(root, mode, scenes)
     weights = resolve_checkpoint(checkpoint, mode)
@@ -88,13 +89,14 @@ def evaluate_lom(
     rows = _rows(results, methods)
     document = {
         "root": str(root), "mode": mode, "protocol": protocol, "preset": settings.name, "geometry": geometry,
-        "refine_steps": settings.refine_steps,
+        "refine_steps": settings.refine_steps, "max_gaussians": settings.max_gaussians,
         "max_views": limit, "checkpoint": {"name": weights.name, "sha256": file_sha256(weights)},
         "lpips": meter.lpips_note, "rows": rows,
         "frames": {r.scene: {"test": r.test_frames, "views_used": r.views_used, "lumos3d": r.ours, "gamma": r.baseline}
                    for r in results},
         "cameras": {r.scene: r.pose.as_dict() for r in results if r.pose is not None},
         "geometry_sources": {r.scene: r.geometry for r in results},
+        "gaussians": {r.scene: r.gaussians for r in results},
     }
     return EvalReport(document, rows, results, methods)
 

@@ -37,7 +37,8 @@ PROTOCOLS = ("context", "holdout")
 class SceneEvaluation:
     """Per test frame: metrics of ours and of the baseline; the images for the contact sheet
     (inputs, baseline, references [T, 3, H, W]; renders, ours, per frame [3, H, W]); the accuracy
-    of the predicted cameras of all views used (None without reference cameras)."""
+    of the predicted cameras of all views used (None without reference cameras); the Gaussians
+    the scene kept and its budget."""
 
     scene: str
     protocol: str
@@ -52,6 +53,7 @@ class SceneEvaluation:
     references: torch.Tensor
     pose: PoseAccuracy | None = None
     geometry: dict = field(default_factory=dict)
+    gaussians: dict = field(default_factory=dict)  # kept and the budget the scene got
 
 
 def _pose_accuracy(scene: LomScene, frames: list[str], predicted: torch.Tensor) -> PoseAccuracy | None:
@@ -107,5 +109,5 @@ def evaluate_lom_scene(
     return SceneEvaluation(
         scene.name, protocol, len(built.selected), list(scene.test), meter.measure(renders, references),
         meter.measure(baseline_images, references), time.perf_counter() - started, inputs, renders, baseline_images,
-        references, pose, built.geometry.summary(),
+        references, pose, built.geometry.summary(), {"kept": len(built.gaussians), "budget": built.budget},
     )

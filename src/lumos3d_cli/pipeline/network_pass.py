@@ -3,15 +3,19 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import logging
+from dataclasses import dataclass, replace
 
 import torch
 
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.geometry.field_of_view import FALLBACK_FOV_DEGREES, longer_side_fov, plausible_intrinsics
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DPrediction
 from lumos3d_cli.model.preprocess import PreparedImages, prepare_images
 from lumos3d_cli.pipeline.presets import RestorePreset
+
+logger = logging.getLogger(__name__)
 
 
 def even_subset(count: int, limit: int, required: list[int] = ()) -> list[int]:
@@ -63,9 +67,18 @@ def network_image_size(model: Lumos3D, preset: RestorePreset) -> int:
 
 
 def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset) -> NetworkPass:
-    """images [V, 3, H, W] at the photos' size -> the network's predictions for them."""
+    """images [V, 3, H, W] at the photos' size -> the network's predictions for them; a view
+    whose predicted field of view no lens has gets a typical one (`geometry.field_of_view`)."""
     prepared = prepare_images(images, network_image_size(model, preset), model.architecture.patch_size)
     device = next(model.parameters()).device
     with torch.no_grad():
         prediction = model.predict(prepared.images[None].to(device))
+    intrinsics, replaced = plausible_intrinsics(prediction.intrinsics[0], prepared.network_size)
+    if bool(replaced.any()):
+        degrees = longer_side_fov(prediction.intrinsics[0][replaced], prepared.network_size)
+        logger.warning("the network predicted a field of view no lens has (%s degrees) for %d of %d view(s); using %g "
+                       "degrees there (give --poses or use structure-from-motion for exact cameras)",
+                       ", ".join(f"{value:.3g}" for value in degrees.tolist()[:5]), int(replaced.sum()), len(replaced),
+                       FALLBACK_FOV_DEGREES)
+        prediction = replace(prediction, intrinsics=intrinsics[None])
     return NetworkPass(prediction, prepared)

@@ -1,6 +1,7 @@
 """Speed/accuracy presets of `lumos3d restore` and `lumos3d eval`: how many views the network
 sees, at which resolution (relative to the model's), the SH degree written and rendered, the
-voxel size (relative to the model's) and the steps of test-time refinement (pipeline.scene_refinement)."""
+voxel size (relative to the model's pixel footprint), the steps of test-time refinement
+(pipeline.scene_refinement) and the most Gaussians a scene may keep (render.gaussian_budget)."""
 
 from __future__ import annotations
 
@@ -15,8 +16,9 @@ class RestorePreset:
     max_views: int
     resolution: float  # multiplier of the architecture's image size
     sh_degree: int | None  # None: the model's full degree
-    voxel_scale: float  # multiplier of the architecture's voxel size
+    voxel_scale: float  # multiple of the pixel footprint a voxel may span (model.pixel_footprint)
     refine_steps: int = 0  # test-time refinement steps (0: the forward pass as it is)
+    max_gaussians: int | None = None  # cap on the scene's Gaussians (None: all that the views show)
 
     def network_image_size(self, model_image_size: int, patch_size: int) -> int:
         """The longer network side: a patch multiple, at least one patch."""
@@ -31,14 +33,19 @@ RESTORE_PRESETS = {
 DEFAULT_RESTORE_PRESET = "balanced"
 
 
-def get_restore_preset(name: str, refine_steps: int | None = None) -> RestorePreset:
-    """The preset `name`, with its refinement steps replaced by `refine_steps` when given."""
+def get_restore_preset(name: str, refine_steps: int | None = None, max_gaussians: int | None = None) -> RestorePreset:
+    """The preset `name`, with its refinement steps and Gaussian cap replaced by `refine_steps`
+    and `max_gaussians` when given."""
     try:
         preset = RESTORE_PRESETS[name]
     except KeyError:
         raise InputError(f"{name!r}: use one of {', '.join(RESTORE_PRESETS)}", parameter="preset") from None
-    if refine_steps is None:
-        return preset
-    if refine_steps < 0:
-        raise InputError(f"{refine_steps}: use 0 (no refinement) or more steps", parameter="refine_steps")
-    return replace(preset, refine_steps=refine_steps)
+    if refine_steps is not None:
+        if refine_steps < 0:
+            raise InputError(f"{refine_steps}: use 0 (no refinement) or more steps", parameter="refine_steps")
+        preset = replace(preset, refine_steps=refine_steps)
+    if max_gaussians is not None:
+        if max_gaussians < 1:
+            raise InputError(f"{max_gaussians}: use at least 1 Gaussian", parameter="max_gaussians")
+        preset = replace(preset, max_gaussians=max_gaussians)
+    return preset

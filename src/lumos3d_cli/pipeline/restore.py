@@ -28,6 +28,7 @@ from lumos3d_cli.model.appearance.operator import AppearanceOperator
 from lumos3d_cli.model.appearance.photo_restoration import restore_photos
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D, Lumos3DPrediction
+from lumos3d_cli.model.pixel_footprint import DEFAULT_FOOTPRINT_SCALE
 from lumos3d_cli.pipeline.model_loading import load_restoration_model
 from lumos3d_cli.pipeline.network_pass import NetworkPass, even_subset, run_network
 from lumos3d_cli.pipeline.presets import (
@@ -46,6 +47,7 @@ from lumos3d_cli.pipeline.scene_geometry import (
     register_views,
 )
 from lumos3d_cli.pipeline.scene_refinement import refine_scene, refinement_targets
+from lumos3d_cli.render.gaussian_budget import DEFAULT_MIN_WEIGHT, BudgetReport, fit_budget
 from lumos3d_cli.render.render import render
 
 logger = logging.getLogger(__name__)
@@ -81,9 +83,10 @@ class RestoredScene:
     references: list[torch.Tensor] | None = None
     timings: dict[str, float] = field(default_factory=dict)
     refinement: dict | None = None  # the refinement's steps, loss curve, SH degree (None: not refined)
+    budget: dict | None = None  # the Gaussian budget the scene got (BuiltScene.budget)
 
-    def summary(self, scene_path: Path | str | None = None) -> dict:
-        """The JSON summary of the run (summary.json)."""
+    def summary(self, scene_path: Path | str | None = None, ply_bytes: int | None = None) -> dict:
+        """The JSON summary of the run (summary.json); `ply_bytes`: the size of the written scene."""
         return {
             "scene": str(scene_path) if scene_path is not None else None,
             "inputs": len(self.input_paths), "views": self.names,
@@ -92,7 +95,8 @@ class RestoredScene:
             "network_size": list(self.network_size), "preset": self.preset, "mode": self.mode, "device": self.device,
             "checkpoint": self.checkpoint, "geometry": self.geometry.summary(),
             "gaussians": {"pixel": self.counts.pixels, "voxels": self.counts.voxels,
-                          "pruned": self.counts.pruned, "kept": len(self.gaussians)},
+                          "pruned": self.counts.pruned, "kept": len(self.gaussians), "budget": self.budget,
+                          "ply_mib": None if ply_bytes is None else round(ply_bytes / 2**20, 3)},
             "seconds": {name: round(value, 3) for name, value in self.timings.items()},
             "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
             "refinement": self.refinement,
@@ -125,7 +129,8 @@ def _limit_sh(gaussians: Gaussians, sh_degree: int | None) -> Gaussians:
 class BuiltScene:
     """The scene before rendering: fused Gaussians, the geometry (cameras of every view that has
     one), the views the network saw (indices into the photos), counts, the network image size
-    (width, height), seconds per stage, and the refinement's summary (None: not refined)."""
+    (width, height), seconds per stage, the Gaussian budget it got (`_budget_summary`), and the
+    refinement's summary (None: not refined)."""
 
     gaussians: Gaussians
     geometry: SceneGeometry
@@ -133,7 +138,14 @@ class BuiltScene:
     counts: GaussianCounts
     network_size: tuple[int, int]
     timings: dict[str, float]
+    budget: dict
     refinement: dict | None = None  # refine.RefinementResult.summary() when the scene was refined
+
+
+def _budget_summary(report: BudgetReport, preset: RestorePreset) -> dict:
+    """The budget a scene got (summary.json's gaussians.budget)."""
+    return report.as_dict() | {"max_gaussians": preset.max_gaussians, "min_weight_px": DEFAULT_MIN_WEIGHT,
+                               "footprint_scale": DEFAULT_FOOTPRINT_SCALE * preset.voxel_scale}
 
 
 def with_full_resolution_colours(prediction: Lumos3DPrediction, photos: torch.Tensor, model: Lumos3D) -> Lumos3DPrediction:
@@ -226,15 +238,23 @@ def build_scene(
     if keep is not None and not bool(keep.any()):
         raise InputError("selects none of the network's views", parameter="fuse_views")
     with torch.no_grad():
+        # Voxels follow each point's pixel footprint: near detail keeps the network's resolution
+        # while far duplicates still merge (one global size does one or the other; a single
+        # photo's huge depth range collapsed into a few hundred voxels with it).
         output = model.assemble(
             prediction, scene_geometry.network_extrinsics[None], scene_geometry.network_intrinsics[None],
-            scene_geometry.depth[None], voxel_size=model.architecture.voxel_size * preset.voxel_scale, fuse_views=keep,
+            scene_geometry.depth[None], footprint_scale=DEFAULT_FOOTPRINT_SCALE * preset.voxel_scale, fuse_views=keep,
             fuse_pixels=None if scene_geometry.fuse_pixels is None else scene_geometry.fuse_pixels[None],
         )
     network_cameras = Cameras(scene_geometry.network_extrinsics.float(), scene_geometry.network_intrinsics.float(),
                               [network.network_size] * len(selected))
     gaussians = apply_sampling_filter(output.gaussians[0].detach().to(device="cpu"), network_cameras)
     timings["fuse"] = time.perf_counter() - started
+    started = time.perf_counter()
+    # The budget is measured at the cameras the scene is rendered at (held-out ones included:
+    # only their poses, never their photos).
+    gaussians, budget = fit_budget(gaussians, scene_geometry.cameras, preset.max_gaussians)
+    timings["budget"] = time.perf_counter() - started
     gaussians, refinement = _limit_sh(gaussians, preset.sh_degree), None
     if preset.refine_steps > 0:
         started = time.perf_counter()
@@ -246,7 +266,8 @@ def build_scene(
         result = refine_scene(gaussians, targets, cameras, preset.refine_steps, progress)
         gaussians, refinement = result.gaussians, result.summary()
         timings["refine"] = time.perf_counter() - started
-    return BuiltScene(gaussians, scene_geometry, selected, output.counts[0], network.network_size, timings, refinement)
+    return BuiltScene(gaussians, scene_geometry, selected, output.counts[0], network.network_size, timings,
+                      _budget_summary(budget, preset), refinement)
 
 
 def restore_scene(
@@ -277,7 +298,7 @@ def restore_scene(
     return RestoredScene(
         built.gaussians, cameras, restored, inputs, list(cameras.names), list(batch.paths),
         built.selected, built.counts, built.network_size, built.geometry, preset.name, mode, timings=timings,
-        refinement=built.refinement,
+        refinement=built.refinement, budget=built.budget,
     )
 
 
@@ -286,18 +307,20 @@ def restore(
     preset: str = DEFAULT_RESTORE_PRESET, geometry: str = "auto", poses: Path | str | None = None,
     max_views: int | None = None, device: str = "cpu", reference: Path | str | None = None,
     lpips_weights: Path | str | None = None, progress: JobProgress | None = None, refine_steps: int | None = None,
+    max_gaussians: int | None = None,
 ) -> RestoredScene:
     """The whole restore job from files: photos (a folder or files: photos, camera RAW, EXR),
     the bundled model of `mode` or `checkpoint`, and optionally reference photos of the same
     views (same file stems) for PSNR/SSIM/LPIPS. `refine_steps` overrides the preset's
-    test-time refinement (0: none). Write the result with `write_restored_scene`."""
+    test-time refinement (0: none), `max_gaussians` caps the scene's Gaussians. Write the
+    result with `write_restored_scene`."""
     progress = progress or SilentProgress()
     started = time.perf_counter()
     if mode not in MODES:
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
     if max_views is not None and max_views < 1:
         raise InputError(f"{max_views}: use at least 1", parameter="max_views")
-    settings = get_restore_preset(preset, refine_steps)
+    settings = get_restore_preset(preset, refine_steps, max_gaussians)
     check_geometry_source(geometry)
     weights = resolve_checkpoint(checkpoint, mode)
     meter = QualityMeter.create(lpips_weights) if reference is not None else None

@@ -77,6 +77,6 @@ def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_fo
         scene.timings["write"] = time.perf_counter() - started
         if "total" in scene.timings:
             scene.timings["total"] += scene.timings["write"]
-        summary = scene.summary(scene_path)
+        summary = scene.summary(scene_path, (staging / scene_path.name).stat().st_size)
         (staging / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary

@@ -1,0 +1,45 @@
+"""Fields of view no lens has: the camera head's fallback for a view it cannot read.
+
+The camera head predicts each view's field of view through a ReLU, and on some photos (a single
+night photo: no parallax, few cues) it predicts 0, which decodes to a focal length of 10^5
+pixels or more. Geometry built on it is degenerate: the pixel Gaussians, sized for a normal lens,
+each cover the whole image. Such a view gets a typical phone or kit lens instead; a view with
+a plausible field of view keeps the network's.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+# Fields of view of the longer image side outside this range (degrees) are taken as a failed
+# prediction: a 600 mm telephoto sees about 4 degrees on a 35 mm frame, so 3 leaves room for
+# real long lenses; fisheyes beyond 150 degrees are not pinhole cameras at all.
+PLAUSIBLE_FOV_DEGREES = (3.0, 150.0)
+# The fallback: about a 30 mm lens on a 35 mm frame, a phone's main camera.
+FALLBACK_FOV_DEGREES = 60.0
+
+
+def longer_side_fov(intrinsics: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
+    """intrinsics [V, 3, 3] of images of size (width, height) -> [V] field of view of the
+    longer side, in degrees."""
+    width, height = size
+    side, focal = (width, intrinsics[:, 0, 0]) if width >= height else (height, intrinsics[:, 1, 1])
+    return torch.rad2deg(2 * torch.atan(side / 2 / focal.clamp_min(1e-12)))
+
+
+def plausible_intrinsics(intrinsics: torch.Tensor, size: tuple[int, int]) -> tuple[torch.Tensor, torch.Tensor]:
+    """intrinsics [V, 3, 3] of images of size (width, height) -> (intrinsics [V, 3, 3], replaced
+    [V] bool): views whose field of view is outside PLAUSIBLE_FOV_DEGREES (or not finite) get
+    square pixels and FALLBACK_FOV_DEGREES on the longer side; the principal point is kept."""
+    fov = longer_side_fov(intrinsics, size)
+    low, high = PLAUSIBLE_FOV_DEGREES
+    replaced = ~(torch.isfinite(fov) & (fov >= low) & (fov <= high))
+    if not bool(replaced.any()):
+        return intrinsics, replaced
+    focal = max(size) / 2 / math.tan(math.radians(FALLBACK_FOV_DEGREES) / 2)
+    fixed = intrinsics.clone()
+    fixed[replaced, 0, 0] = focal
+    fixed[replaced, 1, 1] = focal
+    return fixed, replaced

@@ -1,0 +1,46 @@
+"""The fallback for fields of view no lens has (geometry.field_of_view)."""
+
+import math
+
+import pytest
+import torch
+
+from lumos3d_cli.geometry.field_of_view import FALLBACK_FOV_DEGREES, longer_side_fov, plausible_intrinsics
+from lumos3d_cli.model.pose_encoding import MIN_FOV
+
+
+def _intrinsics(fx: float, fy: float, size: tuple[int, int]) -> torch.Tensor:
+    width, height = size
+    return torch.tensor([[fx, 0.0, width / 2], [0.0, fy, height / 2], [0.0, 0.0, 1.0]], dtype=torch.float64)
+
+
+def test_the_longer_side_decides_the_field_of_view():
+    # 90 degrees across 200 px needs f = 100; portrait images measure along their height
+    landscape = _intrinsics(100.0, 100.0, (200, 100))[None]
+    portrait = _intrinsics(100.0, 100.0, (100, 200))[None]
+    assert longer_side_fov(landscape, (200, 100)).item() == pytest.approx(90.0)
+    assert longer_side_fov(portrait, (100, 200)).item() == pytest.approx(90.0)
+
+
+def test_plausible_fields_of_view_are_kept_untouched():
+    size = (224, 168)
+    intrinsics = torch.stack([_intrinsics(f, f * 1.01, size) for f in (45.0, 240.0, 2000.0)])
+    fixed, replaced = plausible_intrinsics(intrinsics, size)
+    assert fixed is intrinsics and not replaced.any()
+
+
+def test_degenerate_predictions_get_the_fallback_lens():
+    size = (224, 140)
+    width, height = size
+    # what the camera head decodes from a field of view ReLU'd to 0, a near-180-degree one, and NaN
+    zero = (width / 2) / math.tan(MIN_FOV / 2)
+    wide = (width / 2) / math.tan((math.pi - MIN_FOV) / 2)
+    intrinsics = torch.stack([_intrinsics(zero, zero, size), _intrinsics(240.0, 240.0, size),
+                              _intrinsics(wide, wide, size), _intrinsics(float("nan"), 100.0, size)])
+    fixed, replaced = plausible_intrinsics(intrinsics, size)
+    assert replaced.tolist() == [True, False, True, True]
+    assert torch.isfinite(fixed).all()
+    assert longer_side_fov(fixed[replaced], size) == pytest.approx(torch.full((3,), FALLBACK_FOV_DEGREES, dtype=torch.float64))
+    assert (fixed[replaced, 0, 0] == fixed[replaced, 1, 1]).all()  # square pixels
+    assert torch.equal(fixed[:, :2, 2], intrinsics[:, :2, 2])  # principal points kept
+    assert torch.equal(fixed[1], intrinsics[1])
