@@ -8,7 +8,6 @@ import cv2
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-import torch
 
 from lumos3d_cli import __version__
 from lumos3d_cli.io.ply import write_ply

@@ -4,7 +4,6 @@ import cv2
 import msgspec
 import numpy as np
 import pytest
-import torch
 import viser
 from websockets.sync.client import connect
 
