@@ -1,105 +1,156 @@
-"""The speed/accuracy trade of `lumos3d restore --preset fast|balanced|best` on LOM buu
-(low-light and over-exposure): wall time and peak RSS of `restore` on all 25 views (each preset
-caps the views the network sees), the Gaussian count, and PSNR/SSIM of `eval` (context and
-holdout protocols) with the bundled models; then `balanced` with 4 to 25 views through the network.
+"""The speed/accuracy trade of `lumos3d restore --preset fast|balanced|best` with test-time
+refinement, on LOM buu (low light): for each preset and each number of refinement steps, the wall
+time, peak RSS, Gaussians and `.ply` size of `restore` on all 25 photos, and PSNR/SSIM/sharpness
+of `eval` on buu's three test frames under both protocols. Writes a table into docs/performance.md
+and a plot (time against holdout PSNR, one line per preset) into docs/images/preset-trade.png.
 
-    .venv/bin/python benchmarks/presets.py   # rewrites the "presets" section of docs/performance.md
+    .venv/bin/python benchmarks/presets.py                  # the full grid: 18 configurations
+    .venv/bin/python benchmarks/presets.py --steps 0 50 --no-doc
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import tempfile
 from pathlib import Path
 
+import cv2
+import numpy as np
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cli_runs import LOM, evaluate_buu, run_lumos3d_json  # noqa: E402
+from cli_runs import LOM, REPO, evaluate_buu, run_lumos3d_json  # noqa: E402
 from report import machine_description, markdown_table, write_section  # noqa: E402
 
-FOLDERS = {"low-light": "low", "over-exposure": "over_exp"}
-VIEW_COUNTS = (4, 8, 12, 16, 25)
+from lumos3d_cli.pipeline.presets import RESTORE_PRESETS  # noqa: E402
+
+STEPS = (0, 25, 50, 100, 200, 400)
+PLOT = REPO / "docs" / "images" / "preset-trade.png"
+COLOURS = {"fast": (40, 160, 40), "balanced": (200, 120, 20), "best": (40, 40, 200)}  # BGR
 
 
-DEFAULT_REASON = (
-    "Why `balanced` is the default: it runs the network at the resolution it was trained at, and on "
-    "low light (the paper's task and the default mode) it gives the highest holdout PSNR — novel views, "
-    "which are what a 3D scene is for — while `fast` is within a few hundredths of a dB on the context "
-    "frames, a little higher in SSIM and about twice as quick. With the bundled `tiny` models the presets "
-    "lie within about 1 dB of each other, because their multi-view geometry is coarse and more views add "
-    "more misaligned Gaussians: `best` (25 views) is the slowest, has the lowest SSIM in both modes and "
-    "the lowest PSNR on low light. On over-exposure `fast` scores about 1 dB more PSNR than `balanced`; "
-    "the views table below shows that this comes from its other settings (network resolution, voxel "
-    "size, SH degree), not from seeing fewer views. `fast` is the choice for previews and, with these "
-    "models, for over-exposed photos."
-)
-
-VIEWS_NOTE = (
-    "The network sees the three test frames plus evenly spaced others. With 4 views the context "
-    "frames are scored best (three of the four views are the test frames themselves) but the holdout "
-    "scene is built from a single photo; from 8 views on, the scores change by less than the spread "
-    "between presets, and the cameras' AUC@30 does not grow with more views."
-)
+def measure(preset: str, steps: int, folder: str, grid: float | None = None) -> dict:
+    """One configuration: `restore` (time, memory, size) and `eval` (both protocols); `grid`
+    overrides the preset's Gaussian grid."""
+    options = ["--preset", preset, "--refine-steps", str(steps)] + (["--gaussian-grid", str(grid)] if grid else [])
+    name = f"{preset}-{steps}-{grid}"
+    summary, seconds = run_lumos3d_json(["restore", str(LOM / "buu" / "low"), "-o", f"{folder}/{name}/scene.ply", *options])
+    scores = evaluate_buu("low-light", options, f"{folder}/report-{name}")
+    return {
+        "preset": preset, "steps": steps, "grid_option": grid, "seconds": seconds, "peak_rss_mib": summary["peak_rss_mib"],
+        "gaussians": summary["gaussians"]["kept"], "ply_mib": summary["gaussians"]["ply_mib"],
+        "grid": summary["gaussians"]["budget"]["grid"], "views": len(summary["network_views"]),
+        "refine_seconds": summary["seconds"].get("refine", 0.0),
+        "context": scores["context"][0], "holdout": scores["holdout"][0], "gamma": scores["context"][1],
+    }
 
 
-def _views_sweep(folder: str, extra: list[str]) -> list[list[object]]:
-    """`balanced` with the network seeing 4 to 25 of buu's photos."""
+def plot(results: list[dict], path: Path) -> None:
+    """Restore time (x, log scale) against holdout PSNR (y): one line per preset, its points
+    labelled with their refinement steps; the gamma curve's context PSNR as a dashed line."""
+    width, height, margin = 900, 560, 70
+    canvas = np.full((height, width, 3), 255, np.uint8)
+    seconds = np.log10([r["seconds"] for r in results])
+    psnr = [r["holdout"]["psnr"] for r in results] + [results[0]["gamma"]["psnr"]]
+    x_range = (seconds.min() - 0.05, seconds.max() + 0.05)
+    y_range = (min(psnr) - 0.3, max(psnr) + 0.3)
+
+    def point(log_seconds: float, value: float) -> tuple[int, int]:
+        x = margin + (log_seconds - x_range[0]) / (x_range[1] - x_range[0]) * (width - 2 * margin)
+        y = height - margin - (value - y_range[0]) / (y_range[1] - y_range[0]) * (height - 2 * margin)
+        return int(round(x)), int(round(y))
+
+    font = cv2.FONT_HERSHEY_SIMPLEX
+    cv2.rectangle(canvas, (margin, margin), (width - margin, height - margin), (0, 0, 0), 1)
+    for tick in np.arange(np.floor(y_range[0] * 2) / 2, y_range[1], 0.5):
+        if tick > y_range[0]:
+            x, y = point(x_range[0], tick)
+            cv2.line(canvas, (margin, y), (width - margin, y), (225, 225, 225), 1)
+            cv2.putText(canvas, f"{tick:.1f}", (8, y + 5), font, 0.45, (0, 0, 0), 1, cv2.LINE_AA)
+    for tick in (5, 10, 20, 30, 50, 100, 200, 300, 500, 1000, 2000):
+        if x_range[0] < np.log10(tick) < x_range[1]:
+            x, _ = point(np.log10(tick), y_range[0])
+            cv2.line(canvas, (x, margin), (x, height - margin), (225, 225, 225), 1)
+            cv2.putText(canvas, f"{tick}", (x - 12, height - margin + 20), font, 0.45, (0, 0, 0), 1, cv2.LINE_AA)
+    gamma_y = point(x_range[0], results[0]["gamma"]["psnr"])[1]
+    for x in range(margin, width - margin, 12):
+        cv2.line(canvas, (x, gamma_y), (x + 6, gamma_y), (120, 120, 120), 1)
+    cv2.putText(canvas, "gamma curve (context)", (width - margin - 190, gamma_y - 6), font, 0.45, (90, 90, 90), 1, cv2.LINE_AA)
+    for index, (preset, colour) in enumerate(COLOURS.items()):
+        rows = [r for r in results if r["preset"] == preset and r["grid_option"] is None]
+        points = [point(np.log10(r["seconds"]), r["holdout"]["psnr"]) for r in rows]
+        for start, end in zip(points, points[1:]):
+            cv2.line(canvas, start, end, colour, 2, cv2.LINE_AA)
+        for row, position in zip(rows, points):
+            cv2.circle(canvas, position, 4, colour, -1, cv2.LINE_AA)
+            cv2.putText(canvas, str(row["steps"]), (position[0] + 5, position[1] - 6), font, 0.4, colour, 1, cv2.LINE_AA)
+        cv2.putText(canvas, preset, (margin + 10, margin + 22 + 20 * index), font, 0.55, colour, 2, cv2.LINE_AA)
+    cv2.putText(canvas, "restore wall time on buu (s, log scale)", (width // 2 - 170, height - 20), font, 0.5, (0, 0, 0), 1,
+                cv2.LINE_AA)
+    cv2.putText(canvas, "holdout PSNR (dB); labels: refinement steps", (margin, margin - 15), font, 0.5, (0, 0, 0), 1,
+                cv2.LINE_AA)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), canvas)
+
+
+def table(results: list[dict]) -> str:
     rows = []
-    for mode in FOLDERS:
-        for views in VIEW_COUNTS:
-            scores = evaluate_buu(mode, ["--preset", "balanced", "--max-views", str(views), *extra],
-                               f"{folder}/views-{mode}-{views}")
-            (context, _, cameras), (holdout, _, _) = scores["context"], scores["holdout"]
-            rows.append([mode, views, f"{context['psnr']:.2f} / {context['ssim']:.3f}",
-                         f"{holdout['psnr']:.2f} / {holdout['ssim']:.3f}", f"{cameras['auc_30']:.3f}"])
-            print(rows[-1], flush=True)
-    return rows
+    for r in results:
+        default = r["steps"] == RESTORE_PRESETS[r["preset"]].refine_steps and r["grid_option"] is None
+        name = f"**{r['preset']}**" if default else r["preset"]
+        if r["grid_option"] is not None:
+            name += f" `--gaussian-grid {r['grid_option']:g}`"
+        context, holdout = r["context"], r["holdout"]
+        rows.append([
+            name, r["steps"], r["views"], "×".join(map(str, r["grid"])), f"{r['seconds']:.1f}", f"{r['refine_seconds']:.1f}",
+            f"{r['peak_rss_mib']:.0f}", f"{r['gaussians']:,}", f"{r['ply_mib']:.1f}",
+            f"{context['psnr']:.2f} / {context['ssim']:.3f} / {context['sharpness']:.2f}",
+            f"{holdout['psnr']:.2f} / {holdout['ssim']:.3f} / {holdout['sharpness']:.2f}",
+        ])
+    gamma = results[0]["gamma"]
+    return (markdown_table(["preset", "refine steps", "views", "Gaussian grid", "restore s", "of which refine s", "peak RSS MiB",
+                            "Gaussians", ".ply MiB", "context PSNR / SSIM / sharpness", "holdout PSNR / SSIM / sharpness"], rows)
+            + f"\n\nThe blind auto-gamma curve on the same frames: {gamma['psnr']:.2f} / {gamma['ssim']:.3f} / "
+              f"{gamma['sharpness']:.2f}. Bold: each preset's default.")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--checkpoint", help="weights to use instead of the bundled model of each mode")
+    parser.add_argument("--presets", nargs="*", default=list(COLOURS))
+    parser.add_argument("--steps", nargs="*", type=int, default=list(STEPS))
+    parser.add_argument("--grids", nargs="*", type=float, default=[2.0],
+                        help="Gaussian grids to measure besides the presets' own (each preset at its default steps)")
+    parser.add_argument("--results", type=Path, help="a JSON file of results to reuse (written after each configuration)")
     parser.add_argument("--no-doc", action="store_true", help="print only")
     args = parser.parse_args()
-    extra = ["--checkpoint", args.checkpoint] if args.checkpoint else []
-    rows = []
+    results = json.loads(args.results.read_text()) if args.results and args.results.exists() else []
+    done = {(r["preset"], r["steps"], r["grid_option"]) for r in results}
+    configurations = [(preset, steps, None) for preset in args.presets for steps in args.steps]
+    configurations += [(preset, RESTORE_PRESETS[preset].refine_steps, grid) for preset in args.presets for grid in args.grids]
     with tempfile.TemporaryDirectory() as folder:
-        for mode, photos in FOLDERS.items():
-            for preset in ("fast", "balanced", "best"):
-                summary, seconds = run_lumos3d_json(
-                    ["restore", str(LOM / "buu" / photos), "-o", f"{folder}/{mode}-{preset}/scene.ply", "--preset", preset,
-                     "--mode", mode, *extra]
-                )
-                scores = evaluate_buu(mode, ["--preset", preset, *extra], f"{folder}/report-{mode}-{preset}")
-                context, gamma, _ = scores["context"]
-                holdout, _, _ = scores["holdout"]
-                rows.append([
-                    mode, f"**{preset}**" if preset == "balanced" else preset, summary["views_used"],
-                    "×".join(str(v) for v in summary["network_size"]), f"{seconds:.1f}", f"{summary['peak_rss_mib']:.0f}",
-                    f"{summary['gaussians']['kept']:,}", f"{context['psnr']:.2f} / {context['ssim']:.3f}",
-                    f"{holdout['psnr']:.2f} / {holdout['ssim']:.3f}", f"{gamma['psnr']:.2f} / {gamma['ssim']:.3f}",
-                ])
-                print(rows[-1], flush=True)
-        view_rows = _views_sweep(folder, extra)
+        for configuration in configurations:
+            if configuration in done:
+                continue
+            results.append(measure(*configuration[:2], folder, configuration[2]))
+            print(json.dumps(results[-1]), flush=True)
+            if args.results:
+                args.results.write_text(json.dumps(results, indent=1))
+    order = {name: index for index, name in enumerate(COLOURS)}
+    results.sort(key=lambda r: (order[r["preset"]], r["grid_option"] or 0, r["steps"]))
     text = "\n\n".join([
-        "## Restore presets (LOM buu)",
-        f"Machine: {machine_description()}. Script: `benchmarks/presets.py`. `restore` runs on all 25 "
-        "photos of buu (each preset caps the views the network sees); time is the whole command "
-        "(start-up, loading, network, rendering every used view at 500×375, writing). PSNR/SSIM "
-        "are `lumos3d eval` on buu's three test frames (context and holdout protocols); the gamma "
-        "column is the blind auto-gamma baseline on the same frames.",
-        markdown_table(["mode", "preset", "views", "network", "restore s", "peak RSS MiB", "Gaussians",
-                        "context PSNR / SSIM", "holdout PSNR / SSIM", "gamma PSNR / SSIM"], rows),
-        DEFAULT_REASON,
-        "### Views through the network (balanced preset)",
-        "`lumos3d eval --preset balanced --max-views N` on buu, N from 4 to all 25 photos:",
-        markdown_table(["mode", "views", "context PSNR / SSIM", "holdout PSNR / SSIM", "cameras AUC@30"], view_rows),
-        VIEWS_NOTE,
-        "The paper's ablations at this scale (Lumos loss terms, the teacher's input, one model for both "
-        "modes) are in [model-card.md](model-card.md#ablations-tiny-scale-shipped-teacher).",
+        "## Restore presets and test-time refinement (LOM buu, low light)",
+        f"Machine: {machine_description()}. Script: `benchmarks/presets.py`, one run. `restore` runs on all 25 "
+        "photos of buu (each preset caps the views the network sees); its time is the whole command (start-up, "
+        "loading, network, fusion, budget, refinement, rendering every view at 500×375, writing). PSNR / SSIM / "
+        "sharpness are `lumos3d eval` on buu's three test frames with the same options; holdout scores novel "
+        "views (the test frames' own Gaussians left out, never fitted by the refinement).",
+        table(results),
+        "![restore time against holdout PSNR](images/preset-trade.png)",
     ])
     print(text)
     if not args.no_doc:
+        plot(results, PLOT)
         write_section("presets", text)
 
 

@@ -1,6 +1,7 @@
 import dataclasses
 import math
 
+import pytest
 import torch
 import torch.nn.functional as F
 
@@ -53,3 +54,16 @@ def test_scale_is_proportional_to_scene_scale():
     b = activate_gaussians(torch.zeros(4, 3), params, torch.tensor(50.0), ARCHITECTURE)
     torch.testing.assert_close(b.scales, a.scales * 50)
     torch.testing.assert_close(F.normalize(a.quats, dim=1), a.quats)
+
+
+def test_shrinking_raw_scales_divides_the_softplus_exactly():
+    from lumos3d_cli.model.gaussian_adapter import SCALE, shrink_raw_scales
+
+    raw = torch.linspace(-40, 40, 81, dtype=torch.float64)[:, None].expand(81, 14).contiguous()
+    for factor in (1.0, 1.79, 2.0, 1e3):
+        shrunk = shrink_raw_scales(raw, factor)
+        assert torch.isfinite(shrunk).all()
+        torch.testing.assert_close(F.softplus(shrunk[:, SCALE]), F.softplus(raw[:, SCALE]) / factor, rtol=1e-9, atol=1e-300)
+        assert torch.equal(shrunk[:, :1], raw[:, :1]) and torch.equal(shrunk[:, 4:], raw[:, 4:])  # only the scales
+    with pytest.raises(ValueError):
+        shrink_raw_scales(raw, 0.5)

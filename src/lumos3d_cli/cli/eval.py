@@ -65,6 +65,8 @@ def eval_command(
         None, "--refine-steps", help="Test-time refinement steps after the forward pass (default: the preset's; 0: none)."),
     max_gaussians: int | None = typer.Option(
         None, "--max-gaussians", help="Keep at most this many Gaussians, the ones the views draw most (default: all that the views show)."),
+    gaussian_grid: float | None = typer.Option(
+        None, "--gaussian-grid", help="Pixel Gaussians per network pixel along each side, 1 to 4 (default: the preset's; at most the photos' resolution)."),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     out: Path = typer.Option(Path("report"), "--out", help="Report folder (metrics.json, metrics.csv, contact sheets)."),
     baseline: str = typer.Option("gamma", "--baseline", help="gamma (blind auto-gamma row) or none."),
@@ -78,7 +80,7 @@ def eval_command(
         task = bars.add_task(f"eval ({protocol})", total=len(names) if names else None)
         report = evaluate_lom(
             root, names, mode=mode, protocol=protocol, checkpoint=checkpoint, preset=preset, geometry=geometry,
-            max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, device=device, baseline=baseline, lpips_weights=lpips_weights,
+            max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, gaussian_grid=gaussian_grid, device=device, baseline=baseline, lpips_weights=lpips_weights,
             on_scene=lambda _: bars.advance(task),
         )
     write_eval_report(report, out)

@@ -43,6 +43,8 @@ def restore_command(
         None, "--refine-steps", help="Test-time refinement steps after the forward pass (default: the preset's; 0: none)."),
     max_gaussians: int | None = typer.Option(
         None, "--max-gaussians", help="Keep at most this many Gaussians, the ones the views draw most (default: all that the views show)."),
+    gaussian_grid: float | None = typer.Option(
+        None, "--gaussian-grid", help="Pixel Gaussians per network pixel along each side, 1 to 4 (default: the preset's; at most the photos' resolution)."),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     reference: Path | None = typer.Option(None, "--reference", help="Normal-light photos of the same views (metrics)."),
     lpips_weights: Path | None = typer.Option(None, "--lpips-weights", help="torchvision vgg16 weights for LPIPS."),
@@ -63,7 +65,7 @@ def restore_command(
     with progress_bar() as bars:
         scene = restore(
             photos, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,
-            max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, device=device, reference=reference, lpips_weights=lpips_weights,
+            max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, gaussian_grid=gaussian_grid, device=device, reference=reference, lpips_weights=lpips_weights,
             progress=ProgressBars(bars),
         )
         summary = write_restored_scene(scene, output, output_format)

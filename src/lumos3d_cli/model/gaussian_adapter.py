@@ -58,3 +58,16 @@ def activate_gaussians(means: torch.Tensor, params: torch.Tensor, scene_scale: t
         opacities=torch.sigmoid(params[:, 0]),
         sh=sh * sh_degree_weights(architecture.sh_degree, sh.dtype, sh.device)[None, :, None],
     )
+
+
+def shrink_raw_scales(params: torch.Tensor, factor: float) -> torch.Tensor:
+    """raw parameters [..., C] -> the same with every Gaussian's scale divided by `factor` >= 1
+    (before the architecture's clamp): softplus(raw') = softplus(raw) / factor. For a grid of
+    pixel Gaussians made `factor` times denser, whose pixels are that much smaller."""
+    if factor < 1:
+        raise ValueError(f"factor {factor} must be >= 1")
+    shrunk = params.clone()
+    target = (F.softplus(params[..., SCALE]) / factor).clamp_min(torch.finfo(params.dtype).tiny)
+    # softplus^-1(y) = y + log(1 - exp(-y)), stable for small and large y
+    shrunk[..., SCALE] = target + torch.log(-torch.expm1(-target))
+    return shrunk

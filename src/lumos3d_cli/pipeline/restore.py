@@ -29,6 +29,7 @@ from lumos3d_cli.model.appearance.photo_restoration import restore_photos
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D, Lumos3DPrediction
 from lumos3d_cli.model.pixel_footprint import DEFAULT_FOOTPRINT_SCALE
+from lumos3d_cli.pipeline.gaussian_grid import dense_grid_size, densify_grid
 from lumos3d_cli.pipeline.model_loading import load_restoration_model
 from lumos3d_cli.pipeline.network_pass import NetworkPass, even_subset, run_network
 from lumos3d_cli.pipeline.presets import (
@@ -142,10 +143,11 @@ class BuiltScene:
     refinement: dict | None = None  # refine.RefinementResult.summary() when the scene was refined
 
 
-def _budget_summary(report: BudgetReport, preset: RestorePreset) -> dict:
-    """The budget a scene got (summary.json's gaussians.budget)."""
+def _budget_summary(report: BudgetReport, preset: RestorePreset, grid_size: tuple[int, int]) -> dict:
+    """The budget a scene got (summary.json's gaussians.budget): the pixel Gaussians' grid per
+    view (width, height), the voxels' footprint multiple, and what `fit_budget` kept."""
     return report.as_dict() | {"max_gaussians": preset.max_gaussians, "min_weight_px": DEFAULT_MIN_WEIGHT,
-                               "footprint_scale": DEFAULT_FOOTPRINT_SCALE * preset.voxel_scale}
+                               "grid": list(grid_size), "footprint_scale": DEFAULT_FOOTPRINT_SCALE * preset.voxel_scale}
 
 
 def with_full_resolution_colours(prediction: Lumos3DPrediction, photos: torch.Tensor, model: Lumos3D) -> Lumos3DPrediction:
@@ -233,21 +235,23 @@ def build_scene(
                     len(names), len(selected))
     started = time.perf_counter()
     scene_geometry = place_views(registration, network, selected, names)
-    prediction = with_full_resolution_colours(network.prediction, images[selected], model)
+    grid_size = dense_grid_size(network.network_size, (images.shape[-1], images.shape[-2]), preset.gaussian_grid)
+    prediction, grid_geometry = densify_grid(network.prediction, scene_geometry, grid_size)
+    prediction = with_full_resolution_colours(prediction, images[selected], model)
     keep = None if fuse_views is None else torch.tensor([bool(fuse_views[i]) for i in selected])
     if keep is not None and not bool(keep.any()):
         raise InputError("selects none of the network's views", parameter="fuse_views")
     with torch.no_grad():
-        # Voxels follow each point's pixel footprint: near detail keeps the network's resolution
+        # Voxels follow each point's pixel footprint: near detail keeps the grid's resolution
         # while far duplicates still merge (one global size does one or the other; a single
         # photo's huge depth range collapsed into a few hundred voxels with it).
         output = model.assemble(
-            prediction, scene_geometry.network_extrinsics[None], scene_geometry.network_intrinsics[None],
-            scene_geometry.depth[None], footprint_scale=DEFAULT_FOOTPRINT_SCALE * preset.voxel_scale, fuse_views=keep,
-            fuse_pixels=None if scene_geometry.fuse_pixels is None else scene_geometry.fuse_pixels[None],
+            prediction, grid_geometry.network_extrinsics[None], grid_geometry.network_intrinsics[None],
+            grid_geometry.depth[None], footprint_scale=DEFAULT_FOOTPRINT_SCALE * preset.voxel_scale, fuse_views=keep,
+            fuse_pixels=None if grid_geometry.fuse_pixels is None else grid_geometry.fuse_pixels[None],
         )
-    network_cameras = Cameras(scene_geometry.network_extrinsics.float(), scene_geometry.network_intrinsics.float(),
-                              [network.network_size] * len(selected))
+    network_cameras = Cameras(grid_geometry.network_extrinsics.float(), grid_geometry.network_intrinsics.float(),
+                              [grid_size] * len(selected))
     gaussians = apply_sampling_filter(output.gaussians[0].detach().to(device="cpu"), network_cameras)
     timings["fuse"] = time.perf_counter() - started
     started = time.perf_counter()
@@ -267,7 +271,7 @@ def build_scene(
         gaussians, refinement = result.gaussians, result.summary()
         timings["refine"] = time.perf_counter() - started
     return BuiltScene(gaussians, scene_geometry, selected, output.counts[0], network.network_size, timings,
-                      _budget_summary(budget, preset), refinement)
+                      _budget_summary(budget, preset, grid_size), refinement)
 
 
 def restore_scene(
@@ -307,12 +311,13 @@ def restore(
     preset: str = DEFAULT_RESTORE_PRESET, geometry: str = "auto", poses: Path | str | None = None,
     max_views: int | None = None, device: str = "cpu", reference: Path | str | None = None,
     lpips_weights: Path | str | None = None, progress: JobProgress | None = None, refine_steps: int | None = None,
-    max_gaussians: int | None = None,
+    max_gaussians: int | None = None, gaussian_grid: float | None = None,
 ) -> RestoredScene:
     """The whole restore job from files: photos (a folder or files: photos, camera RAW, EXR),
     the bundled model of `mode` or `checkpoint`, and optionally reference photos of the same
     views (same file stems) for PSNR/SSIM/LPIPS. `refine_steps` overrides the preset's
-    test-time refinement (0: none), `max_gaussians` caps the scene's Gaussians. Write the
+    test-time refinement (0: none), `max_gaussians` caps the scene's Gaussians and
+    `gaussian_grid` sets the density of pixel Gaussians (`pipeline.gaussian_grid`). Write the
     result with `write_restored_scene`."""
     progress = progress or SilentProgress()
     started = time.perf_counter()
@@ -320,7 +325,7 @@ def restore(
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
     if max_views is not None and max_views < 1:
         raise InputError(f"{max_views}: use at least 1", parameter="max_views")
-    settings = get_restore_preset(preset, refine_steps, max_gaussians)
+    settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid)
     check_geometry_source(geometry)
     weights = resolve_checkpoint(checkpoint, mode)
     meter = QualityMeter.create(lpips_weights) if reference is not None else None
