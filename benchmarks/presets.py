@@ -123,6 +123,7 @@ def main() -> None:
                         help="Gaussian grids to measure besides the presets' own (each preset at its default steps)")
     parser.add_argument("--results", type=Path, help="a JSON file of results to reuse (written after each configuration)")
     parser.add_argument("--no-doc", action="store_true", help="print only")
+    parser.add_argument("--no-run", action="store_true", help="only the table and plot of the --results file")
     args = parser.parse_args()
     results = json.loads(args.results.read_text()) if args.results and args.results.exists() else []
     done = {(r["preset"], r["steps"], r["grid_option"]) for r in results}
@@ -130,7 +131,7 @@ def main() -> None:
     configurations += [(preset, RESTORE_PRESETS[preset].refine_steps, grid) for preset in args.presets for grid in args.grids]
     with tempfile.TemporaryDirectory() as folder:
         for configuration in configurations:
-            if configuration in done:
+            if configuration in done or args.no_run:
                 continue
             results.append(measure(*configuration[:2], folder, configuration[2]))
             print(json.dumps(results[-1]), flush=True)

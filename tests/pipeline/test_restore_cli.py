@@ -149,3 +149,15 @@ def test_restore_writes_an_orbit_video(run_cli, buu, tmp_path, random_checkpoint
     assert result.code == 0, result.err
     stream = probe_video(tmp_path / "orbit.mp4")
     assert stream.codec == "h264" and stream.pixel_format == "yuv420p" and stream.width > 0
+
+
+def test_gaussian_grid_densifies_the_pixel_gaussians(run_cli, buu, tmp_path, random_checkpoint):
+    photos = _copy(buu, tmp_path, ["1.JPG"])
+    out = tmp_path / "out" / "scene.ply"
+    result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--gaussian-grid", "2", "--json")
+    assert result.code == 0, result.err
+    summary = json.loads(result.out)
+    assert summary["gaussians"]["budget"]["grid"] == [448, 336] and summary["gaussians"]["pixel"] == 448 * 336
+    assert cv2.imread(str(out.parent / "restored" / "1.png")).shape == (375, 500, 3)
+    expect_input_error(run_cli("restore", photos, "-o", tmp_path / "bad" / "scene.ply", "--checkpoint", random_checkpoint,
+                               "--gaussian-grid", "0.5"), "--gaussian-grid 0.5")

@@ -212,6 +212,10 @@ def build_scene(
     cameras instead. `max_views` (default: the preset's) caps the views that go through the
     network, which always include `required_views` and the views only the network can place.
     `fuse_views` [V] bool (evaluation's holdout) keeps only those views' Gaussians.
+
+    The preset sets the grid of pixel Gaussians (`pipeline.gaussian_grid`), their voxels (a
+    multiple of each point's pixel footprint), the budget (`render.gaussian_budget`: what no
+    rendered view shows goes, at most `max_gaussians` stay) and the refinement steps.
     """
     progress = progress or SilentProgress()
     check_geometry_source(geometry)
