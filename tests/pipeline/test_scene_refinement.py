@@ -42,8 +42,8 @@ def test_refine_steps_are_checked(run_cli, buu, tmp_path, random_checkpoint):
     assert not (tmp_path / "o").exists()
 
 
-def test_presets_refine_only_in_best_and_the_option_overrides():
-    assert [RESTORE_PRESETS[name].refine_steps > 0 for name in ("fast", "balanced", "best")] == [False, False, True]
+def test_fast_does_not_refine_and_the_option_overrides():
+    assert [RESTORE_PRESETS[name].refine_steps > 0 for name in ("fast", "balanced", "best")] == [False, True, True]
     assert get_restore_preset("best", 0).refine_steps == 0 and get_restore_preset("fast", 7).refine_steps == 7
 
 
