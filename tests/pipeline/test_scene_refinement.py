@@ -31,8 +31,8 @@ def test_restore_refines_and_reports_the_loss_curve(run_cli, buu, tmp_path, rand
     assert refinement["steps"] == 4 and len(refinement["loss_curve"]) == 4
     assert all(value > 0 for value in refinement["loss_curve"]) and refinement["sh_degree"] in (0, 1)
     plain = run_cli("restore", photos, "-o", tmp_path / "plain" / "scene.ply", "--checkpoint", random_checkpoint,
-                    "--geometry", "network", "--json")
-    assert json.loads(plain.out)["refinement"] is None  # balanced does not refine
+                    "--geometry", "network", "--preset", "fast", "--json")
+    assert json.loads(plain.out)["refinement"] is None  # fast does not refine
 
 
 def test_refine_steps_are_checked(run_cli, buu, tmp_path, random_checkpoint):
