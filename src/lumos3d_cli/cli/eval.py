@@ -9,6 +9,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
+from lumos3d_cli.cli import preset_options
 from lumos3d_cli.cli.console import print_json, progress_bar, stdout_console
 from lumos3d_cli.data.degradations import MODES
 from lumos3d_cli.io.output_paths import check_output_path
@@ -61,12 +62,9 @@ def eval_command(
     preset: str = typer.Option(DEFAULT_RESTORE_PRESET, "--preset", help="Speed/accuracy: fast, balanced or best."),
     geometry: str = typer.Option("auto", "--geometry", help=f"Cameras from: {', '.join(GEOMETRY_SOURCES)}."),
     max_views: int | None = typer.Option(None, "--max-views", help="Views per scene through the network (default: the preset's)."),
-    refine_steps: int | None = typer.Option(
-        None, "--refine-steps", help="Test-time refinement steps after the forward pass (default: the preset's; 0: none)."),
-    max_gaussians: int | None = typer.Option(
-        None, "--max-gaussians", help="Keep at most this many Gaussians, the ones the views draw most (default: all that the views show)."),
-    gaussian_grid: float | None = typer.Option(
-        None, "--gaussian-grid", help="Pixel Gaussians per network pixel along each side, 1 to 4 (default: the preset's; at most the photos' resolution)."),
+    refine_steps: int | None = preset_options.REFINE_STEPS,
+    max_gaussians: int | None = preset_options.MAX_GAUSSIANS,
+    gaussian_grid: float | None = preset_options.GAUSSIAN_GRID,
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     out: Path = typer.Option(Path("report"), "--out", help="Report folder (metrics.json, metrics.csv, contact sheets)."),
     baseline: str = typer.Option("gamma", "--baseline", help="gamma (blind auto-gamma row) or none."),

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import typer
 
+from lumos3d_cli.cli import preset_options
 from lumos3d_cli.cli.console import ProgressBars, print_json, progress_bar, say
 from lumos3d_cli.cli.view import EXIT_INTERRUPTED, announce
 from lumos3d_cli.data.degradations import MODES
@@ -39,12 +40,9 @@ def restore_command(
     geometry: str = typer.Option("auto", "--geometry", help=f"Cameras from: {', '.join(GEOMETRY_SOURCES)} (auto: sfm when it registers most views, else network)."),
     poses: Path | None = typer.Option(None, "--poses", help="Known cameras: a transforms.json or a COLMAP model folder (matched by file stem)."),
     max_views: int | None = typer.Option(None, "--max-views", help="Views the network sees (default: the preset's)."),
-    refine_steps: int | None = typer.Option(
-        None, "--refine-steps", help="Test-time refinement steps after the forward pass (default: the preset's; 0: none)."),
-    max_gaussians: int | None = typer.Option(
-        None, "--max-gaussians", help="Keep at most this many Gaussians, the ones the views draw most (default: all that the views show)."),
-    gaussian_grid: float | None = typer.Option(
-        None, "--gaussian-grid", help="Pixel Gaussians per network pixel along each side, 1 to 4 (default: the preset's; at most the photos' resolution)."),
+    refine_steps: int | None = preset_options.REFINE_STEPS,
+    max_gaussians: int | None = preset_options.MAX_GAUSSIANS,
+    gaussian_grid: float | None = preset_options.GAUSSIAN_GRID,
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     reference: Path | None = typer.Option(None, "--reference", help="Normal-light photos of the same views (metrics)."),
     lpips_weights: Path | None = typer.Option(None, "--lpips-weights", help="torchvision vgg16 weights for LPIPS."),

@@ -1,0 +1,12 @@
+"""The options of `restore` and `eval` that override a preset's settings (pipeline.presets)."""
+
+from __future__ import annotations
+
+import typer
+
+REFINE_STEPS = typer.Option(
+    None, "--refine-steps", help="Test-time refinement steps after the forward pass (default: the preset's; 0: none).")
+MAX_GAUSSIANS = typer.Option(
+    None, "--max-gaussians", help="Keep at most this many Gaussians, the ones the views draw most (default: all that the views show).")
+GAUSSIAN_GRID = typer.Option(
+    None, "--gaussian-grid", help="Pixel Gaussians per network pixel along each side, 1 to 4 (default: the preset's; at most the photos' resolution).")
