@@ -6,6 +6,7 @@ import shutil
 
 import cv2
 import numpy as np
+import pytest
 import torch
 from assertions import expect_input_error
 
@@ -25,14 +26,19 @@ def _photos(buu, tmp_path, names=FRAMES, folder="low"):
     return target
 
 
-def test_sfm_registers_the_photos_and_writes_a_colmap_model_with_points(run_cli, buu, tmp_path, random_checkpoint):
+# The presets' speed settings: the size SfM sees buu's 500x375 photos at, and the scale the
+# Gaussian budget renders its weights at; `fast`'s must still place the cameras as well.
+@pytest.mark.parametrize("preset, sfm_size, weights_resolution", [("balanced", [500, 375], 1.0), ("fast", [384, 288], 0.5)])
+def test_sfm_registers_the_photos_and_writes_a_colmap_model_with_points(run_cli, buu, tmp_path, random_checkpoint,
+                                                                         preset, sfm_size, weights_resolution):
     photos = _photos(buu, tmp_path)
     out = tmp_path / "out" / "scene.ply"
     result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "sfm",
-                     "--max-views", 3, "--json")
+                     "--max-views", 3, "--preset", preset, "--json")
     assert result.code == 0, result.err
     summary = json.loads(result.out)
     geometry = summary["geometry"]
+    assert geometry["sfm_size"] == sfm_size and summary["gaussians"]["budget"]["weights_resolution"] == weights_resolution
     assert geometry["source"] == "sfm" and geometry["registered_views"] == 5 and geometry["sparse_points"] > 50
     assert geometry["reprojection_error_px"] < 2 and geometry["brightening"].startswith("auto-gamma")
     assert 0 <= geometry["depth_consistency"] <= 1 and geometry["depth_alignment"]["views"] == 3

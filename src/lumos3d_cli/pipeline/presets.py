@@ -1,13 +1,16 @@
 """Speed/accuracy presets of `lumos3d restore` and `lumos3d eval`: how many views the network
 sees, at which resolution (relative to the model's), the SH degree written and rendered, the
 voxel size (relative to the model's pixel footprint), the steps of test-time refinement
-(pipeline.scene_refinement) and the most Gaussians a scene may keep (render.gaussian_budget)."""
+(pipeline.scene_refinement), the most Gaussians a scene may keep (render.gaussian_budget), and
+two speed settings: the size structure-from-motion sees the photos at (geometry.sfm) and the
+resolution the budget renders the Gaussians' weights at."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.geometry.sfm import SFM_LONG_SIDE
 
 
 @dataclass(frozen=True)
@@ -20,6 +23,8 @@ class RestorePreset:
     refine_steps: int = 0  # test-time refinement steps (0: the forward pass as it is)
     max_gaussians: int | None = None  # cap on the scene's Gaussians (None: all that the views show)
     gaussian_grid: float = 1.0  # pixel Gaussians per network pixel along each side (pipeline.gaussian_grid)
+    sfm_long_side: int = SFM_LONG_SIDE  # the longest side structure-from-motion sees a photo at
+    budget_resolution: float = 1.0  # the scale the Gaussian budget's weights are rendered at
 
     def network_image_size(self, model_image_size: int, patch_size: int) -> int:
         """The longer network side: a patch multiple, at least one patch."""
@@ -27,12 +32,17 @@ class RestorePreset:
 
 
 RESTORE_PRESETS = {
-    # fast: a smaller network image and no view-dependent colour; 8 views left buu's holdout
-    # scene to 5 photos whose misplaced Gaussians it could not outvote (14.4 dB against 17.7).
-    "fast": RestorePreset("fast", max_views=16, resolution=0.75, sh_degree=0, voxel_scale=1.0),
-    # balanced: 25 refinement steps take buu's views from sharpness 0.58 to 1.0 and add 0.2-0.4 dB
-    # for 6 s (benchmarks/presets.py); later steps add less than 0.1 dB each doubling.
-    "balanced": RestorePreset("balanced", max_views=16, resolution=1.0, sh_degree=None, voxel_scale=1.0, refine_steps=25),
+    # fast: balanced's network without refinement, structure-from-motion on photos of at most
+    # 384 px (on buu and Strecha 0.4 degrees median rotation error against 0.3 at 512, in 40-60 %
+    # of the time) and the budget's weights at half resolution (up to 0.08 dB lost). 8 views left
+    # buu's holdout scene to 5 photos whose misplaced Gaussians it could not outvote (14.4 dB).
+    "fast": RestorePreset("fast", max_views=16, resolution=0.75, sh_degree=0, voxel_scale=1.0, sfm_long_side=384,
+                          budget_resolution=0.5),
+    # balanced: 25 refinement steps take buu's views from sharpness 0.5-0.6 to about 1 and add
+    # 0.2-0.4 dB for 5-6 s (benchmarks/presets.py); later steps add less than 0.1 dB each doubling.
+    # Refined, the network at 0.75x without view-dependent colour scored higher than at 1x with it
+    # in every column, and in less time.
+    "balanced": RestorePreset("balanced", max_views=16, resolution=0.75, sh_degree=0, voxel_scale=1.0, refine_steps=25),
     # best: the network at its trained resolution (1.25x scored 0.3-0.5 dB lower on buu's holdout),
     # voxels of two footprints (their merging averages the amplified noise of dark photos), then
     # refinement; its steps and the grid of 1 are read off benchmarks/presets.py.

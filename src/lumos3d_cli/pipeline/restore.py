@@ -147,7 +147,8 @@ def _budget_summary(report: BudgetReport, preset: RestorePreset, grid_size: tupl
     """The budget a scene got (summary.json's gaussians.budget): the pixel Gaussians' grid per
     view (width, height), the voxels' footprint multiple, and what `fit_budget` kept."""
     return report.as_dict() | {"max_gaussians": preset.max_gaussians, "min_weight_px": DEFAULT_MIN_WEIGHT,
-                               "grid": list(grid_size), "footprint_scale": DEFAULT_FOOTPRINT_SCALE * preset.voxel_scale}
+                               "grid": list(grid_size), "footprint_scale": DEFAULT_FOOTPRINT_SCALE * preset.voxel_scale,
+                               "weights_resolution": preset.budget_resolution}
 
 
 def with_full_resolution_colours(prediction: Lumos3DPrediction, photos: torch.Tensor, model: Lumos3D) -> Lumos3DPrediction:
@@ -228,7 +229,8 @@ def build_scene(
         selected = even_subset(len(names), limit, required=list(required_views))
         network = _timed_network(model, images, selected, preset, timings, progress)
         brightened = Brightened(_restored_photos(network, images), "the model's restoration operator")
-    registration = register_views(images, names, geometry, poses, mode, progress, brightened, sizes)
+    registration = register_views(images, names, geometry, poses, mode, progress, brightened, sizes,
+                                  preset.sfm_long_side)
     timings.update(registration.seconds)
     unplaced = set(registration.views_needing_network()) - set(selected)
     if network is None or unplaced:
@@ -261,7 +263,8 @@ def build_scene(
     started = time.perf_counter()
     # The budget is measured at the cameras the scene is rendered at (held-out ones included:
     # only their poses, never their photos).
-    gaussians, budget = fit_budget(gaussians, scene_geometry.cameras, preset.max_gaussians)
+    gaussians, budget = fit_budget(gaussians, scene_geometry.cameras, preset.max_gaussians,
+                                   resolution=preset.budget_resolution)
     timings["budget"] = time.perf_counter() - started
     gaussians, refinement = _limit_sh(gaussians, preset.sh_degree), None
     if preset.refine_steps > 0:

@@ -34,6 +34,7 @@ from lumos3d_cli.geometry.depth_correction import correct_depth
 from lumos3d_cli.geometry.given_poses import read_given_poses
 from lumos3d_cli.geometry.sfm import (
     EXHAUSTIVE_MATCHING_LIMIT,
+    SFM_LONG_SIDE,
     Registration,
     register_photos,
 )
@@ -83,13 +84,22 @@ class ViewRegistration:
 
 
 def _structure_from_motion(images: torch.Tensor, names: list[str], sizes: list[tuple[int, int]],
-                           progress: JobProgress) -> Registration:
-    """images: the photos already brightened (`Brightened`); sizes: each photo's own size."""
+                           progress: JobProgress, long_side: int | None) -> Registration:
+    """images: the photos already brightened (`Brightened`); sizes: each photo's own size;
+    long_side: the longest side SfM sees (`register_photos`)."""
     progress.start("structure from motion", 1)
     # One thread makes COLMAP's result repeatable (with more, a small photo set can settle on
     # another focal length from run to run); above the exhaustive-matching range speed matters more.
     threads = 1 if len(names) <= EXHAUSTIVE_MATCHING_LIMIT else None
-    registration = register_photos(images, names, threads=threads, sizes=sizes)
+    registration = register_photos(images, names, long_side=long_side, threads=threads, sizes=sizes)
+    if registration.registered_count < len(names) and long_side is not None and long_side < SFM_LONG_SIDE:
+        # Smaller photos hold fewer features: where some view did not register at the reduced
+        # size, the default size gets its chance, and the model that places more views is kept.
+        retry = register_photos(images, names, long_side=SFM_LONG_SIDE, threads=threads, sizes=sizes)
+        logger.info("structure-from-motion at %d px placed %d of %d views; at %d px %d",
+                    long_side, registration.registered_count, len(names), SFM_LONG_SIDE, retry.registered_count)
+        if retry.registered_count > registration.registered_count:
+            registration = retry
     progress.advance("structure from motion")
     if not registration.failed and not registration.looks_like_one_scene:
         logger.warning("the photos may not show one scene: %s", registration.describe())
@@ -113,11 +123,13 @@ class Brightened:
 def register_views(
     images: torch.Tensor, names: list[str], geometry: str, poses: Path | str | None, mode: str, progress: JobProgress,
     brightened: Brightened | None = None, sizes: Sequence[tuple[int, int]] | None = None,
+    sfm_long_side: int | None = SFM_LONG_SIDE,
 ) -> ViewRegistration:
     """images [V, 3, H, W] (the photos in the working tensor) -> the cameras known before the
     network runs. `brightened`: the photos as SfM should see them (default: the blind tone
     curve); `sizes`: each photo's own (width, height) before it was stretched into `images`
-    (None: the tensor's size)."""
+    (None: the tensor's size); `sfm_long_side`: the longest side structure-from-motion sees each
+    photo at (None: its own size)."""
     check_geometry_source(geometry)
     brightened = brightened if brightened is not None else Brightened.blind(images)
     images = brightened.images
@@ -126,7 +138,7 @@ def register_views(
     started = time.perf_counter()
     if poses is not None:
         given = read_given_poses(poses, names, sizes)
-        sfm = _structure_from_motion(images, names, sizes, progress) if geometry != "network" and count > 1 else None
+        sfm = _structure_from_motion(images, names, sizes, progress, sfm_long_side) if geometry != "network" and count > 1 else None
         return ViewRegistration(geometry, sizes, "poses", torch.ones(count, dtype=torch.bool), given, sfm,
                                 {"sfm": time.perf_counter() - started}, brightened.method)
     if geometry == "network":
@@ -136,7 +148,7 @@ def register_views(
             raise InputError("sfm: structure-from-motion needs at least two photos; use geometry network",
                              parameter="geometry")
         return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, None)
-    registration = _structure_from_motion(images, names, sizes, progress)
+    registration = _structure_from_motion(images, names, sizes, progress, sfm_long_side)
     seconds = {"sfm": time.perf_counter() - started}
     if registration.registered_count > AUTO_MIN_REGISTERED_SHARE * count:
         return ViewRegistration(geometry, sizes, "sfm", registration.registered.clone(), registration.cameras,
@@ -305,6 +317,7 @@ def place_views(registration: ViewRegistration, network: NetworkPass, selected: 
         "sparse_points": len(points),
         "models": sfm.model_sizes if sfm is not None else None,
         "matching": sfm.matching if sfm is not None else None,
+        "sfm_size": list(sfm.sfm_size) if sfm is not None else None,
         "depth_alignment": alignment_report,
         "depth_consistency": round(consistency.share, 4) if consistency is not None else None,
         "pixels_kept": round(float(fuse_pixels.float().mean()), 4),
