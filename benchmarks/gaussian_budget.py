@@ -32,7 +32,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import machine_description, markdown_table  # noqa: E402
+from report import machine_description, markdown_table, write_section  # noqa: E402
 
 from lumos3d_cli.data.lom import read_lom_scene  # noqa: E402
 from lumos3d_cli.eval.metrics import psnr  # noqa: E402
@@ -119,11 +119,12 @@ class AssembleRecorder:
 
 
 def build(case: Case, model: Lumos3D) -> tuple[BuiltScene, AssembleRecorder]:
-    """`build_scene` with the default preset, recording its fusion's arguments."""
+    """`build_scene` with the default preset (unrefined), recording its fusion's arguments."""
     recorder = AssembleRecorder(model)
     model.assemble = recorder
     try:
-        built = build_scene(case.photos, case.names, model, get_restore_preset("balanced"))
+        # The forward pass only: refinement would change the Gaussians that the fusions re-assemble.
+        built = build_scene(case.photos, case.names, model, get_restore_preset("balanced", refine_steps=0))
     finally:
         del model.assemble
     if case.photo_colours:
@@ -182,6 +183,31 @@ HEADER = ["scene", "fusion", "weights at", "min weight px", "Gaussians", ".ply M
           "fidelity dB", "seconds"]
 
 
+SUMMARY_HEADER = ["fusion", "weights at", "min weight px", "Gaussians (all scenes)", "of the fusion's", ".ply MiB (all)",
+                  "mean Δ PSNR vs fixed dB", "mean fidelity dB", "weights s (all)"]
+
+
+def summary_rows(rows: list[list[object]]) -> list[list[object]]:
+    """One row per (fusion, weights resolution, threshold) of `measure_case`'s rows: totals and
+    means over the scenes; "of the fusion's": kept over the unpruned fusion's count."""
+    def number(text: str) -> float:
+        return float(str(text).replace(",", ""))
+
+    unpruned = {(r[0], r[1]): number(r[4]) for r in rows if r[2] == "-"}
+    groups: dict[tuple, list[list[object]]] = {}
+    for row in rows:
+        groups.setdefault((row[1], row[2], row[3]), []).append(row)
+    summary = []
+    for (fusion, resolution, min_weight), group in groups.items():
+        kept = sum(number(r[4]) for r in group)
+        share = kept / sum(unpruned[(r[0], fusion)] for r in group)
+        fidelity = "-" if resolution == "-" else f"{sum(number(r[8]) for r in group) / len(group):.1f}"
+        summary.append([fusion, resolution, min_weight, f"{kept:,.0f}", f"{share:.0%}", f"{sum(number(r[5]) for r in group):.1f}",
+                        f"{sum(number(r[7]) for r in group) / len(group):+.2f}", fidelity,
+                        f"{sum(number(r[9]) for r in group):.1f}"])
+    return summary
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="*", default=list(TUNING_SCENES), help="folders in ../shared/data/scenes")
@@ -189,7 +215,8 @@ def main() -> None:
     parser.add_argument("--footprints", nargs="*", type=float, default=[DEFAULT_FOOTPRINT_SCALE, 2 * DEFAULT_FOOTPRINT_SCALE],
                         help="voxel size as multiples of the pixel footprint (besides the fixed size)")
     parser.add_argument("--min-weights", nargs="*", type=float, default=[DEFAULT_MIN_WEIGHT, 1.0, 2.0])
-    parser.add_argument("--resolutions", nargs="*", type=float, default=[1.0], help="render scale of the weights")
+    parser.add_argument("--resolutions", nargs="*", type=float, default=[1.0, 0.5], help="render scale of the weights")
+    parser.add_argument("--no-doc", action="store_true", help="print the tables without editing docs/performance.md")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stderr)
     model = load_restoration_model(resolve_checkpoint(None, "low-light"), "cpu")
@@ -197,8 +224,22 @@ def main() -> None:
     rows = []
     for case in cases:
         rows += measure_case(case, *build(case, model), args.footprints, args.min_weights, args.resolutions)
-    print(f"Machine: {machine_description()}. Preset balanced, bundled low-light model.\n")
-    print(markdown_table(HEADER, rows))
+    text = "\n\n".join([
+        "## Gaussian budget (fusion and contribution pruning)",
+        f"Machine: {machine_description()}. Script: `benchmarks/gaussian_budget.py` "
+        f"({'LOM ' + ', '.join(args.lom) if args.lom else f'{len(cases)} normal-light scenes of ../shared/data/scenes'}); "
+        "preset `balanced` without refinement, bundled low-light model. " + __doc__.split("\n\n")[2].replace("\n", " "),
+        "### Mean over the scenes",
+        markdown_table(SUMMARY_HEADER, summary_rows(rows)),
+        "The fixed voxel size is the model's one global size; the footprint fusions size each voxel by the "
+        "point's pixel footprint (`restore` uses x1 in `fast` and `balanced`, x2 in `best`). `restore` prunes at "
+        f"{DEFAULT_MIN_WEIGHT:g} px, with the weights at full resolution (`balanced`, `best`) or half (`fast`).",
+        "### Every scene",
+        markdown_table(HEADER, rows),
+    ])
+    print(text)
+    if not args.no_doc:
+        write_section("gaussian-budget", text)
 
 
 if __name__ == "__main__":
