@@ -106,11 +106,11 @@ class AssembleRecorder:
         self.args = (replace(prediction, params=params), *self.args[1:])
 
     def fuse(self, footprint_scale: float | None, network_size: tuple[int, int]) -> Gaussians:
-        """The scene fused again: the recorded voxel size (None) or `footprint_scale`, then the
-        sampling filter of build_scene."""
-        kwargs = dict(self.kwargs)
-        if footprint_scale is not None:
-            kwargs |= {"voxel_size": None, "footprint_scale": footprint_scale}
+        """The scene fused again: with the architecture's one global voxel size (None) or voxels
+        of `footprint_scale` pixel footprints, then the sampling filter of build_scene."""
+        # build_scene fuses by footprint, so the recorded call carries a footprint_scale: the
+        # fixed fusion must drop it, or it repeats the footprint fusion.
+        kwargs = dict(self.kwargs) | {"voxel_size": None, "footprint_scale": footprint_scale}
         with torch.no_grad():
             output = Lumos3D.assemble(self.model, *self.args, **kwargs)
         extrinsics, intrinsics = self.args[1][0], self.args[2][0]

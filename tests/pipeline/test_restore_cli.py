@@ -36,8 +36,7 @@ def test_restore_writes_every_output(run_cli, buu, tmp_path, random_checkpoint):
     vertex = ply["vertex"]
     assert vertex.count == summary["gaussians"]["kept"] > 0
     assert all(np.isfinite(vertex[p.name]).all() for p in vertex.properties)
-    # balanced runs the network at 0.75x the model's 224 px
-    assert summary["gaussians"]["pixel"] == 3 * 168 * 126 and len(summary["network_views"]) == 3
+    assert summary["gaussians"]["pixel"] == 3 * 224 * 168 and len(summary["network_views"]) == 3
     cameras = read_cameras(out.parent / "cameras.json")
     colmap = read_colmap_model(out.parent / "colmap")
     assert cameras.sizes == [(500, 375)] * 3 and cameras.names == ["1.JPG", "2.JPG", "3.JPG"]
@@ -158,7 +157,7 @@ def test_gaussian_grid_densifies_the_pixel_gaussians(run_cli, buu, tmp_path, ran
     result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--gaussian-grid", "2", "--json")
     assert result.code == 0, result.err
     summary = json.loads(result.out)
-    assert summary["gaussians"]["budget"]["grid"] == [336, 252] and summary["gaussians"]["pixel"] == 336 * 252
+    assert summary["gaussians"]["budget"]["grid"] == [448, 336] and summary["gaussians"]["pixel"] == 448 * 336
     assert cv2.imread(str(out.parent / "restored" / "1.png")).shape == (375, 500, 3)
     expect_input_error(run_cli("restore", photos, "-o", tmp_path / "bad" / "scene.ply", "--checkpoint", random_checkpoint,
                                "--gaussian-grid", "0.5"), "--gaussian-grid 0.5")

@@ -32,17 +32,19 @@ class RestorePreset:
 
 
 RESTORE_PRESETS = {
-    # fast: balanced's network without refinement, structure-from-motion on photos of at most
-    # 384 px (on buu and Strecha 0.4 degrees median rotation error against 0.3 at 512, in 40-60 %
-    # of the time) and the budget's weights at half resolution (up to 0.08 dB lost). 8 views left
-    # buu's holdout scene to 5 photos whose misplaced Gaussians it could not outvote (14.4 dB).
+    # fast: a smaller network image without view-dependent colour, no refinement,
+    # structure-from-motion on photos of at most 384 px (on buu and Strecha 0.4 degrees median
+    # rotation error against 0.3 at 512, in 40-60 % of the time) and the budget's weights at half
+    # resolution (up to 0.08 dB lost). 8 views left buu's holdout scene to 5 photos whose
+    # misplaced Gaussians it could not outvote (14.4 dB). On few small photos (make demo's 8 at
+    # 250 px) the 0.75x network misplaces views: use balanced there.
     "fast": RestorePreset("fast", max_views=16, resolution=0.75, sh_degree=0, voxel_scale=1.0, sfm_long_side=384,
                           budget_resolution=0.5),
-    # balanced: 25 refinement steps take buu's views from sharpness 0.5-0.6 to about 1 and add
-    # 0.2-0.4 dB for 5-6 s (benchmarks/presets.py); later steps add less than 0.1 dB each doubling.
-    # Refined, the network at 0.75x without view-dependent colour scored higher than at 1x with it
-    # in every column, and in less time.
-    "balanced": RestorePreset("balanced", max_views=16, resolution=0.75, sh_degree=0, voxel_scale=1.0, refine_steps=25),
+    # balanced: 25 refinement steps take buu's views from sharpness 0.58 to about 1 and add
+    # 0.2-0.4 dB for 6 s (benchmarks/presets.py); later steps add 0.2 dB or less each doubling.
+    # The network at 0.75x scored higher on buu (25 photos at 500 px) but misplaced the 8 photos
+    # of 250 px of `make demo` into ghosted, doubled views: balanced keeps the model's resolution.
+    "balanced": RestorePreset("balanced", max_views=16, resolution=1.0, sh_degree=None, voxel_scale=1.0, refine_steps=25),
     # best: the network at its trained resolution (1.25x scored 0.3-0.5 dB lower on buu's holdout),
     # voxels of two footprints (their merging averages the amplified noise of dark photos), then
     # refinement to where the early stop ends it (200 steps; 400 gave the same scene); its steps
