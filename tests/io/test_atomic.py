@@ -4,6 +4,7 @@ nothing else; a killed run's temporaries are removed by the next run, a live run
 import os
 import subprocess
 import sys
+import tempfile
 
 import pytest
 
@@ -96,3 +97,22 @@ def test_outputs_follow_the_umask(tmp_path):
     with atomic_path(tmp_path / "a.bin") as temporary:
         temporary.write_bytes(b"x")
     assert (tmp_path / "a.bin").stat().st_mode & 0o777 == 0o666 & ~atomic._current_umask()
+
+
+def test_interrupt_right_after_the_staging_folder_is_made_leaves_nothing(tmp_path, monkeypatch):
+    """A signal between mkdtemp making the staging folder and the code naming it (the window in
+    which a restore stopped by Ctrl-C once left its staging folder behind)."""
+    made = tempfile.mkdtemp
+
+    def interrupted_mkdtemp(*args, **kwargs):
+        made(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "kept.txt").write_text("earlier run")
+    monkeypatch.setattr(atomic.tempfile, "mkdtemp", interrupted_mkdtemp)
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_directory(out):
+            pass
+    assert sorted(p.name for p in out.iterdir()) == ["kept.txt"]

@@ -179,15 +179,22 @@ def atomic_directory(final: Path | str, replace_folders: bool = False) -> Iterat
     final = Path(final)
     created = _make_folder(final)
     remove_leftovers(final)
-    staging = Path(tempfile.mkdtemp(prefix=_prefix("staging"), suffix=".tmp", dir=final))
-    succeeded = False
+    prefix = _prefix("staging")
+    earlier = {item.name for item in final.iterdir() if item.name.startswith(prefix)}
+    staging, succeeded = None, False
     try:
+        staging = Path(tempfile.mkdtemp(prefix=prefix, suffix=".tmp", dir=final))
         yield staging
         _check_kinds(staging, final, replace_folders)
         _move_into(staging, final, replace_folders)
         succeeded = True
     finally:
-        shutil.rmtree(staging, ignore_errors=True)
+        # A signal can land after mkdtemp made the folder but before `staging` names it: then the
+        # folder to remove is the one of this process's staging folders that was not there before.
+        made = [staging] if staging is not None else [
+            item for item in final.iterdir() if item.name.startswith(prefix) and item.name not in earlier]
+        for folder in made:
+            shutil.rmtree(folder, ignore_errors=True)
         if not succeeded:
             _remove_created(created)
 
