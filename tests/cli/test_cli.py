@@ -20,8 +20,23 @@ def test_help_lists_every_command_with_examples(run_cli):
     result = run_cli("--help")
     assert result.code == 0
     assert "Examples" in result.out
-    for command in ("degrade", "info", "render", "train", "restore", "eval"):
+    for command in ("degrade", "info", "render", "train", "restore", "eval", "convert", "view"):
         assert f" {command} " in result.out
+
+
+def test_a_named_subcommand_imports_only_its_own_module(tmp_path):
+    # Start-up time: `info` must not wait for the evaluation's, the viewer's or training's imports.
+    probe = (
+        "import sys; from lumos3d_cli.cli.app import main; "
+        f"code = main(['info', {str(tmp_path / 'missing')!r}]); "
+        "print(code, sorted(m for m in sys.modules if m.startswith('lumos3d_cli.cli.')))"
+    )
+    result = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
+    code, imported = result.stdout.split(" ", 1)
+    assert code == "2"
+    assert "lumos3d_cli.cli.info" in imported
+    for other in ("eval", "restore", "train", "view", "convert"):
+        assert f"lumos3d_cli.cli.{other}'" not in imported
 
 
 def test_version(run_cli):

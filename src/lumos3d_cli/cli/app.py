@@ -53,23 +53,30 @@ def global_options(
     configure_logging(debug, quiet)
 
 
-def add_commands() -> typer.Typer:
-    """Import the subcommands and add them to `app` (once); returns `app`. Their modules import
-    torch, pycolmap and the rest (seconds), so `main` calls this only once its signal handlers
-    are in place: Ctrl-C during start-up then ends in the same one line as later."""
-    if app.registered_commands:
-        return app
-    from lumos3d_cli.cli import convert, degrade, eval, info, render, restore, train, view
+# Subcommand name (also its module under lumos3d_cli.cli) -> its help panel, in `--help`'s order.
+_COMMAND_PANELS = {
+    "degrade": "Data", "restore": "Scenes", "eval": "Scenes", "train": "Models",
+    "render": "Scenes", "info": "Inspect", "convert": "Models", "view": "Scenes",
+}
 
-    app.command("degrade", epilog=degrade.EXAMPLES, rich_help_panel="Data")(degrade.degrade_command)
-    app.command("restore", epilog=restore.EXAMPLES, rich_help_panel="Scenes")(restore.restore_command)
-    app.command("eval", epilog=eval.EXAMPLES, rich_help_panel="Scenes")(eval.eval_command)
-    app.command("train", epilog=train.EXAMPLES, rich_help_panel="Models",
-                context_settings={"allow_extra_args": False})(train.train_command)
-    app.command("render", epilog=render.EXAMPLES, rich_help_panel="Scenes")(render.render_command)
-    app.command("info", epilog=info.EXAMPLES, rich_help_panel="Inspect")(info.info_command)
-    app.command("convert", epilog=convert.EXAMPLES, rich_help_panel="Models")(convert.convert_command)
-    app.command("view", epilog=view.EXAMPLES, rich_help_panel="Scenes")(view.view_command)
+
+def add_commands(args: list[str] | None = None) -> typer.Typer:
+    """Import subcommands and add them to `app`; returns `app`. Their modules import torch,
+    pycolmap, trimesh, viser and the rest (seconds), so `main` calls this only once its signal
+    handlers are in place (Ctrl-C during start-up then ends in the same one line as later), and
+    a command line that names a subcommand imports only that one's module (`restore` does not
+    wait for the viewer's or the evaluation's imports); any other (`--help`) imports them all."""
+    import importlib
+
+    named = next((arg for arg in args or () if not arg.startswith("-")), None)
+    wanted = [named] if named in _COMMAND_PANELS else list(_COMMAND_PANELS)
+    registered = {info.name for info in app.registered_commands}
+    for name in wanted:
+        if name in registered:
+            continue
+        module = importlib.import_module(f"lumos3d_cli.cli.{name}")
+        settings = {"context_settings": {"allow_extra_args": False}} if name == "train" else {}
+        app.command(name, epilog=module.EXAMPLES, rich_help_panel=_COMMAND_PANELS[name], **settings)(getattr(module, f"{name}_command"))
     return app
 
 
@@ -113,7 +120,7 @@ def _run(args: list[str], debug: bool, claim_signals: Callable[[], None]) -> int
     """Run the app; map its errors to messages and exit codes (interruptions pass through).
     `claim_signals` re-installs the CLI's signal handlers over those the imports installed."""
     try:
-        command_line = add_commands()
+        command_line = add_commands(args)
         claim_signals()
         command_line(args=args, prog_name="lumos3d", standalone_mode=True)
     except SystemExit as done:

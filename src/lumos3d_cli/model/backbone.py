@@ -63,8 +63,10 @@ class Aggregator(nn.Module):
 
         self.frame_blocks = blocks()
         self.global_blocks = blocks()
-        self.camera_token = nn.Parameter(torch.randn(1, 2, 1, dim) * 1e-6)
-        self.register_token = nn.Parameter(torch.randn(1, 2, architecture.num_register_tokens, dim) * 1e-6)
+        # normal(0, 1e-6) as VGGT initialises them, drawn in place: `randn` and `*` on the meta device
+        # (where `load_model` builds the network) would first load PyTorch's Python meta kernels, 1 s.
+        self.camera_token = nn.Parameter(nn.init.trunc_normal_(torch.empty(1, 2, 1, dim), std=1e-6))
+        self.register_token = nn.Parameter(nn.init.trunc_normal_(torch.empty(1, 2, architecture.num_register_tokens, dim), std=1e-6))
         self.gradient_checkpointing = False
 
     def set_gradient_checkpointing(self, enabled: bool) -> None:

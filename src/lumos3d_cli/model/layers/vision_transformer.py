@@ -40,8 +40,10 @@ class DinoVisionTransformer(nn.Module):
         self.norm = nn.LayerNorm(embed_dim, eps=1e-6)
         self.gradient_checkpointing = False
         nn.init.trunc_normal_(self.pos_embed, std=0.02)
-        nn.init.normal_(self.cls_token, std=1e-6)
-        nn.init.normal_(self.register_tokens, std=1e-6)
+        # normal(0, 1e-6), drawn by trunc_normal_ (bounds at 2e6 sigma): `normal_` on the meta device,
+        # where `load_model` builds the network, would first load PyTorch's Python meta kernels (1 s).
+        nn.init.trunc_normal_(self.cls_token, std=1e-6)
+        nn.init.trunc_normal_(self.register_tokens, std=1e-6)
 
     def position_embedding(self, grid_height: int, grid_width: int, dtype: torch.dtype) -> torch.Tensor:
         """[1, 1 + h*w, C] embedding of the cls token and an h x w patch grid."""
