@@ -88,6 +88,24 @@ def test_aligned_depth_stays_positive_and_finite_when_the_fit_crosses_zero():
         assert torch.isfinite(result.depth).all() and (result.depth > 0).all()
 
 
+@pytest.mark.parametrize("form", DEPTH_FORMS)
+def test_depth_that_runs_against_the_points_gets_a_positive_scale_only(form):
+    # The bundled tiny model's near-flat depth on riverview anti-correlates with SfM's points: the
+    # affine fit's scale is negative in every view, which used to leave every view unaligned.
+    cameras = plane_cameras(3)
+    truth = plane_depth(cameras)
+    inverted = 2 * truth.mean() - truth  # nearest where the truth is farthest
+    result = align_depth(inverted, cameras, plane_points(cameras, 200), form=form)
+    assert result.fitted.all() and result.scale_only.all() and (result.scale > 0).all()
+    assert (result.shift == 0).all()
+    assert torch.isfinite(result.depth).all() and (result.depth > 0).all()
+    # The size is right: the aligned median depth matches the truth's within the spread of the truth.
+    ratio = float(result.depth.median() / truth.median())
+    assert 0.7 < ratio < 1.4
+    honest = align_depth(truth, cameras, plane_points(cameras, 200), form=form)
+    assert not honest.scale_only.any()
+
+
 def test_constant_network_depth_fits_a_scale_only():
     source = torch.full((50,), 3.0, dtype=torch.float64)
     target = torch.full((50,), 6.0, dtype=torch.float64)

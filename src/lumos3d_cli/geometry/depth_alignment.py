@@ -17,7 +17,11 @@ consistency of the aligned depth (share within 2 %):
 Inverse depth has the lower residual on two scenes of three and the higher consistency on all.
 
 A view with fewer than MIN_POINTS usable points (or none: a view SfM did not register) takes the
-median scale and shift of the fitted views.
+median scale and shift of the fitted views. Where the best affine fit has a scale <= 0 (the
+network's depth runs against the points: a near-flat or inverted prediction, as the bundled tiny
+model gives on some wide outdoor scenes, e.g. riverview), its relative depths carry nothing the
+points can use, so only a scale is fitted (no shift): positive depth of the right size, and the
+smooth correction (`geometry.depth_correction`) then bends it towards the points.
 """
 
 from __future__ import annotations
@@ -46,7 +50,8 @@ _DEPTH_RANGE = 1e3
 @dataclass
 class DepthAlignment:
     """depth [V, h, w] aligned (registered frame); scale, shift [V] (of the chosen form);
-    fitted [V] bool: False where the scene's median alignment was used; points [V] int64 points
+    fitted [V] bool: False where the scene's median alignment was used; scale_only [V] bool: the
+    affine fit had a scale <= 0 and a scale alone was fitted; points [V] int64 points
     used per view; residual [V] median relative depth error |z - z_sfm| / z_sfm at those points
     after alignment (nan for a view without points); form: "depth" or "inverse depth"."""
 
@@ -54,6 +59,7 @@ class DepthAlignment:
     scale: torch.Tensor
     shift: torch.Tensor
     fitted: torch.Tensor
+    scale_only: torch.Tensor
     points: torch.Tensor
     residual: torch.Tensor
     form: str
@@ -95,10 +101,11 @@ def _forward(values: torch.Tensor, form: str) -> torch.Tensor:
     return values if form == "depth" else 1.0 / values
 
 
-def fit_scale_shift(source: torch.Tensor, target: torch.Tensor) -> tuple[float, float]:
+def fit_scale_shift(source: torch.Tensor, target: torch.Tensor, with_shift: bool = True) -> tuple[float, float]:
     """Robust a, b with target ~ a * source + b, minimising relative errors (a - b*s - t) / t
     by IRLS with Cauchy weights. source, target [N] positive. With (near) constant source the
-    shift is undetermined and only a scale is fitted."""
+    shift is undetermined and only a scale is fitted; `with_shift` False fits only a scale (b = 0,
+    a > 0)."""
     base = 1.0 / target
     scale, shift = float((target / source).median()), 0.0
     constant = float(source.std()) <= 1e-9 * float(source.abs().mean()) if len(source) > 1 else True
@@ -106,7 +113,7 @@ def fit_scale_shift(source: torch.Tensor, target: torch.Tensor) -> tuple[float, 
         relative = (scale * source + shift - target) * base
         spread = max(1.4826 * float(relative.abs().median()), 1e-6)
         weights = base / (1 + (relative / (_CAUCHY * spread)) ** 2).sqrt()  # sqrt: rows of a least-squares system
-        if constant:
+        if constant or not with_shift:
             scale = float((weights * source * weights * target).sum() / (weights * source).square().sum())
             continue
         system = torch.stack([source * weights, weights], dim=1)
@@ -156,6 +163,7 @@ def align_depth(
     scale = torch.full((views,), float("nan"), dtype=torch.float64)
     shift = torch.zeros(views, dtype=torch.float64)
     fitted = torch.zeros(views, dtype=torch.bool)
+    scale_only = torch.zeros(views, dtype=torch.bool)
     used = torch.zeros(views, dtype=torch.int64)
     pairs = []
     for view in range(views):
@@ -164,7 +172,11 @@ def align_depth(
         used[view] = len(sfm_depth)
         if len(sfm_depth) < min_points:
             continue
-        a, b = fit_scale_shift(_forward(network_depth, form), _forward(sfm_depth, form))
+        source, target = _forward(network_depth, form), _forward(sfm_depth, form)
+        a, b = fit_scale_shift(source, target)
+        if not a > 0:
+            a, b = fit_scale_shift(source, target, with_shift=False)
+            scale_only[view] = True
         if a > 0:
             scale[view], shift[view], fitted[view] = a, b, True
     if not fitted.any():
@@ -178,7 +190,7 @@ def align_depth(
         _relative_residual(_affine(network_depth, float(scale[v]), float(shift[v]), form), sfm_depth)
         for v, (network_depth, sfm_depth) in enumerate(pairs)
     ], dtype=torch.float64)
-    return DepthAlignment(aligned.to(depth.dtype), scale, shift, fitted, used, residual, form)
+    return DepthAlignment(aligned.to(depth.dtype), scale, shift, fitted, scale_only, used, residual, form)
 
 
 def unproject_aligned(depth: torch.Tensor, cameras: Cameras) -> torch.Tensor:

@@ -254,6 +254,7 @@ def _aligned_depth(
             correction = correct_depth(alignment.depth, network_cameras, observed)
             return correction.depth, {
                 "form": alignment.form, "fitted_views": int(alignment.fitted.sum()), "views": len(selected),
+                "scale_only_views": int(alignment.scale_only.sum()),
                 "median_relative_residual": round(alignment.median_residual(), 4),
                 "points_per_view": alignment.points.tolist(),
                 "smooth_correction": {
