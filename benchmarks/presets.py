@@ -153,6 +153,9 @@ def main() -> None:
     parser.add_argument("--steps", nargs="*", type=int, default=list(STEPS))
     parser.add_argument("--grids", nargs="*", type=float, default=[2.0],
                         help="Gaussian grids to measure besides the presets' own (each preset at its default steps)")
+    parser.add_argument("--grid-presets", nargs="*", default=["fast", "balanced"],
+                        help="the presets measured at --grids (best's denser grid at its full-size refinement takes "
+                             "about 8 minutes)")
     parser.add_argument("--results", type=Path, help="a JSON file of results to reuse (written after each configuration)")
     parser.add_argument("--no-doc", action="store_true", help="print only")
     parser.add_argument("--no-run", action="store_true", help="only the table and plot of the --results file")
@@ -160,7 +163,8 @@ def main() -> None:
     results = json.loads(args.results.read_text()) if args.results and args.results.exists() else []
     done = {(r["preset"], r["steps"], r["grid_option"]) for r in results}
     configurations = [(preset, steps, None) for preset in args.presets for steps in args.steps]
-    configurations += [(preset, RESTORE_PRESETS[preset].refine_steps, grid) for preset in args.presets for grid in args.grids]
+    configurations += [(preset, RESTORE_PRESETS[preset].refine_steps, grid) for preset in args.presets
+                       if preset in args.grid_presets for grid in args.grids]
     with tempfile.TemporaryDirectory() as folder:
         for configuration in configurations:
             if configuration in done or args.no_run:

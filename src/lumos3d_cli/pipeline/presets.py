@@ -3,7 +3,8 @@ sees, at which resolution (relative to the model's), the SH degree written and r
 voxel size (relative to the model's pixel footprint), the steps of test-time refinement
 (pipeline.scene_refinement), the most Gaussians a scene may keep (render.gaussian_budget), and
 two speed settings: the size structure-from-motion sees the photos at (geometry.sfm) and the
-resolution the budget renders the Gaussians' weights at."""
+resolution the budget renders the Gaussians' weights at; and the size of the images refinement
+fits (`best` fits LOM's 500x375 photos at their own size, the others at most 256 px)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from dataclasses import dataclass, replace
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.sfm import SFM_LONG_SIDE
+from lumos3d_cli.refine.settings import RefineSettings
 
 
 @dataclass(frozen=True)
@@ -25,6 +27,7 @@ class RestorePreset:
     gaussian_grid: float = 1.0  # pixel Gaussians per network pixel along each side (pipeline.gaussian_grid)
     sfm_long_side: int = SFM_LONG_SIDE  # the longest side structure-from-motion sees a photo at
     budget_resolution: float = 1.0  # the scale the Gaussian budget's weights are rendered at
+    refine_side: int = RefineSettings.max_side  # the longer side of the images refinement fits (never enlarged)
 
     def network_image_size(self, model_image_size: int, patch_size: int) -> int:
         """The longer network side: a patch multiple, at least one patch."""
@@ -49,7 +52,8 @@ RESTORE_PRESETS = {
     # voxels of two footprints (their merging averages the amplified noise of dark photos), then
     # refinement to where the early stop ends it (200 steps; 400 gave the same scene); its steps
     # and the grid of 1 are read off benchmarks/presets.py.
-    "best": RestorePreset("best", max_views=32, resolution=1.0, sh_degree=None, voxel_scale=2.0, refine_steps=200),
+    "best": RestorePreset("best", max_views=32, resolution=1.0, sh_degree=None, voxel_scale=2.0, refine_steps=200,
+                          refine_side=512),
 }
 DEFAULT_RESTORE_PRESET = "balanced"
 

@@ -274,7 +274,7 @@ def build_scene(
             restored = _operator_restoration(network, images, selected)
         targets, cameras = refinement_targets(network, model, images, restored, selected, names,
                                               scene_geometry.cameras, fuse_views)
-        result = refine_scene(gaussians, targets, cameras, preset.refine_steps, progress)
+        result = refine_scene(gaussians, targets, cameras, preset.refine_steps, progress, preset.refine_side)
         gaussians, refinement = result.gaussians, result.summary()
         timings["refine"] = time.perf_counter() - started
     return BuiltScene(gaussians, scene_geometry, selected, output.counts[0], network.network_size, timings,

@@ -32,7 +32,8 @@ class RefinementResult:
     cameras with corrected extrinsics (as given unless cameras were refined, and for views
     without a usable camera); loss_curve: the photometric loss of each step's views at the
     working resolution; steps_run <= the steps asked for; stopped_early: the loss stopped falling
-    (settings.patience, settings.tolerance); sh_degree: the degree kept; seconds: wall time."""
+    (settings.patience, settings.tolerance); sh_degree: the degree kept; working_size: (width,
+    height) of the images fitted; seconds: wall time."""
 
     gaussians: Gaussians
     cameras: Cameras
@@ -40,12 +41,14 @@ class RefinementResult:
     steps_run: int
     stopped_early: bool
     sh_degree: int
+    working_size: tuple[int, int]
     seconds: float
 
     def summary(self) -> dict:
         """The refinement's entry of summary.json."""
         return {
             "steps": self.steps_run, "stopped_early": self.stopped_early, "sh_degree": self.sh_degree,
+            "working_size": list(self.working_size),
             "seconds": round(self.seconds, 3), "loss_curve": [round(value, 6) for value in self.loss_curve],
         }
 
@@ -159,7 +162,7 @@ def refine_gaussians(
         extrinsics[usable] = corrections.corrected_extrinsics().to(extrinsics.dtype)
     return RefinementResult(
         refined, Cameras(extrinsics, cameras.intrinsics.clone(), list(cameras.sizes), list(cameras.names)),
-        curve, len(curve), stop.should_stop, degree, time.perf_counter() - started,
+        curve, len(curve), stop.should_stop, degree, (images.shape[-1], images.shape[-2]), time.perf_counter() - started,
     )
 
 
