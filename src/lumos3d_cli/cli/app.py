@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import sys
 import traceback
 from collections.abc import Callable
@@ -66,8 +67,6 @@ def add_commands(args: list[str] | None = None) -> typer.Typer:
     handlers are in place (Ctrl-C during start-up then ends in the same one line as later), and
     a command line that names a subcommand imports only that one's module (`restore` does not
     wait for the viewer's or the evaluation's imports); any other (`--help`) imports them all."""
-    import importlib
-
     named = next((arg for arg in args or () if not arg.startswith("-")), None)
     wanted = [named] if named in _COMMAND_PANELS else list(_COMMAND_PANELS)
     registered = {info.name for info in app.registered_commands}

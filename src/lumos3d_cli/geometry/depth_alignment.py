@@ -19,7 +19,7 @@ Inverse depth has the lower residual on two scenes of three and the higher consi
 A view with fewer than MIN_POINTS usable points (or none: a view SfM did not register) takes the
 median scale and shift of the fitted views. Where the best affine fit has a scale <= 0 (the
 network's depth runs against the points: a near-flat or inverted prediction, as the bundled tiny
-model gives on some wide outdoor scenes, e.g. riverview), its relative depths carry nothing the
+model gives on some deep, cluttered scenes, e.g. riverview's warehouse), its relative depths carry nothing the
 points can use, so only a scale is fitted (no shift): positive depth of the right size, and the
 smooth correction (`geometry.depth_correction`) then bends it towards the points.
 """
