@@ -16,10 +16,16 @@ def test_pairing_rule():
     # target 03 (closest to 0.45); low-light: mean <= 0.23; over-exposure: 1 - mean <= 0.27.
     assert pair_frames(frames, "low-light") == [(0, 3), (1, 3)]
     assert pair_frames(frames, "over-exposure") == [(5, 3), (6, 3)]
+    # Well-exposed pairs add the frames between the inputs and the target, and the target itself
+    # (as its own target), and nothing of the other side of the target.
+    assert pair_frames(frames, "low-light", inputs="both") == [(0, 3), (1, 3), (2, 3), (3, 3)]
+    assert pair_frames(frames, "over-exposure", inputs="well-exposed") == [(3, 3), (4, 3)]
     # No frame near a good exposure: no pairs at all.
     assert pair_frames([("00.jpg", 0.02), ("01.jpg", 0.1)], "low-light") == []
     with pytest.raises(InputError, match="unknown mode"):
         pair_frames(frames, "dusk")
+    with pytest.raises(InputError, match="unknown bracket inputs"):
+        pair_frames(frames, "low-light", inputs="all")
 
 
 def test_missing_or_malformed_index_is_an_input_error(tmp_path):

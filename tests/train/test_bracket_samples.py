@@ -31,6 +31,24 @@ def test_operator_student_trains_on_brackets_and_validates_on_the_held_out_ones(
     run = Path(str(config).replace(".yaml", ""))
     line = json.loads((run / "validation.jsonl").read_text().splitlines()[-1])
     assert line["bracket_samples"] == 2 and 5 < line["bracket_psnr"] < 60 and 0 < line["bracket_ssim"] <= 1
+    # the well-exposed inputs (a frame beside or equal to the target) are scored apart: barely
+    # touched by a head this young, so far closer to their targets than the dark ones
+    assert line["bracket_psnr"] + 5 < line["bracket_well_exposed_psnr"] <= 100 and 0 < line["bracket_well_exposed_ssim"] <= 1
+
+
+def test_well_exposed_inputs_join_training_only_when_asked(brackets):
+    size, crop = (56, 42), (1.0, 1.0)
+    standard = BracketSamples(BracketConfig(root=str(brackets)), "low-light", size, crop, seed=0)
+    widened = BracketSamples(BracketConfig(root=str(brackets), well_exposed=True), "low-light", size, crop, seed=0)
+    standard_pairs, widened_pairs = standard.train[0].pairs, widened.train[0].pairs
+    assert set(standard_pairs) < set(widened_pairs)
+    assert all(p.input_mean <= p.target_mean / 2 for p in standard_pairs)
+    extra = set(widened_pairs) - set(standard_pairs)
+    assert all(p.target_mean / 2 < p.input_mean <= p.target_mean for p in extra)
+    assert any(p.input_path == p.target_path for p in extra)  # the target as its own input
+    # validation is the same in both: the restoration pairs, and the well-exposed ones apart
+    assert standard.validation[0].pairs == widened.validation[0].pairs
+    assert all(p.input_mean > p.target_mean / 2 for p in standard.validation_well_exposed[0].pairs)
 
 
 def test_brackets_need_an_operator_model(tiny_config, brackets):

@@ -12,7 +12,10 @@ Pairing rule (per bracket):
 - low-light inputs: frames with mean <= target mean / 2 (at least half as bright);
 - over-exposure inputs: frames whose headroom (1 - mean) <= target headroom / 2 (at least half
   the distance to white gone).
-Frames in between are too close to the target to teach restoration and are not used.
+Frames in between are too close to the target to teach restoration. They, and the target itself
+(paired with itself), are the `well-exposed` inputs: a head also trained on them learns to leave
+a photo that is already well exposed nearly as it is, instead of brightening (or darkening)
+every photo the same way. `inputs` picks "restore" (the rule above), "well-exposed" or "both".
 
 VALIDATION_BRACKETS, 20 brackets fixed once (evenly spaced over the brackets that have a target
 and both kinds of input), are held out for validation and model selection.
@@ -37,6 +40,7 @@ logger = logging.getLogger(__name__)
 
 BRACKET_MODES = ("low-light", "over-exposure")
 SPLITS = ("train", "validation", "all")
+INPUT_KINDS = ("restore", "well-exposed", "both")
 WELL_EXPOSED_MEAN = 0.45
 TARGET_MEAN_RANGE = (0.3, 0.6)
 BRIGHTNESS_FACTOR = 2.0
@@ -71,10 +75,13 @@ def read_bracket_index(root: Path | str) -> dict[str, list[tuple[str, float]]]:
         raise InputError(f"{index_path}: expected {{bracket: [{{file, mean}}, ...]}}, could not read it ({error})") from None
 
 
-def pair_frames(frames: list[tuple[str, float]], mode: str) -> list[tuple[int, int]]:
-    """Frames [(file, mean)] of one bracket -> [(input index, target index)] by the module's rule."""
+def pair_frames(frames: list[tuple[str, float]], mode: str, inputs: str = "restore") -> list[tuple[int, int]]:
+    """Frames [(file, mean)] of one bracket -> [(input index, target index)] by the module's rule,
+    for the input kind `inputs` (INPUT_KINDS)."""
     if mode not in BRACKET_MODES:
         raise InputError(f"unknown mode '{mode}'; choose one of: {', '.join(BRACKET_MODES)}")
+    if inputs not in INPUT_KINDS:
+        raise InputError(f"unknown bracket inputs '{inputs}'; choose one of: {', '.join(INPUT_KINDS)}")
     if not frames:
         return []
     means = np.array([mean for _, mean in frames])
@@ -82,16 +89,18 @@ def pair_frames(frames: list[tuple[str, float]], mode: str) -> list[tuple[int, i
     low, high = TARGET_MEAN_RANGE
     if not low <= means[target] <= high:
         return []
-    if mode == "low-light":
-        inputs = np.flatnonzero(means <= means[target] / BRIGHTNESS_FACTOR)
-    else:
-        inputs = np.flatnonzero(1 - means <= (1 - means[target]) / BRIGHTNESS_FACTOR)
-    return [(int(i), target) for i in inputs]
+    # distance from the well-exposed end: brightness for low light, headroom for over-exposure
+    level = means if mode == "low-light" else 1 - means
+    restore = level <= level[target] / BRIGHTNESS_FACTOR
+    well_exposed = (level <= level[target]) & ~restore
+    chosen = {"restore": restore, "well-exposed": well_exposed, "both": restore | well_exposed}[inputs]
+    return [(int(i), target) for i in np.flatnonzero(chosen)]
 
 
-def bracket_pairs(root: Path | str, mode: str, split: str = "train") -> list[BracketPair]:
-    """All pairs of one mode in a split: "train" (every bracket but the validation ones),
-    "validation" (VALIDATION_BRACKETS) or "all". Sorted by bracket, then input frame."""
+def bracket_pairs(root: Path | str, mode: str, split: str = "train", inputs: str = "restore") -> list[BracketPair]:
+    """All pairs of one mode and input kind (pair_frames) in a split: "train" (every bracket but
+    the validation ones), "validation" (VALIDATION_BRACKETS) or "all". Sorted by bracket, then
+    input frame."""
     if split not in SPLITS:
         raise InputError(f"unknown split '{split}'; choose one of: {', '.join(SPLITS)}")
     root = Path(root)
@@ -102,7 +111,7 @@ def bracket_pairs(root: Path | str, mode: str, split: str = "train") -> list[Bra
         if (split == "train" and name in held_out) or (split == "validation" and name not in held_out):
             continue
         frames = index[name]
-        for source, target in pair_frames(frames, mode):
+        for source, target in pair_frames(frames, mode, inputs):
             pairs.append(BracketPair(
                 name, root / name / frames[source][0], root / name / frames[target][0], frames[source][1], frames[target][1], mode,
             ))  # fmt: skip
@@ -124,7 +133,7 @@ class BracketDataset(Dataset):
     [1, 3, H, W], bracket name and mode. The same random crop (covering `crop_scale` of the
     largest box of the output's aspect ratio) and mirror for input and target, resized to
     `size` (width, height). crop_scale (1, 1) and flip False give the whole frame, as
-    validation wants.
+    validation wants. `inputs`: the kind of input frames (pair_frames).
 
     Deterministic: sample i of epoch e depends only on (seed, e, i).
     """
@@ -138,11 +147,12 @@ class BracketDataset(Dataset):
         crop_scale: tuple[float, float] = (0.6, 1.0),
         flip: bool = True,
         seed: int = 0,
+        inputs: str = "restore",
     ):
-        self.pairs = bracket_pairs(root, mode, split)
+        self.pairs = bracket_pairs(root, mode, split, inputs)
         if not self.pairs:
-            raise InputError(f"{root}: no {mode} pairs in the {split} split")
-        logger.info("%d %s bracket pairs (%s split) from %s", len(self.pairs), mode, split, root)
+            raise InputError(f"{root}: no {mode} pairs with {inputs} inputs in the {split} split")
+        logger.info("%d %s bracket pairs (%s inputs, %s split) from %s", len(self.pairs), mode, inputs, split, root)
         self.width, self.height = size
         self.crop_scale = crop_scale
         self.flip = flip

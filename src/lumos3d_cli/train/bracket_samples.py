@@ -30,8 +30,14 @@ class BracketSamples:
             raise ValueError("BracketSamples needs brackets.root")
         self.config = config
         modes = BRACKET_MODES if mode == "mixed" else (mode,)
-        self.train = [BracketDataset(config.root, m, "train", size, crop_scale, flip=True, seed=seed) for m in modes]
+        train_inputs = "both" if config.well_exposed else "restore"
+        self.train = [BracketDataset(config.root, m, "train", size, crop_scale, flip=True, seed=seed, inputs=train_inputs)
+                      for m in modes]
         self.validation = [BracketDataset(config.root, m, "validation", size, (1.0, 1.0), flip=False, seed=seed) for m in modes]
+        self.validation_well_exposed = [
+            BracketDataset(config.root, m, "validation", size, (1.0, 1.0), flip=False, seed=seed, inputs="well-exposed")
+            for m in modes
+        ]
 
     def _batch(self, datasets: list[BracketDataset], sample_ids: list[int]) -> tuple[torch.Tensor, torch.Tensor]:
         """Sample id i -> dataset i mod (number of modes), its pair i div that -> inputs, targets [N, 1, 3, H, W]."""
@@ -55,17 +61,26 @@ class BracketSamples:
     @torch.no_grad()
     def scores(self, model: Lumos3D, device: torch.device) -> dict[str, float]:
         """Mean PSNR / SSIM of the first `validation_samples` held-out pairs restored at the network
-        size: {"bracket_psnr", "bracket_ssim", "bracket_samples"}."""
-        count = min(self.config.validation_samples, sum(len(d) for d in self.validation))
+        size: {"bracket_psnr", "bracket_ssim", "bracket_samples"} for the restoration pairs and
+        {"bracket_well_exposed_psnr", "bracket_well_exposed_ssim"} for as many well-exposed ones
+        (how much the head disturbs a photo that needs little or nothing)."""
+        restore_psnr, restore_ssim, count = self._scores(model, self.validation, device)
+        well_psnr, well_ssim, _ = self._scores(model, self.validation_well_exposed, device)
+        return {"bracket_psnr": restore_psnr, "bracket_ssim": restore_ssim, "bracket_samples": count,
+                "bracket_well_exposed_psnr": well_psnr, "bracket_well_exposed_ssim": well_ssim}
+
+    def _scores(self, model: Lumos3D, datasets: list[BracketDataset], device: torch.device) -> tuple[float, float, int]:
+        count = min(self.config.validation_samples, sum(len(d) for d in datasets))
         psnrs, ssims = [], []
         for sample_id in range(count):
-            inputs, targets = self._batch(self.validation, [sample_id])
+            inputs, targets = self._batch(datasets, [sample_id])
             inputs, targets = inputs.to(device), targets.to(device)
             restored = model.predict_appearance(inputs).apply(inputs).clamp(0, 1)
-            mse = float(torch.mean((restored.double() - targets.double()) ** 2))
-            psnrs.append(10 * math.log10(1 / mse) if mse > 0 else math.inf)
+            # an input that is its own target can be returned exactly: PSNR capped at 100 dB
+            mse = max(float(torch.mean((restored.double() - targets.double()) ** 2)), 1e-10)
+            psnrs.append(10 * math.log10(1 / mse))
             ssims.append(float(ssim_map_mean(restored.double(), targets.double()).mean()))
-        return {"bracket_psnr": float(np.mean(psnrs)), "bracket_ssim": float(np.mean(ssims)), "bracket_samples": count}
+        return float(np.mean(psnrs)), float(np.mean(ssims)), count
 
 
 def check_bracket_model(model: Lumos3D, config: BracketConfig) -> None:

@@ -48,13 +48,18 @@ class DataConfig:
 class BracketConfig:
     """root: the brackets folder (None: no bracket samples); weight of their appearance loss in
     the total; batch_size: bracket samples per step (each one view); ssim_weight: w of the
-    appearance loss; validation_samples: held-out pairs scored at each validation."""
+    appearance loss; validation_samples: held-out pairs scored at each validation;
+    well_exposed: also train on inputs that are already (nearly) well exposed, paired with the
+    target (data/brackets.py), so the head learns to leave such photos as they are. Validation
+    scores both kinds apart: bracket_psnr on the restoration pairs (comparable across runs),
+    bracket_well_exposed_psnr on the well-exposed ones."""
 
     root: str | None = None
     weight: float = 1.0
     batch_size: int = 4
     ssim_weight: float = SSIM_WEIGHT
     validation_samples: int = 16
+    well_exposed: bool = False
 
     def __post_init__(self) -> None:
         if self.batch_size < 1 or self.validation_samples < 1 or self.weight < 0:
