@@ -14,6 +14,7 @@ import argparse
 import json
 import sys
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -67,6 +68,19 @@ def measure(preset: str, steps: int, folder: str, grid: float | None = None) -> 
         "refine_seconds": summary["seconds"].get("refine", 0.0),
         "context": scores["context"][0], "holdout": scores["holdout"][0], "gamma": scores["context"][1],
     }
+
+
+def steps_to_measure(preset: str, presets: list[str], steps: list[int]) -> list[int]:
+    """All of `steps`, unless another measured preset builds the same scene and refines longer
+    (`balanced` is `best` stopped at 25 steps): then that preset's line already holds the other
+    step counts, and only this preset's own steps are measured."""
+    own = RESTORE_PRESETS[preset]
+    for other in presets:
+        settings = RESTORE_PRESETS[other]
+        if other != preset and replace(settings, name=preset, refine_steps=own.refine_steps) == own \
+                and settings.refine_steps > own.refine_steps:
+            return [own.refine_steps]
+    return steps
 
 
 def plot(results: list[dict], path: Path) -> None:
@@ -150,16 +164,17 @@ def main() -> None:
     parser.add_argument("--steps", nargs="*", type=int, default=list(STEPS))
     parser.add_argument("--grids", nargs="*", type=float, default=[2.0],
                         help="Gaussian grids to measure besides the presets' own (each preset at its default steps)")
-    parser.add_argument("--grid-presets", nargs="*", default=["fast", "balanced"],
-                        help="the presets measured at --grids (best's denser grid at its full-size refinement takes "
-                             "about 8 minutes)")
+    parser.add_argument("--grid-presets", nargs="*", default=["fast"],
+                        help="the presets measured at --grids (a denser grid refined at the photos' full size, as "
+                             "balanced and best refine, takes about 8 minutes)")
     parser.add_argument("--results", type=Path, help="a JSON file of results to reuse (written after each configuration)")
     parser.add_argument("--no-doc", action="store_true", help="print only")
     parser.add_argument("--no-run", action="store_true", help="only the table and plot of the --results file")
     args = parser.parse_args()
     results = json.loads(args.results.read_text()) if args.results and args.results.exists() else []
     done = {(r["preset"], r["steps"], r["grid_option"]) for r in results}
-    configurations = [(preset, steps, None) for preset in args.presets for steps in args.steps]
+    configurations = [(preset, steps, None) for preset in args.presets
+                      for steps in steps_to_measure(preset, args.presets, args.steps)]
     configurations += [(preset, RESTORE_PRESETS[preset].refine_steps, grid) for preset in args.presets
                        if preset in args.grid_presets for grid in args.grids]
     with tempfile.TemporaryDirectory() as folder:

@@ -30,10 +30,10 @@ def test_restore_refines_and_reports_the_loss_curve(run_cli, buu, tmp_path, rand
     refinement = json.loads(result.out)["refinement"]
     assert refinement["steps"] == 4 and len(refinement["loss_curve"]) == 4
     assert all(value > 0 for value in refinement["loss_curve"]) and refinement["sh_degree"] in (0, 1)
-    assert refinement["working_size"] == [256, 192]  # buu's 500x375 photos downsampled to refine's 256 px
-    best = run_cli("restore", photos, "-o", tmp_path / "best" / "scene.ply", "--checkpoint", random_checkpoint,
-                   "--geometry", "network", "--preset", "best", "--refine-steps", 2, "--json")
-    assert json.loads(best.out)["refinement"]["working_size"] == [500, 375]  # best fits the photos' own size
+    assert refinement["working_size"] == [500, 375]  # balanced (the default) fits the photos' own size
+    fast = run_cli("restore", photos, "-o", tmp_path / "fast" / "scene.ply", "--checkpoint", random_checkpoint,
+                   "--geometry", "network", "--preset", "fast", "--refine-steps", 2, "--json")
+    assert json.loads(fast.out)["refinement"]["working_size"] == [256, 192]  # fast downsamples to refine's 256 px
     plain = run_cli("restore", photos, "-o", tmp_path / "plain" / "scene.ply", "--checkpoint", random_checkpoint,
                     "--geometry", "network", "--preset", "fast", "--json")
     assert json.loads(plain.out)["refinement"] is None  # fast does not refine

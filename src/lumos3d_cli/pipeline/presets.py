@@ -4,7 +4,8 @@ voxel size (relative to the model's pixel footprint), the steps of test-time ref
 (pipeline.scene_refinement), the most Gaussians a scene may keep (render.gaussian_budget), and
 two speed settings: the size structure-from-motion sees the photos at (geometry.sfm) and the
 resolution the budget renders the Gaussians' weights at; and the size of the images refinement
-fits (`best` fits LOM's 500x375 photos at their own size, the others at most 256 px)."""
+fits (`balanced` and `best` fit LOM's 500x375 photos at their own size, `fast` at most 256 px
+when asked to refine)."""
 
 from __future__ import annotations
 
@@ -43,15 +44,19 @@ RESTORE_PRESETS = {
     # 250 px) the 0.75x network misplaces views: use balanced there.
     "fast": RestorePreset("fast", max_views=16, resolution=0.75, sh_degree=0, voxel_scale=1.0, sfm_long_side=384,
                           budget_resolution=0.5),
-    # balanced: 25 refinement steps take buu's views from sharpness 0.58 to about 1 and add
-    # 0.2-0.4 dB for 6 s (benchmarks/presets.py); later steps add 0.2 dB or less each doubling.
-    # The network at 0.75x scored higher on buu (25 photos at 500 px) but misplaced the 8 photos
-    # of 250 px of `make demo` into ghosted, doubled views: balanced keeps the model's resolution.
-    "balanced": RestorePreset("balanced", max_views=16, resolution=1.0, sh_degree=None, voxel_scale=1.0, refine_steps=25),
-    # best: the network at its trained resolution (1.25x scored 0.3-0.5 dB lower on buu's holdout),
-    # voxels of two footprints (their merging averages the amplified noise of dark photos), then
-    # refinement to where the early stop ends it (200 steps; 400 gave the same scene); its steps
-    # and the grid of 1 are read off benchmarks/presets.py.
+    # balanced: best's scene (all views up to 32, voxels of two footprints, refinement against the
+    # photos at their own size) with 25 refinement steps instead of 200. benchmarks/presets.py
+    # measured that scene at 25 steps above the former balanced (16 views, one-footprint voxels,
+    # refinement at 256 px) at every step count, in 7 s more; the first 25 steps take the views
+    # from sharpness 0.55 to about 0.95. The network keeps the model's resolution: at 0.75x it
+    # misplaced the 8 photos of 250 px of `make demo` into ghosted, doubled views.
+    "balanced": RestorePreset("balanced", max_views=32, resolution=1.0, sh_degree=None, voxel_scale=2.0, refine_steps=25,
+                              refine_side=512),
+    # best: the same scene refined to where the early stop ends it (200 steps; 400 gave the same
+    # scene). The network at its trained resolution (1.25x scored 0.3-0.5 dB lower on buu's
+    # holdout); voxels of two footprints (their merging averages the amplified noise of dark
+    # photos; one or three scored 0.1 dB lower); the grid of 1 (2 lost 0.8-1.2 dB): all read off
+    # benchmarks/presets.py.
     "best": RestorePreset("best", max_views=32, resolution=1.0, sh_degree=None, voxel_scale=2.0, refine_steps=200,
                           refine_side=512),
 }
