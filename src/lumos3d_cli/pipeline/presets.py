@@ -35,6 +35,15 @@ class RestorePreset:
         return max(patch_size, round(model_image_size * self.resolution / patch_size) * patch_size)
 
 
+# balanced: best's scene (all views up to 32, voxels of two footprints, refinement against the
+# photos at their own size) with 25 refinement steps instead of 200. benchmarks/presets.py
+# measured that scene at 25 steps above the former balanced (16 views, one-footprint voxels,
+# refinement at 256 px) at every step count, in 7 s more; the first 25 steps take the views
+# from sharpness 0.55 to about 0.95. The network keeps the model's resolution: at 0.75x it
+# misplaced the 8 photos of 250 px of `make demo` into ghosted, doubled views.
+_BALANCED = RestorePreset("balanced", max_views=32, resolution=1.0, sh_degree=None, voxel_scale=2.0, refine_steps=25,
+                          refine_side=512)
+
 RESTORE_PRESETS = {
     # fast: a smaller network image without view-dependent colour, no refinement,
     # structure-from-motion on photos of at most 384 px (on buu and Strecha 0.4 degrees median
@@ -44,21 +53,13 @@ RESTORE_PRESETS = {
     # 250 px) the 0.75x network misplaces views: use balanced there.
     "fast": RestorePreset("fast", max_views=16, resolution=0.75, sh_degree=0, voxel_scale=1.0, sfm_long_side=384,
                           budget_resolution=0.5),
-    # balanced: best's scene (all views up to 32, voxels of two footprints, refinement against the
-    # photos at their own size) with 25 refinement steps instead of 200. benchmarks/presets.py
-    # measured that scene at 25 steps above the former balanced (16 views, one-footprint voxels,
-    # refinement at 256 px) at every step count, in 7 s more; the first 25 steps take the views
-    # from sharpness 0.55 to about 0.95. The network keeps the model's resolution: at 0.75x it
-    # misplaced the 8 photos of 250 px of `make demo` into ghosted, doubled views.
-    "balanced": RestorePreset("balanced", max_views=32, resolution=1.0, sh_degree=None, voxel_scale=2.0, refine_steps=25,
-                              refine_side=512),
+    "balanced": _BALANCED,
     # best: the same scene refined to where the early stop ends it (200 steps; 400 gave the same
     # scene). The network at its trained resolution (1.25x scored 0.3-0.5 dB lower on buu's
     # holdout); voxels of two footprints (their merging averages the amplified noise of dark
     # photos; one or three scored 0.1 dB lower); the grid of 1 (2 lost 0.8-1.2 dB): all read off
     # benchmarks/presets.py.
-    "best": RestorePreset("best", max_views=32, resolution=1.0, sh_degree=None, voxel_scale=2.0, refine_steps=200,
-                          refine_side=512),
+    "best": replace(_BALANCED, name="best", refine_steps=200),
 }
 DEFAULT_RESTORE_PRESET = "balanced"
 
