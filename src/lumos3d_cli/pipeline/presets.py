@@ -35,13 +35,17 @@ class RestorePreset:
         return max(patch_size, round(model_image_size * self.resolution / patch_size) * patch_size)
 
 
-# balanced: best's scene (all views up to 32, voxels of two footprints, refinement against the
+# balanced: best's scene (all views up to 32, voxels of one footprint, refinement against the
 # photos at their own size) with 25 refinement steps instead of 200. benchmarks/presets.py
-# measured that scene at 25 steps above the former balanced (16 views, one-footprint voxels,
-# refinement at 256 px) at every step count, in 7 s more; the first 25 steps take the views
-# from sharpness 0.55 to about 0.95. The network keeps the model's resolution: at 0.75x it
-# misplaced the 8 photos of 250 px of `make demo` into ghosted, doubled views.
-_BALANCED = RestorePreset("balanced", max_views=32, resolution=1.0, sh_degree=None, voxel_scale=2.0, refine_steps=25,
+# measured that scene at 25 steps above the former balanced (16 views, refinement at 256 px) at
+# every step count; the first 25 steps take the views from sharpness 0.55 to about 0.95. Voxels
+# of two footprints merge neighbouring pixels of one view into Gaussians that do not cover their
+# seams: where only that view sees the scene (the borders of `make demo`'s views, the corner of
+# buu's frame 19) the black background showed through as dark streaks (rendered alpha below 0.9
+# on 22 % of a view against 11 %); one footprint scored 0.1-0.2 dB higher PSNR and 0.005 lower
+# SSIM on buu. The network keeps the model's resolution: at 0.75x it misplaced the 8 photos of
+# 250 px of `make demo` into ghosted, doubled views.
+_BALANCED = RestorePreset("balanced", max_views=32, resolution=1.0, sh_degree=None, voxel_scale=1.0, refine_steps=25,
                           refine_side=512)
 
 RESTORE_PRESETS = {
@@ -56,9 +60,7 @@ RESTORE_PRESETS = {
     "balanced": _BALANCED,
     # best: the same scene refined to where the early stop ends it (200 steps; 400 gave the same
     # scene). The network at its trained resolution (1.25x scored 0.3-0.5 dB lower on buu's
-    # holdout); voxels of two footprints (their merging averages the amplified noise of dark
-    # photos; one or three scored 0.1 dB lower); the grid of 1 (2 lost 0.8-1.2 dB): all read off
-    # benchmarks/presets.py.
+    # holdout); the grid of 1 (2 lost 0.8-1.2 dB): read off benchmarks/presets.py.
     "best": replace(_BALANCED, name="best", refine_steps=200),
 }
 DEFAULT_RESTORE_PRESET = "balanced"
