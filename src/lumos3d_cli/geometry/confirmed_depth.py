@@ -93,9 +93,10 @@ def projected_cover(world: torch.Tensor, cameras: Cameras, view: int, size: tupl
     z = camera[:, 2]
     front = z > 0
     intrinsics = cameras.intrinsics[view].to(world.dtype)
-    u = torch.floor(intrinsics[0, 0] * camera[front, 0] / z[front] + intrinsics[0, 2]).long()
-    v = torch.floor(intrinsics[1, 1] * camera[front, 1] / z[front] + intrinsics[1, 2]).long()
+    u = torch.floor(intrinsics[0, 0] * camera[front, 0] / z[front] + intrinsics[0, 2])
+    v = torch.floor(intrinsics[1, 1] * camera[front, 1] / z[front] + intrinsics[1, 2])
+    # tested in floating point: a point just in front of the camera projects to +-inf
     inside = (u >= 0) & (u < width) & (v >= 0) & (v < height)
     hits = torch.zeros(height * width, dtype=torch.float32)
-    hits[v[inside] * width + u[inside]] = 1.0
+    hits[v[inside].long() * width + u[inside].long()] = 1.0
     return F.max_pool2d(hits.reshape(1, 1, height, width), 3, stride=1, padding=1)[0, 0] > 0
