@@ -69,4 +69,3 @@ def test_a_contradicted_pixel_whose_place_no_neighbour_covers_is_kept():
     assert bool(kept[0, :, 36:45].all())  # contradicted, but dropping them would leave a hole
     assert float(kept[0, :, 24:34].float().mean()) < 0.3  # contradicted and covered by the wall
     assert bool(kept[1].all())
-

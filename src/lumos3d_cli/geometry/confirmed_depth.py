@@ -73,13 +73,16 @@ def confirmed_pixels(
             confirmed |= yes
             contradicted |= no
         keep[view] = confirmed | ~contradicted
-    dropped = ~keep
+    # Cover is measured with the first pass's kept pixels, so no view's result depends on the
+    # order the views are visited in.
+    first_pass = keep.clone()
     for view in range(views):
-        if bool(dropped[view].any()):
+        dropped = ~first_pass[view]
+        if bool(dropped.any()):
             covered = torch.zeros(depth.shape[1:], dtype=torch.bool)
             for other in nearest[view].tolist():
-                covered |= projected_cover(world[other][keep[other]], cameras, view, depth.shape[1:])
-            keep[view] |= dropped[view] & ~covered
+                covered |= projected_cover(world[other][first_pass[other]], cameras, view, depth.shape[1:])
+            keep[view] |= dropped & ~covered
     return keep
 
 
@@ -89,14 +92,10 @@ def projected_cover(world: torch.Tensor, cameras: Cameras, view: int, size: tupl
     grid seldom lands on every one of this view's pixels, and a gap of one pixel is not a hole
     that a neighbour's Gaussians (about a pixel wide) leave open."""
     height, width = size
-    camera = world @ cameras.extrinsics[view, :, :3].T.to(world.dtype) + cameras.extrinsics[view, :, 3].to(world.dtype)
-    z = camera[:, 2]
-    front = z > 0
-    intrinsics = cameras.intrinsics[view].to(world.dtype)
-    u = torch.floor(intrinsics[0, 0] * camera[front, 0] / z[front] + intrinsics[0, 2])
-    v = torch.floor(intrinsics[1, 1] * camera[front, 1] / z[front] + intrinsics[1, 2])
-    # tested in floating point: a point just in front of the camera projects to +-inf
-    inside = (u >= 0) & (u < width) & (v >= 0) & (v < height)
+    pixels, z = cameras[[view]].to(world.dtype).project(world)
+    u, v, z = pixels[0, :, 0].floor(), pixels[0, :, 1].floor(), z[0]
+    # tested in floating point: a point just in front of the camera projects to +-inf (or NaN)
+    inside = (z > 0) & (u >= 0) & (u < width) & (v >= 0) & (v < height)
     hits = torch.zeros(height * width, dtype=torch.float32)
     hits[v[inside].long() * width + u[inside].long()] = 1.0
     return F.max_pool2d(hits.reshape(1, 1, height, width), 3, stride=1, padding=1)[0, 0] > 0
