@@ -43,8 +43,9 @@ class RestorePreset:
 # seams: where only that view sees the scene (the borders of `make demo`'s views, the corner of
 # buu's frame 19) the black background showed through as dark streaks (rendered alpha below 0.9
 # on 22 % of a view against 11 %); on buu one footprint scored 0.1-0.2 dB higher PSNR and 0.005
-# lower SSIM at 25 steps, 0.06 dB and 0.002 lower at 200. The network keeps the model's resolution: at 0.75x it misplaced the 8 photos of
-# 250 px of `make demo` into ghosted, doubled views.
+# lower SSIM at 25 steps, 0.06 dB and 0.002 lower at 200. The network keeps the model's
+# resolution: at 0.75x it misplaced the 8 photos of 250 px of `make demo` into ghosted, doubled
+# views.
 _BALANCED = RestorePreset("balanced", max_views=32, resolution=1.0, sh_degree=None, voxel_scale=1.0, refine_steps=25,
                           refine_side=512)
 
