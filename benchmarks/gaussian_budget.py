@@ -46,7 +46,7 @@ from lumos3d_cli.model.bundled_models import resolve_checkpoint  # noqa: E402
 from lumos3d_cli.model.lumos3d import Lumos3D  # noqa: E402
 from lumos3d_cli.model.pixel_footprint import DEFAULT_FOOTPRINT_SCALE  # noqa: E402
 from lumos3d_cli.pipeline.model_loading import load_restoration_model  # noqa: E402
-from lumos3d_cli.pipeline.presets import get_restore_preset  # noqa: E402
+from lumos3d_cli.pipeline.presets import RESTORE_PRESETS, get_restore_preset  # noqa: E402
 from lumos3d_cli.pipeline.restore import BuiltScene, build_scene, render_views  # noqa: E402
 from lumos3d_cli.pipeline.sampling_filter import apply_sampling_filter  # noqa: E402
 from lumos3d_cli.render.contribution import rendered_weights  # noqa: E402
@@ -208,6 +208,15 @@ def summary_rows(rows: list[list[object]]) -> list[list[object]]:
     return summary
 
 
+def preset_budgets() -> str:
+    """What each restore preset uses, read from the presets themselves: '`fast`: voxels of x1
+    footprints, weights at 0.5, ...'."""
+    return "; ".join(
+        f"`{name}`: voxels of x{preset.voxel_scale:g} footprints, weights at {preset.budget_resolution:g}"
+        for name, preset in RESTORE_PRESETS.items()
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="*", default=list(TUNING_SCENES), help="folders in ../shared/data/scenes")
@@ -232,8 +241,7 @@ def main() -> None:
         "### Mean over the scenes",
         markdown_table(SUMMARY_HEADER, summary_rows(rows)),
         "The fixed voxel size is the model's one global size; the footprint fusions size each voxel by the "
-        "point's pixel footprint (`restore` uses x1 in `fast` and `balanced`, x2 in `best`). `restore` prunes at "
-        f"{DEFAULT_MIN_WEIGHT:g} px, with the weights at full resolution (`balanced`, `best`) or half (`fast`).",
+        f"point's pixel footprint. `restore` prunes at {DEFAULT_MIN_WEIGHT:g} px; {preset_budgets()}.",
         "### Every scene",
         markdown_table(HEADER, rows),
     ])

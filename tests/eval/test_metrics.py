@@ -5,7 +5,7 @@ import torch
 from skimage.filters import difference_of_gaussians
 from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
-from lumos3d_cli.eval.metrics import auto_gamma, psnr, sharpness, ssim
+from lumos3d_cli.eval.metrics import auto_gamma, psnr, psnr_gt_mean, sharpness, ssim
 
 
 def _load(path):
@@ -45,6 +45,41 @@ def test_gamma_baseline_reproduces_the_reference_numbers(buu):
         corrected = auto_gamma(inputs)
         assert psnr(corrected, targets).mean().item() == pytest.approx(expected_psnr, abs=0.01)
         assert ssim(corrected, targets).mean().item() == pytest.approx(expected_ssim, abs=0.001)
+
+
+def _gt_mean_oracle(image, reference):
+    """The GT-mean protocol as LLFlow's and Retinexformer's evaluation code writes it: OpenCV's
+    grey means, one scale, clip, then PSNR (scikit-image)."""
+    a = image.permute(1, 2, 0).numpy().astype(np.float32)
+    b = reference.permute(1, 2, 0).numpy().astype(np.float32)
+    scale = cv2.cvtColor(b, cv2.COLOR_RGB2GRAY).mean() / cv2.cvtColor(a, cv2.COLOR_RGB2GRAY).mean()
+    return peak_signal_noise_ratio(b.astype(np.float64), np.clip(a.astype(np.float64) * scale, 0, 1), data_range=1)
+
+
+def test_gt_mean_psnr_matches_the_published_protocol(pairs):
+    for low, high in pairs:
+        for image in (low, auto_gamma(low)):
+            assert psnr_gt_mean(image, high).item() == pytest.approx(_gt_mean_oracle(image, high), abs=2e-3)
+            # Matching the exposure can only help a dark image much: it is at least its plain PSNR here.
+            assert psnr_gt_mean(image, high).item() > psnr(image, high).item()
+
+
+def test_gt_mean_psnr_ignores_exposure_only(pairs):
+    _, high = pairs[0]
+    darker = high * 0.5
+    assert psnr_gt_mean(darker, high).item() > 60 and psnr(darker, high).item() < 15
+    # A colour change is not forgiven: swapping red and blue keeps the grey mean close but scores low.
+    swapped = high[[2, 1, 0]]
+    assert psnr_gt_mean(swapped, high).item() < 30
+    batch = torch.stack([darker, high])
+    assert psnr_gt_mean(batch, torch.stack([high, high])).shape == (2,)
+
+
+def test_gt_mean_psnr_of_a_black_image_is_its_plain_psnr(pairs):
+    _, high = pairs[0]
+    black = torch.zeros_like(high)
+    value = psnr_gt_mean(black, high)
+    assert torch.isfinite(value) and value.item() == pytest.approx(psnr(black, high).item())
 
 
 def _luminance(image):

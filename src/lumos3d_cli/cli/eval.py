@@ -33,10 +33,10 @@ def _print_report(report: EvalReport, out: Path) -> None:
     document = report.document
     table = Table(title=f"LOM {document['mode']}, protocol {document['protocol']}, preset {document['preset']}, "
                         f"geometry {document['geometry']} ({document['lpips']})")
-    for column in ("scene", "method", "PSNR ↑", "SSIM ↑", "sharpness (1 = ref)", "LPIPS ↓", "time s"):
+    for column in ("scene", "method", "PSNR ↑", "PSNR at GT mean ↑", "SSIM ↑", "sharpness (1 = ref)", "LPIPS ↓", "time s"):
         table.add_column(column, justify="left" if column in ("scene", "method") else "right")
     for row in report.rows:
-        table.add_row(row["scene"], row["method"], _cell(row["psnr"], 2), _cell(row["ssim"], 3),
+        table.add_row(row["scene"], row["method"], _cell(row["psnr"], 2), _cell(row["psnr_gt_mean"], 2), _cell(row["ssim"], 3),
                       _cell(row["sharpness"], 2), _cell(row["lpips"], 3),
                       _cell(row["seconds"], 1), end_section=row["scene"] == "mean" and row["method"] == report.methods[-1])
     console = stdout_console()

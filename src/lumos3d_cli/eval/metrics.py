@@ -1,4 +1,5 @@
-"""Image-quality metrics: PSNR on [0, 1]; SSIM with an 11x11 Gaussian window (sigma 1.5),
+"""Image-quality metrics: PSNR on [0, 1]; PSNR after matching the reference's mean grey level
+("GT-mean" PSNR); SSIM with an 11x11 Gaussian window (sigma 1.5),
 K1 = 0.01, K2 = 0.03, population covariances, reflected borders cropped before averaging (the
 settings of scikit-image's `structural_similarity(gaussian_weights=True, sigma=1.5,
 use_sample_covariance=False)`, which the tests use as the oracle); sharpness, the high-frequency
@@ -25,6 +26,26 @@ def psnr(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor:
     """[..., 3, H, W] in [0, 1] -> [...] PSNR in dB (inf for identical images)."""
     mse = ((_flatten(images) - _flatten(references)) ** 2).mean(dim=(1, 2, 3))
     return (10 * torch.log10(1.0 / mse)).reshape(images.shape[:-3])
+
+
+GREY_WEIGHTS = (0.299, 0.587, 0.114)  # Rec. 601, OpenCV's RGB -> grey, as the GT-mean protocol uses it
+
+
+def psnr_gt_mean(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor:
+    """[..., 3, H, W] in [0, 1] -> [...] PSNR in dB after scaling each image by its reference's mean
+    grey level over its own (then clipping to [0, 1]): the "GT-mean" PSNR that low-light
+    enhancement papers report beside PSNR (LLFlow, Retinexformer). It leaves out one number, the
+    overall exposure, which the reference fixes by the photographer's choice and a dark photo
+    does not reveal; what remains scores colour, contrast and detail. An image with no light
+    (mean grey 0) is scored as it is.
+    """
+    ours, theirs = _flatten(images), _flatten(references)
+    weights = torch.tensor(GREY_WEIGHTS, dtype=torch.float64)[:, None, None]
+    our_grey = (ours * weights).sum(dim=1).mean(dim=(1, 2))
+    their_grey = (theirs * weights).sum(dim=1).mean(dim=(1, 2))
+    scale = torch.where(our_grey > 0, their_grey / our_grey.clamp_min(1e-12), torch.ones_like(our_grey))
+    matched = (ours * scale[:, None, None, None]).clamp(0.0, 1.0)
+    return psnr(matched, theirs).reshape(images.shape[:-3])
 
 
 def ssim(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor:

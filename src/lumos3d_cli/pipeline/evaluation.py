@@ -27,7 +27,7 @@ from lumos3d_cli.pipeline.quality import QualityMeter, mean_metrics
 from lumos3d_cli.pipeline.scene_geometry import check_geometry_source
 
 BASELINES = ("gamma", "none")
-METRIC_KEYS = ("psnr", "ssim", "sharpness", "lpips", "seconds")
+METRIC_KEYS = ("psnr", "psnr_gt_mean", "ssim", "sharpness", "lpips", "seconds")
 
 
 @dataclass

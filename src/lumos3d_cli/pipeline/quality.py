@@ -1,4 +1,5 @@
-"""Per-view quality of restored images against references: PSNR, SSIM, sharpness (detail
+"""Per-view quality of restored images against references: PSNR, PSNR at the reference's mean
+grey level (eval.metrics.psnr_gt_mean), SSIM, sharpness (detail
 energy over the reference's, eval.metrics.sharpness) and (with trunk weights) LPIPS; LPIPS
 reports why it is missing instead of a number."""
 
@@ -12,7 +13,7 @@ import numpy as np
 import torch
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.eval.metrics import psnr, sharpness, ssim
+from lumos3d_cli.eval.metrics import psnr, psnr_gt_mean, sharpness, ssim
 from lumos3d_cli.io.image_files import list_images
 from lumos3d_cli.io.images import read_image, to_srgb
 from lumos3d_cli.losses.lpips import LPIPS
@@ -40,7 +41,7 @@ class QualityMeter:
 
     def measure(self, images: Sequence[torch.Tensor],
                 references: Sequence[torch.Tensor]) -> list[dict[str, float | None]]:
-        """Per image {psnr, ssim, sharpness, lpips}, in order; images of one size are measured as
+        """Per image {psnr, psnr_gt_mean, ssim, sharpness, lpips}, in order; images of one size are measured as
         one batch."""
         if len(images) != len(references):
             raise ValueError(f"{len(images)} images for {len(references)} references")
@@ -56,6 +57,7 @@ class QualityMeter:
     def _measure_batch(self, images: torch.Tensor, references: torch.Tensor) -> list[dict[str, float | None]]:
         """images, references [N, 3, H, W]."""
         values_psnr = psnr(images, references).tolist()
+        values_gt_mean = psnr_gt_mean(images, references).tolist()
         values_ssim = ssim(images, references).tolist()
         values_sharpness = sharpness(images, references).tolist()
         if self.lpips is not None:
@@ -63,12 +65,12 @@ class QualityMeter:
                 values_lpips = [float(v) for v in self.lpips(images.float(), references.float())]
         else:
             values_lpips = [None] * len(values_psnr)
-        return [{"psnr": p, "ssim": s, "sharpness": d, "lpips": l}
-                for p, s, d, l in zip(values_psnr, values_ssim, values_sharpness, values_lpips)]
+        return [{"psnr": p, "psnr_gt_mean": g, "ssim": s, "sharpness": d, "lpips": l}
+                for p, g, s, d, l in zip(values_psnr, values_gt_mean, values_ssim, values_sharpness, values_lpips)]
 
 
 def mean_metrics(rows: list[dict[str, float | None]],
-                 keys: tuple[str, ...] = ("psnr", "ssim", "sharpness", "lpips")) -> dict[str, float | None]:
+                 keys: tuple[str, ...] = ("psnr", "psnr_gt_mean", "ssim", "sharpness", "lpips")) -> dict[str, float | None]:
     """The mean of each key over `rows`; None where any row lacks a value (or there is no row)."""
     return {k: (sum(r[k] for r in rows) / len(rows) if rows and all(r[k] is not None for r in rows) else None) for k in keys}
 
