@@ -63,14 +63,19 @@ def score_scene(model: Lumos3D, photos: torch.Tensor, scored: list[int], targets
     image_size = model.architecture.image_size
     network = prepare_images(photos, image_size, model.architecture.patch_size).images
     with torch.no_grad():
-        operator = model.predict_appearance(network[None])
-        restored = restore_photos(photos, operator.scene(0))[scored]
+        operator = model.predict_appearance(network[None]).scene(0)
+        # only the scored views: their own local grids, the scene's curve and matrix
+        restored = restore_photos(photos[scored], operator.views(torch.tensor(scored)))
     per_scene = _least_squares_scale(restored, targets, (0, 1, 2, 3))
     per_view = _least_squares_scale(restored, targets, (1, 2, 3))
     return torch.stack([
         psnr(restored, targets), psnr(_scaled(restored, per_scene), targets), psnr(_scaled(restored, per_view), targets),
         psnr_gt_mean(restored, targets),
     ], dim=1).tolist()  # fmt: skip
+
+
+def _means(scores: list[list[float]]) -> list[str]:
+    return [f"{sum(column) / len(column):.2f}" for column in zip(*scores)]
 
 
 def main() -> None:
@@ -112,10 +117,6 @@ def main() -> None:
         f"Machine: {machine_description()}.",
     ])  # fmt: skip
     write_section("exposure-gap", text, MODEL_CARD)
-
-
-def _means(scores: list[list[float]]) -> list[str]:
-    return [f"{sum(column) / len(column):.2f}" for column in zip(*scores)]
 
 
 if __name__ == "__main__":
