@@ -38,6 +38,7 @@ def test_the_bundled_model_brightens_the_example_towards_normal_light(run_cli, b
     assert result.code == 0, result.err
     summary = json.loads(result.out)
     assert summary["checkpoint"]["name"] == WEIGHTS[mode].name
+    assert summary["exposure_prior"]["strength"] == 0.75 and 0 < summary["exposure_prior"]["stops"] < 3
     restored = load_images(out.parent / "restored").images
     inputs = load_images(EXAMPLE).images
     references = load_images([buu / "high" / f"{Path(name).stem}.JPG" for name in summary["views"]]).images

@@ -2,6 +2,7 @@
 
 from dataclasses import replace
 
+import pytest
 import torch
 import torch.nn.functional as F
 
@@ -41,13 +42,42 @@ def test_structure_from_motion_sees_the_models_restoration(buu):
     names = ["3.JPG", "4.JPG", "5.JPG", "6.JPG", "7.JPG"]
     photos = load_images([buu / "low" / name for name in names]).images
     model = build_model("tiny-operator", seed=0).eval()
-    built = build_scene(photos, names, model, get_restore_preset("fast"), geometry="sfm", max_views=3)
+    unexposed = get_restore_preset("fast", exposure_prior=0.0)
+    built = build_scene(photos, names, model, unexposed, geometry="sfm", max_views=3)
     report = built.geometry.summary()
     assert report["brightening"] == "the model's restoration operator" and report["registered_views"] == 5
     # At fast's 384 px these dark photos (an untrained operator barely brightens them) leave one view
     # unregistered; the retry at the default 512 px places all five, and its model is kept.
     assert report["sfm_size"] == [500, 375]
-    assert len(built.selected) == 3 and built.timings["network"] > 0
+    assert len(built.selected) == 3 and built.timings["network"] > 0 and built.exposure["stops"] == 0.0
+    # The exposure prior brightens them by itself, and 384 px suffices.
+    built = build_scene(photos, names, model, get_restore_preset("fast"), geometry="sfm", max_views=3)
+    report = built.geometry.summary()
+    assert report["registered_views"] == 5 and report["sfm_size"] == [384, 288] and built.exposure["stops"] > 1
     regression = build_scene(photos, names, build_model("tiny", seed=0).eval(), get_restore_preset("fast"),
                              geometry="sfm", max_views=3)
     assert regression.geometry.summary()["brightening"].startswith("auto-gamma")
+
+
+def test_the_exposure_prior_moves_the_scene_towards_the_key(buu):
+    from lumos3d_cli.errors import InputError
+    from lumos3d_cli.model.appearance.exposure_prior import EXPOSURE_KEY, EXPOSURE_PRIOR_STRENGTH
+
+    from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
+
+    normal = load_images([buu / "high" / "4.JPG", buu / "high" / "5.JPG"]).images
+    photos = linear_to_srgb(srgb_to_linear(normal) / 4)  # two stops under
+    model = build_model("tiny-operator", seed=0).eval()  # an untrained head: the identity
+    plain = run_network(model, photos, get_restore_preset("fast", exposure_prior=0.0))
+    assert plain.exposure_stops == 0.0
+    network = run_network(model, photos, get_restore_preset("fast"))
+    images = network.prepared.images[None]
+    keyed = run_network(model, photos, get_restore_preset("fast", exposure_prior=1.0))
+    # about 2 stops back to the key (buu's reference is a little brighter); the default takes 3/4 of them
+    assert 1.0 < keyed.exposure_stops < 3.0
+    assert network.exposure_stops == pytest.approx(EXPOSURE_PRIOR_STRENGTH * keyed.exposure_stops, rel=1e-5)
+    assert float(keyed.prediction.appearance.apply(images).mean()) == pytest.approx(EXPOSURE_KEY, abs=2e-3)
+    brightness = [float(n.prediction.appearance.apply(images).mean()) for n in (plain, network, keyed)]
+    assert brightness[0] == pytest.approx(float(images.mean()), abs=1e-4) and brightness[0] < brightness[1] < brightness[2]
+    with pytest.raises(InputError, match="exposure_prior"):
+        get_restore_preset("fast", exposure_prior=1.5)

@@ -161,3 +161,7 @@ def test_gaussian_grid_densifies_the_pixel_gaussians(run_cli, buu, tmp_path, ran
     assert cv2.imread(str(out.parent / "restored" / "1.png")).shape == (375, 500, 3)
     expect_input_error(run_cli("restore", photos, "-o", tmp_path / "bad" / "scene.ply", "--checkpoint", random_checkpoint,
                                "--gaussian-grid", "0.5"), "--gaussian-grid 0.5")
+    assert summary["exposure_prior"] is None  # a colour-regression model has no operator to expose
+    expect_input_error(run_cli("restore", photos, "-o", tmp_path / "bad" / "scene.ply", "--checkpoint", random_checkpoint,
+                               "--exposure-prior", "2"), "--exposure-prior 2", "0 (the model's own exposure) to 1")
+    assert not (tmp_path / "bad").exists()

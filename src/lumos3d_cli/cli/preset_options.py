@@ -10,3 +10,5 @@ MAX_GAUSSIANS = typer.Option(
     None, "--max-gaussians", help="Keep at most this many Gaussians, the ones the views draw most (default: all that the views show).")
 GAUSSIAN_GRID = typer.Option(
     None, "--gaussian-grid", help="Pixel Gaussians per network pixel along each side, 1 to 4 (default: the preset's; at most the photos' resolution).")
+EXPOSURE_PRIOR = typer.Option(
+    None, "--exposure-prior", help="How far the scene's overall brightness moves towards a well-exposed key, 0 (the model's own) to 1 (default: 0.75).")

@@ -43,6 +43,7 @@ def restore_command(
     refine_steps: int | None = preset_options.REFINE_STEPS,
     max_gaussians: int | None = preset_options.MAX_GAUSSIANS,
     gaussian_grid: float | None = preset_options.GAUSSIAN_GRID,
+    exposure_prior: float | None = preset_options.EXPOSURE_PRIOR,
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     reference: Path | None = typer.Option(None, "--reference", help="Normal-light photos of the same views (metrics)."),
     lpips_weights: Path | None = typer.Option(None, "--lpips-weights", help="torchvision vgg16 weights for LPIPS."),
@@ -63,7 +64,8 @@ def restore_command(
     with progress_bar() as bars:
         scene = restore(
             photos, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,
-            max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, gaussian_grid=gaussian_grid, device=device, reference=reference, lpips_weights=lpips_weights,
+            max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, gaussian_grid=gaussian_grid,
+            exposure_prior=exposure_prior, device=device, reference=reference, lpips_weights=lpips_weights,
             progress=ProgressBars(bars),
         )
         summary = write_restored_scene(scene, output, output_format)

@@ -11,6 +11,7 @@ import torch
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.field_of_view import FALLBACK_FOV_DEGREES, longer_side_fov, plausible_intrinsics
 from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.model.appearance.exposure_prior import exposure_prior_stops
 from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DPrediction
 from lumos3d_cli.model.preprocess import PreparedImages, prepare_images
 from lumos3d_cli.pipeline.presets import RestorePreset
@@ -39,11 +40,13 @@ def even_subset(count: int, limit: int, required: list[int] = ()) -> list[int]:
 
 @dataclass
 class NetworkPass:
-    """The forward pass over the selected views: `prediction` (batch of one scene) and the
-    prepared images (network size, and the map between network and photo pixels)."""
+    """The forward pass over the selected views: `prediction` (batch of one scene), the prepared
+    images (network size, and the map between network and photo pixels) and the gain in stops
+    the exposure prior added to the predicted operator (None: the model predicts no operator)."""
 
     prediction: Lumos3DPrediction
     prepared: PreparedImages
+    exposure_stops: float | None = None
 
     @property
     def network_size(self) -> tuple[int, int]:
@@ -68,11 +71,17 @@ def network_image_size(model: Lumos3D, preset: RestorePreset) -> int:
 
 def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset) -> NetworkPass:
     """images [V, 3, H, W] at the photos' size -> the network's predictions for them; a view
-    whose predicted field of view no lens has gets a typical one (`geometry.field_of_view`)."""
+    whose predicted field of view no lens has gets a typical one (`geometry.field_of_view`), and
+    a predicted restoration operator is followed by the preset's exposure prior
+    (`model.appearance.exposure_prior`)."""
     prepared = prepare_images(images, network_image_size(model, preset), model.architecture.patch_size)
     device = next(model.parameters()).device
     with torch.no_grad():
         prediction = model.predict(prepared.images[None].to(device))
+    exposure_stops = None
+    if prediction.appearance is not None:
+        stops = exposure_prior_stops(prediction.appearance, prepared.images[None].to(device), preset.exposure_prior)
+        prediction, exposure_stops = replace(prediction, appearance=prediction.appearance.with_gain(stops)), float(stops[0])
     intrinsics, replaced = plausible_intrinsics(prediction.intrinsics[0], prepared.network_size)
     if bool(replaced.any()):
         degrees = longer_side_fov(prediction.intrinsics[0][replaced], prepared.network_size)
@@ -81,4 +90,4 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset) -> 
                        ", ".join(f"{value:.3g}" for value in degrees.tolist()[:5]), int(replaced.sum()), len(replaced),
                        FALLBACK_FOV_DEGREES)
         prediction = replace(prediction, intrinsics=intrinsics[None])
-    return NetworkPass(prediction, prepared)
+    return NetworkPass(prediction, prepared, exposure_stops)

@@ -3,9 +3,10 @@ sees, at which resolution (relative to the model's), the SH degree written and r
 voxel size (relative to the model's pixel footprint), the steps of test-time refinement
 (pipeline.scene_refinement), the most Gaussians a scene may keep (render.gaussian_budget), and
 two speed settings: the size structure-from-motion sees the photos at (geometry.sfm) and the
-resolution the budget renders the Gaussians' weights at; and the size of the images refinement
+resolution the budget renders the Gaussians' weights at; the size of the images refinement
 fits (`balanced` and `best` fit LOM's 500x375 photos at their own size, `fast` at most 256 px
-when asked to refine)."""
+when asked to refine); and the strength of the exposure prior
+(model.appearance.exposure_prior; the same in every preset)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from dataclasses import dataclass, replace
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.sfm import SFM_LONG_SIDE
+from lumos3d_cli.model.appearance.exposure_prior import EXPOSURE_PRIOR_STRENGTH
 from lumos3d_cli.refine.settings import RefineSettings
 
 
@@ -29,6 +31,7 @@ class RestorePreset:
     sfm_long_side: int = SFM_LONG_SIDE  # the longest side structure-from-motion sees a photo at
     budget_resolution: float = 1.0  # the scale the Gaussian budget's weights are rendered at
     refine_side: int = RefineSettings.max_side  # the longer side of the images refinement fits (never enlarged)
+    exposure_prior: float = EXPOSURE_PRIOR_STRENGTH  # how far the scene's brightness moves to the key (0: none)
 
     def network_image_size(self, model_image_size: int, patch_size: int) -> int:
         """The longer network side: a patch multiple, at least one patch."""
@@ -68,10 +71,12 @@ DEFAULT_RESTORE_PRESET = "balanced"
 
 
 def get_restore_preset(
-    name: str, refine_steps: int | None = None, max_gaussians: int | None = None, gaussian_grid: float | None = None
+    name: str, refine_steps: int | None = None, max_gaussians: int | None = None, gaussian_grid: float | None = None,
+    exposure_prior: float | None = None,
 ) -> RestorePreset:
-    """The preset `name`, with its refinement steps, Gaussian cap and Gaussian grid replaced by
-    `refine_steps`, `max_gaussians` and `gaussian_grid` when given."""
+    """The preset `name`, with its refinement steps, Gaussian cap, Gaussian grid and exposure
+    prior replaced by `refine_steps`, `max_gaussians`, `gaussian_grid` and `exposure_prior` when
+    given."""
     try:
         preset = RESTORE_PRESETS[name]
     except KeyError:
@@ -88,4 +93,8 @@ def get_restore_preset(
         if not 1 <= gaussian_grid <= 4:
             raise InputError(f"{gaussian_grid}: use 1 (the network's grid) to 4", parameter="gaussian_grid")
         preset = replace(preset, gaussian_grid=gaussian_grid)
+    if exposure_prior is not None:
+        if not 0 <= exposure_prior <= 1:
+            raise InputError(f"{exposure_prior}: use 0 (the model's own exposure) to 1 (the key's)", parameter="exposure_prior")
+        preset = replace(preset, exposure_prior=exposure_prior)
     return preset

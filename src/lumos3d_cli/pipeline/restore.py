@@ -85,6 +85,7 @@ class RestoredScene:
     timings: dict[str, float] = field(default_factory=dict)
     refinement: dict | None = None  # the refinement's steps, loss curve, SH degree (None: not refined)
     budget: dict | None = None  # the Gaussian budget the scene got (BuiltScene.budget)
+    exposure: dict | None = None  # the exposure prior's strength and gain (BuiltScene.exposure)
 
     def summary(self, scene_path: Path | str | None = None, ply_bytes: int | None = None) -> dict:
         """The JSON summary of the run (summary.json); `ply_bytes`: the size of the written scene."""
@@ -100,7 +101,7 @@ class RestoredScene:
                           "ply_mib": None if ply_bytes is None else round(ply_bytes / 2**20, 3)},
             "seconds": {name: round(value, 3) for name, value in self.timings.items()},
             "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
-            "refinement": self.refinement,
+            "refinement": self.refinement, "exposure_prior": self.exposure,
             "metrics": self.metrics,
         }
 
@@ -130,8 +131,8 @@ def _limit_sh(gaussians: Gaussians, sh_degree: int | None) -> Gaussians:
 class BuiltScene:
     """The scene before rendering: fused Gaussians, the geometry (cameras of every view that has
     one), the views the network saw (indices into the photos), counts, the network image size
-    (width, height), seconds per stage, the Gaussian budget it got (`_budget_summary`), and the
-    refinement's summary (None: not refined)."""
+    (width, height), seconds per stage, the Gaussian budget it got (`_budget_summary`), the
+    refinement's summary (None: not refined) and the exposure prior's gain (`_exposure_summary`)."""
 
     gaussians: Gaussians
     geometry: SceneGeometry
@@ -141,6 +142,7 @@ class BuiltScene:
     timings: dict[str, float]
     budget: dict
     refinement: dict | None = None  # refine.RefinementResult.summary() when the scene was refined
+    exposure: dict | None = None  # the exposure prior's strength and gain (None: no restoration operator)
 
 
 def _budget_summary(report: BudgetReport, preset: RestorePreset, grid_size: tuple[int, int]) -> dict:
@@ -149,6 +151,13 @@ def _budget_summary(report: BudgetReport, preset: RestorePreset, grid_size: tupl
     return report.as_dict() | {"max_gaussians": preset.max_gaussians, "min_weight_px": DEFAULT_MIN_WEIGHT,
                                "grid": list(grid_size), "footprint_scale": DEFAULT_FOOTPRINT_SCALE * preset.voxel_scale,
                                "weights_resolution": preset.budget_resolution}
+
+
+def _exposure_summary(network: NetworkPass, preset: RestorePreset) -> dict | None:
+    """summary.json's exposure_prior: its strength and the gain in stops it gave the scene."""
+    if network.exposure_stops is None:
+        return None
+    return {"strength": preset.exposure_prior, "stops": round(network.exposure_stops, 4)}
 
 
 def with_full_resolution_colours(prediction: Lumos3DPrediction, photos: torch.Tensor, model: Lumos3D) -> Lumos3DPrediction:
@@ -278,7 +287,7 @@ def build_scene(
         gaussians, refinement = result.gaussians, result.summary()
         timings["refine"] = time.perf_counter() - started
     return BuiltScene(gaussians, scene_geometry, selected, output.counts[0], network.network_size, timings,
-                      _budget_summary(budget, preset, grid_size), refinement)
+                      _budget_summary(budget, preset, grid_size), refinement, _exposure_summary(network, preset))
 
 
 def restore_scene(
@@ -309,7 +318,7 @@ def restore_scene(
     return RestoredScene(
         built.gaussians, cameras, restored, inputs, list(cameras.names), list(batch.paths),
         built.selected, built.counts, built.network_size, built.geometry, preset.name, mode, timings=timings,
-        refinement=built.refinement, budget=built.budget,
+        refinement=built.refinement, budget=built.budget, exposure=built.exposure,
     )
 
 
@@ -318,13 +327,14 @@ def restore(
     preset: str = DEFAULT_RESTORE_PRESET, geometry: str = "auto", poses: Path | str | None = None,
     max_views: int | None = None, device: str = "cpu", reference: Path | str | None = None,
     lpips_weights: Path | str | None = None, progress: JobProgress | None = None, refine_steps: int | None = None,
-    max_gaussians: int | None = None, gaussian_grid: float | None = None,
+    max_gaussians: int | None = None, gaussian_grid: float | None = None, exposure_prior: float | None = None,
 ) -> RestoredScene:
     """The whole restore job from files: photos (a folder or files: photos, camera RAW, EXR),
     the bundled model of `mode` or `checkpoint`, and optionally reference photos of the same
     views (same file stems) for PSNR/SSIM/LPIPS. `refine_steps` overrides the preset's
     test-time refinement (0: none), `max_gaussians` caps the scene's Gaussians and
-    `gaussian_grid` sets the density of pixel Gaussians (`pipeline.gaussian_grid`). Write the
+    `gaussian_grid` sets the density of pixel Gaussians (`pipeline.gaussian_grid`),
+    `exposure_prior` the strength of the exposure prior (`model.appearance.exposure_prior`). Write the
     result with `write_restored_scene`."""
     progress = progress or SilentProgress()
     started = time.perf_counter()
@@ -332,7 +342,7 @@ def restore(
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
     if max_views is not None and max_views < 1:
         raise InputError(f"{max_views}: use at least 1", parameter="max_views")
-    settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid)
+    settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior)
     check_geometry_source(geometry)
     weights = resolve_checkpoint(checkpoint, mode)
     meter = QualityMeter.create(lpips_weights) if reference is not None else None

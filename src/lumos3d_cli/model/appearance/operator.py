@@ -82,6 +82,13 @@ class AppearanceOperator:
         local = None if self.local_log2_gain is None else self.local_log2_gain.detach()
         return AppearanceOperator(self.curve_slopes.detach(), self.matrix.detach(), local)
 
+    def with_gain(self, log2_gain: torch.Tensor) -> AppearanceOperator:
+        """The same operators followed by one gain per scene in linear light, log2_gain [B] stops
+        (`exposure_prior`). The curve is linear in its slopes and starts at 0, so scaling every
+        slope is exactly a gain on its output; the slopes may then leave [1/MAX_GAIN, MAX_GAIN]."""
+        gain = torch.exp2(log2_gain.to(self.curve_slopes)).reshape(-1, 1, 1)
+        return AppearanceOperator(self.curve_slopes * gain, self.matrix, self.local_log2_gain)
+
     def require_finite(self, name: str = "appearance operator") -> None:
         hint = "the illumination head produced NaN/Inf (corrupt weights or an unstable input?)"
         require_finite(f"{name} curve", self.curve_slopes, hint)

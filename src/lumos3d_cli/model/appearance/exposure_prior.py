@@ -1,0 +1,105 @@
+"""The exposure prior: after the illumination head, pull each scene's overall brightness part of
+the way towards a fixed key, the way a camera's auto-exposure meters a frame.
+
+A dark photo cannot say how bright its scene "should" be, and the bundled heads guess it with
+an error of their own (on the held-out SICE brackets their output over the target's brightness
+spreads from 0.73 to 1.33). A fixed key guesses it with an independent error; the geometric mean
+of the two, weighted by `strength`, is closer than either (benchmarks/exposure_prior.py, which
+chose the strength on the brackets' training split and confirmed it on the held-out ones). The
+key, mean sRGB 0.45, is the level the bracket pairing rule calls well exposed
+(`data.brackets.WELL_EXPOSED_MEAN`), which the heads were trained to reach.
+
+The gain is one number per scene in linear light, applied after the curve (so it keeps the
+head's colours, tone and per-view local grids), and bounded: a black scene gets none, and a
+brightening gain never pushes more than MAX_NEWLY_CLIPPED of the pixels into clipping. The mean
+of a night street is its dark walls; metering it alone blew the lit bus of
+`lowlight_single/003.jpg` out to orange (+1.7 stops); highlight protection, as a camera's
+metering has, leaves it 0.2 stop. It costs the held-out brackets 0.2 dB of the prior's gain.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from lumos3d_cli.checks import require_finite
+from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
+from lumos3d_cli.model.appearance.operator import AppearanceOperator
+
+EXPOSURE_KEY = 0.45  # mean sRGB of a well-exposed frame (data.brackets.WELL_EXPOSED_MEAN)
+EXPOSURE_PRIOR_STRENGTH = 0.75  # chosen on the SICE training split (benchmarks/exposure_prior.py)
+MAX_PRIOR_STOPS = 3.0  # the key never moves a scene further than this (a frame of nearly nothing)
+MAX_NEWLY_CLIPPED = 0.01  # brightening may clip at most 1 % more of a scene's pixels
+_METERING_SAMPLES = 2**18  # values a scene is metered on (a strided sample): its mean to ~1e-3
+_BISECTION_STEPS = 30  # 6 stops / 2^30: far below one 8-bit step
+_BLACK = 1.0 / 255  # restored images with no pixel above this (in sRGB) hold nothing to meter,
+_WHITE = 254.0 / 255  # nor do images with no pixel below this: no exposure recovers a clipped frame
+
+
+def stops_to_key(restored_linear: torch.Tensor, key: float = EXPOSURE_KEY, max_stops: float = MAX_PRIOR_STOPS) -> torch.Tensor:
+    """restored_linear [B, N, 3, H, W] (the scenes' restored images in linear light, not clipped)
+    -> [B] float32 log2 gains g in [-max_stops, max_stops] such that the mean over each scene of
+    sRGB(clip(2^g x)) is `key`; the bound where no gain within it reaches the key, and 0 for a
+    scene that holds nothing to meter (every value within one 8-bit step of black, or of white).
+
+    The clipped mean rises monotonically with the gain, so bisection in stops finds it. Larger
+    scenes are metered on an even stride of _METERING_SAMPLES of their values.
+    """
+    if restored_linear.dim() != 5:
+        raise ValueError(f"restored images must be [B, N, 3, H, W], got {tuple(restored_linear.shape)}")
+    flat = _strided(restored_linear.detach().flatten(1)).double().clamp_min(0.0)
+    low = torch.full((flat.shape[0],), -max_stops, dtype=torch.float64, device=flat.device)
+    high = torch.full_like(low, max_stops)
+    for _ in range(_BISECTION_STEPS):
+        middle = (low + high) / 2
+        brightness = linear_to_srgb((flat * torch.exp2(middle)[:, None]).clamp(0.0, 1.0)).mean(dim=1)
+        below = brightness < key
+        low = torch.where(below, middle, low)
+        high = torch.where(below, high, middle)
+    stops = (low + high) / 2
+    encoded = linear_to_srgb(flat.clamp(0.0, 1.0))
+    empty = (encoded.amax(dim=1) <= _BLACK) | (encoded.amin(dim=1) >= _WHITE)
+    return torch.where(empty, torch.zeros_like(stops), stops).float()
+
+
+def highlight_headroom(restored_linear: torch.Tensor, newly_clipped: float = MAX_NEWLY_CLIPPED,
+                       max_stops: float = MAX_PRIOR_STOPS) -> torch.Tensor:
+    """restored_linear [B, N, 3, H, W] -> [B] float32 stops in [0, max_stops]: the largest gain that
+    clips (any channel reaching 1) at most `newly_clipped` more of each scene's pixels than are
+    clipped already."""
+    peaks = restored_linear.detach().float().clamp_min(0.0).amax(dim=2).flatten(1)  # [B, pixels]
+    peaks = _strided(peaks)
+    clipped = (peaks >= 1.0).float().mean(dim=1)
+    level = (1.0 - clipped - newly_clipped).clamp_min(0.0)
+    brightest_kept = torch.stack([torch.quantile(row, float(q)) for row, q in zip(peaks, level)])
+    headroom = -torch.log2(brightest_kept.clamp_min(2.0**-max_stops))
+    return headroom.clamp(0.0, max_stops)
+
+
+def exposure_prior_stops(operator: AppearanceOperator, images: torch.Tensor, strength: float = EXPOSURE_PRIOR_STRENGTH,
+                         key: float = EXPOSURE_KEY) -> torch.Tensor:
+    """operator of B scenes, images [B, V, 3, H, W] sRGB (the network images it was predicted
+    from; its local grids are for these V views) -> [B] the prior's gain in stops: `strength`
+    times the stops that bring each scene's restored mean to `key` (0: the operator as it is;
+    1: the key alone decides the exposure), a brightening gain limited to the scene's
+    `highlight_headroom`."""
+    if not 0.0 <= strength <= 1.0:
+        raise ValueError(f"exposure prior strength must be in [0, 1], got {strength}")
+    if strength == 0.0:
+        return torch.zeros(operator.batch, device=operator.curve_slopes.device)
+    with torch.no_grad():
+        restored = operator.apply_linear(srgb_to_linear(images.float().clamp(0.0, 1.0)))
+        require_finite("restored images the exposure prior meters", restored,
+                       "the restoration operator produced NaN/Inf (corrupt weights or an unstable input?)")
+        stops = strength * stops_to_key(restored, key)
+        return torch.where(stops > 0, torch.minimum(stops, highlight_headroom(restored)), stops)
+
+
+def apply_exposure_prior(operator: AppearanceOperator, images: torch.Tensor, strength: float = EXPOSURE_PRIOR_STRENGTH,
+                         key: float = EXPOSURE_KEY) -> AppearanceOperator:
+    """The operator followed by the gain of `exposure_prior_stops` (same arguments)."""
+    return operator.with_gain(exposure_prior_stops(operator, images, strength, key))
+
+
+def _strided(values: torch.Tensor) -> torch.Tensor:
+    """[B, n] -> [B, <= _METERING_SAMPLES] every k-th value (all of them when n is small enough)."""
+    return values[:, :: max(1, -(-values.shape[1] // _METERING_SAMPLES))]
