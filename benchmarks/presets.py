@@ -28,31 +28,24 @@ from lumos3d_cli.pipeline.presets import RESTORE_PRESETS  # noqa: E402
 
 STEPS = (0, 25, 50, 100, 200, 400)
 PLOT = REPO / "docs" / "images" / "preset-trade.png"
-# Read off this benchmark's run of 2026-11-23 (the table it writes); rewrite when the numbers move.
+# Read off this benchmark's run of 2026-11-23 with the exposure prior (the table it writes); rewrite when the numbers move.
 DEFAULTS_REASON = (
-    "How the defaults were picked. Every row above is one run (2026-11-23, this release's low-light head). "
-    "Refinement is what lifts every preset: its first 25 steps take the views from sharpness 0.5-0.6 to about 0.9 "
-    "(they are fitted to the operator applied to the full-resolution photos) and add 0.5-0.9 dB on the context "
-    "frames and 0.3-0.5 dB on the novel holdout frames; after that each doubling adds about 0.2 dB or less, and the early "
-    "stop ends every run by about 200 steps (400 steps gave the 200-step scene). `balanced` (the default) is "
-    "`best`'s scene (all views up to 32, voxels of one pixel footprint, refinement against the photos at their own "
-    "size) stopped at 25 steps; the previous run's 16-view `balanced` scored below that scene at every step count. "
-    "Voxels of two footprints (the previous run) scored within 0.2 dB of one footprint at every step count "
-    "(balanced: 19.41 / 18.16 dB context / holdout against 19.58 / 18.25 now, SSIM 0.005 higher; best: 19.80 / "
-    "18.66 against 19.73 / 18.60) in 11-30 s less, but their merged Gaussians leave the seams between a view's "
-    "pixels uncovered where no other view adds Gaussians, and the black background showed through as dark streaks "
-    "at the borders of `make demo`'s views and in a corner of buu's frame 19; one footprint has none, so the "
-    "picture decided. `best` refines to the early stop: +0.35 dB and +0.024 SSIM on holdout, +0.15 dB and +0.017 "
-    "on context, in 2.4x `balanced`'s time. `fast` runs the network at 0.75x without view-dependent colour and "
-    "without refinement, with structure-from-motion on photos of at most 384 px and the budget's weights at half "
-    "resolution: 0.31x `balanced`'s time, 0.97 dB below it on holdout and 1.26 dB on context, and soft (sharpness "
-    "0.51); with 25 refinement steps it would take 0.45x and be 0.63 dB below on holdout. So the three presets are "
-    "ordered by time and by PSNR and SSIM on both protocols. Against the issue's goals: `fast` is within 1 dB of "
-    "`balanced` on holdout (not on context) at under half its time; `best` gains 0.35 dB on holdout (goal 1.5 dB "
-    "within 5x): not met. The ceiling of every preset is the illumination head's colours (paler and, on frame 1, "
-    "darker than buu's ground truth), which refinement fits rather than corrects (the appearance oracle in "
-    "model-card.md). The denser Gaussian grid (`fast` at grid 2) sharpens the views but keeps the amplified noise "
-    "and loses about 1 dB on holdout, so no preset uses it."
+    "How the defaults were picked. Every row above is one run (2026-11-23, this release's low-light head with "
+    "the exposure prior at 0.75). Refinement is what lifts every preset: its first 25 steps take the views from "
+    "sharpness 0.5-0.6 to about 0.9 (they are fitted to the operator applied to the full-resolution photos) and "
+    "add 0.9-1.5 dB on the context frames and 0.5-0.8 dB on the novel holdout frames; after that each doubling "
+    "adds 0.3 dB or less, and the early stop ends every run by about 200 steps (400 steps gave the 200-step "
+    "scene). `balanced` (the default) is `best`'s scene (all views up to 32, voxels of one pixel footprint, "
+    "refinement against the photos at their own size) stopped at 25 steps. `best` refines to the early stop: "
+    "+0.52 dB and +0.018 SSIM on holdout, +0.60 dB and +0.015 on context, in 1.9x `balanced`'s time. `fast` "
+    "runs the network at 0.75x without view-dependent colour and without refinement, with structure-from-motion "
+    "on photos of at most 384 px and the budget's weights at half resolution: 0.39x `balanced`'s time, 1.41 dB "
+    "below it on holdout and 2.09 dB on context, and soft (sharpness 0.51); with 25 refinement steps it would "
+    "take 0.51x and be 0.89 dB below on holdout. So the three presets are ordered by time and by PSNR and SSIM "
+    "on both protocols. Against the issue's goals: `fast` is not within 1 dB of `balanced` on holdout (it was "
+    "0.97 dB before the exposure prior, which lifts the refined scenes more than the unrefined one); `best` "
+    "gains 0.52 dB on holdout (goal 1.5 dB within 5x): not met. The denser Gaussian grid (`fast` at grid 2) "
+    "sharpens the views but keeps the amplified noise and loses 1.4 dB on holdout, so no preset uses it."
 )
 COLOURS = {"fast": (40, 160, 40), "balanced": (200, 120, 20), "best": (40, 40, 200)}  # BGR
 
