@@ -29,7 +29,7 @@ import torch
 import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import machine_description, markdown_table, write_section  # noqa: E402
+from report import markdown_table, table_section, write_section  # noqa: E402
 
 from lumos3d_cli.data.brackets import VALIDATION_BRACKETS, bracket_pairs, read_srgb  # noqa: E402
 from lumos3d_cli.data.lom import read_lom_scene  # noqa: E402
@@ -174,9 +174,8 @@ def main() -> None:
     print(table)
     if args.limit is not None:
         return
-    text = "\n".join([
+    text = table_section(
         "### Appearance operator: the ceiling of each part",
-        "",
         "PSNR (dB) / SSIM of each operator family of `model/appearance/` **fitted to the ground truth** "
         f"(Adam, {FIT_STEPS} steps on the sRGB squared error at {FIT_SIZE} px, scored at full resolution): "
         "what the illumination head could reach if it predicted the parameters perfectly. Brackets: the 20 "
@@ -185,11 +184,8 @@ def main() -> None:
         "`transforms_test.json` frames as one scene (one operator; one local grid per view); shown for "
         "reference, never used to choose anything. Auto-gamma is the blind baseline "
         "(`eval.metrics.auto_gamma`). Written by `benchmarks/appearance_oracle.py`.",
-        "",
         table,
-        "",
-        f"Machine: {machine_description()}.",
-    ])  # fmt: skip
+    )  # fmt: skip
     write_section("appearance-oracle", text, MODEL_CARD)
 
 

@@ -25,7 +25,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import machine_description, markdown_table, write_section  # noqa: E402
+from report import markdown_table, table_section, write_section  # noqa: E402
 
 from lumos3d_cli.data.brackets import bracket_pairs, read_srgb  # noqa: E402
 from lumos3d_cli.data.lom import read_lom_scene  # noqa: E402
@@ -102,20 +102,16 @@ def main() -> None:
     print(table)
     if args.limit is not None:
         return
-    text = "\n".join([
+    text = table_section(
         "### Where the PSNR goes: overall exposure",
-        "",
         "Each bundled model's illumination head restores a scene's photos in 2D (the operator at full "
         "resolution, no 3D); the restored views are scored as they are, after one brightness scale per "
         "scene, after one per view (both fitted to the ground truth in linear light by least squares), "
         "and at the ground truth's mean grey (`psnr_gt_mean`, as `lumos3d eval` reports it). One scale "
         "per scene is the part a dark photo cannot reveal: how bright the reference was exposed. "
         "Written by `benchmarks/exposure_gap.py`; buu is shown for reference, never used to choose anything.",
-        "",
         table,
-        "",
-        f"Machine: {machine_description()}.",
-    ])  # fmt: skip
+    )  # fmt: skip
     write_section("exposure-gap", text, MODEL_CARD)
 
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import machine_description, markdown_table, write_section  # noqa: E402
+from report import markdown_table, table_section, write_section  # noqa: E402
 
 from lumos3d_cli.data.brackets import bracket_pairs, read_srgb  # noqa: E402
 from lumos3d_cli.data.lom import read_lom_scene  # noqa: E402
@@ -90,19 +90,15 @@ def main() -> None:
     print(table)
     if args.limit is not None:
         return
-    text = "\n".join([
+    text = table_section(
         "### The exposure prior: choosing its strength",
-        "",
         "PSNR (dB) / SSIM of each bundled head's 2D restoration (the operator at full resolution, no 3D) "
         f"with the exposure prior (`model/appearance/exposure_prior.py`) pulling each scene's mean sRGB towards {EXPOSURE_KEY} "
         "by the given strength (0: the head's own exposure; 1: the key's). The strength is chosen on the "
         "brackets' training split and confirmed on the held-out brackets; buu is shown for reference, never "
         "used to choose anything. Written by `benchmarks/exposure_prior.py`.",
-        "",
         table,
-        "",
-        f"Machine: {machine_description()}.",
-    ])  # fmt: skip
+    )  # fmt: skip
     write_section("exposure-prior", text, MODEL_CARD)
 
 

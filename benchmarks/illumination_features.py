@@ -24,7 +24,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import machine_description, markdown_table, write_section  # noqa: E402
+from report import markdown_table, table_section, write_section  # noqa: E402
 
 from lumos3d_cli.data.brackets import bracket_pairs, read_srgb  # noqa: E402
 from lumos3d_cli.eval.metrics import auto_gamma, psnr, ssim  # noqa: E402
@@ -129,18 +129,14 @@ def main() -> None:
     print(table)
     if args.no_doc:
         return
-    text = "\n".join([
+    text = table_section(
         f"### Illumination head: what it reads ({args.mode})",
-        "",
         f"The illumination head alone, trained {args.steps} steps (batch {BATCH}, AdamW {LEARNING_RATE}, cosine) on the "
         f"{len(train['tokens'])} training-split bracket pairs with the appearance loss, on the frozen tokens of the "
         f"bundled {args.mode} model's aggregator; scored on the {len(validation['tokens'])} held-out pairs at full "
         "resolution (local 8x8 grid on in every variant). Written by `benchmarks/illumination_features.py`.",
-        "",
         table,
-        "",
-        f"Machine: {machine_description()}.",
-    ])  # fmt: skip
+    )  # fmt: skip
     write_section(f"illumination-features-{args.mode}", text, MODEL_CARD)
 
 

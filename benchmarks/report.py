@@ -66,6 +66,11 @@ def markdown_table(header: list[str], rows: list[list[object]]) -> str:
     return "\n".join(lines)
 
 
+def table_section(heading: str, description: str, table: str) -> str:
+    """A measured section: the heading, what was measured and how, the table, and the machine."""
+    return "\n".join([heading, "", description, "", table, "", f"Machine: {machine_description()}."])
+
+
 def write_section(name: str, markdown: str, document: Path = PERFORMANCE_DOC) -> None:
     """Replace (or append) the section `name` of `document`."""
     begin, end = f"<!-- {name}:begin -->", f"<!-- {name}:end -->"

@@ -24,6 +24,7 @@ import torch
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
 from lumos3d_cli.model.appearance.operator import AppearanceOperator
+from lumos3d_cli.model.appearance.photo_restoration import BLACK_LEVEL, WHITE_LEVEL
 
 EXPOSURE_KEY = 0.45  # mean sRGB of a well-exposed frame (data.brackets.WELL_EXPOSED_MEAN)
 EXPOSURE_PRIOR_STRENGTH = 0.75  # chosen on the SICE training split (benchmarks/exposure_prior.py)
@@ -31,8 +32,6 @@ MAX_PRIOR_STOPS = 3.0  # the key never moves a scene further than this (a frame 
 MAX_NEWLY_CLIPPED = 0.01  # brightening may clip at most 1 % more of a scene's pixels
 _METERING_SAMPLES = 2**18  # values a scene is metered on (a strided sample): its mean to ~1e-3
 _BISECTION_STEPS = 30  # 6 stops / 2^30: far below one 8-bit step
-_BLACK = 1.0 / 255  # restored images with no pixel above this (in sRGB) hold nothing to meter,
-_WHITE = 254.0 / 255  # nor do images with no pixel below this: no exposure recovers a clipped frame
 
 
 def stops_to_key(restored_linear: torch.Tensor, key: float = EXPOSURE_KEY, max_stops: float = MAX_PRIOR_STOPS) -> torch.Tensor:
@@ -56,8 +55,9 @@ def stops_to_key(restored_linear: torch.Tensor, key: float = EXPOSURE_KEY, max_s
         low = torch.where(below, middle, low)
         high = torch.where(below, high, middle)
     stops = (low + high) / 2
+    # as photo_restoration.frames_without_content: nothing above one 8-bit step of black, or below white
     encoded = linear_to_srgb(flat.clamp(0.0, 1.0))
-    empty = (encoded.amax(dim=1) <= _BLACK) | (encoded.amin(dim=1) >= _WHITE)
+    empty = (encoded.amax(dim=1) <= BLACK_LEVEL) | (encoded.amin(dim=1) >= WHITE_LEVEL)
     return torch.where(empty, torch.zeros_like(stops), stops).float()
 
 

@@ -14,15 +14,15 @@ logger = logging.getLogger(__name__)
 
 # A frame whose pixels are all within one 8-bit step of black (or of white in every channel)
 # carries no image to restore: no gain brings back what was never recorded.
-_BLACK = 1.0 / 255
-_WHITE = 254.0 / 255
+BLACK_LEVEL = 1.0 / 255
+WHITE_LEVEL = 254.0 / 255
 
 
 def frames_without_content(photos: torch.Tensor) -> tuple[list[int], list[int]]:
     """photos [V, 3, H, W] sRGB in [0, 1] -> (indices of all-black views, of all-saturated views)."""
     flat = photos.detach().reshape(photos.shape[0], -1)
-    black = (flat.amax(dim=1) <= _BLACK).nonzero().flatten().tolist()
-    saturated = (flat.amin(dim=1) >= _WHITE).nonzero().flatten().tolist()
+    black = (flat.amax(dim=1) <= BLACK_LEVEL).nonzero().flatten().tolist()
+    saturated = (flat.amin(dim=1) >= WHITE_LEVEL).nonzero().flatten().tolist()
     return black, saturated
 
 
