@@ -156,7 +156,7 @@ def measure_case(case: Case, built: BuiltScene, recorder: AssembleRecorder, foot
         started = time.perf_counter()
         gaussians = recorder.fuse(footprint, built.network_size)
         fuse_seconds = time.perf_counter() - started
-        full = render_views(gaussians, cameras, sh_degree)
+        full = render_views(gaussians, cameras, sh_degree).images
         score = mean_psnr(full, references)
         baseline = score if baseline is None else baseline
         rows.append([case.name, fusion, "-", "-", f"{len(gaussians):,}", f"{ply_mib(gaussians):.1f}", f"{score:.2f}",
@@ -169,7 +169,7 @@ def measure_case(case: Case, built: BuiltScene, recorder: AssembleRecorder, foot
             for min_weight in min_weights:
                 keep, report = select_budget(weights, min_weight)
                 kept = gaussians.select(keep)
-                renders = render_views(kept, cameras, sh_degree)
+                renders = render_views(kept, cameras, sh_degree).images
                 score = mean_psnr(renders, references)
                 rows.append([
                     case.name, fusion, f"{resolution:g}", f"{min_weight:g}", f"{report.kept:,}", f"{ply_mib(kept):.1f}",

@@ -4,7 +4,7 @@ time, peak RSS, Gaussians and `.ply` size of `restore` on all 25 photos, and PSN
 of `eval` on buu's three test frames under both protocols. Writes a table into docs/performance.md
 and a plot (time against holdout PSNR, one line per preset) into docs/images/preset-trade.png.
 
-    .venv/bin/python benchmarks/presets.py                  # the full grid: 18 configurations
+    .venv/bin/python benchmarks/presets.py                  # the full grid: 15 configurations
     .venv/bin/python benchmarks/presets.py --steps 0 50 --no-doc
 """
 
@@ -67,16 +67,16 @@ def measure(preset: str, steps: int, folder: str, grid: float | None = None) -> 
 
 
 def steps_to_measure(preset: str, presets: list[str], steps: list[int]) -> list[int]:
-    """All of `steps`, unless another measured preset builds the same scene and refines longer
-    (`balanced` is `best` stopped at 25 steps): then that preset's line already holds the other
-    step counts, and only this preset's own steps are measured."""
+    """All of `steps` and the preset's own, unless another measured preset builds the same scene
+    and refines longer (`balanced` is `best` stopped at 25 steps): then that preset's line already
+    holds the other step counts, and only this preset's own steps are measured."""
     own = RESTORE_PRESETS[preset]
     for other in presets:
         settings = RESTORE_PRESETS[other]
         if other != preset and replace(settings, name=preset, refine_steps=own.refine_steps) == own \
                 and settings.refine_steps > own.refine_steps:
             return [own.refine_steps]
-    return steps
+    return sorted(set(steps) | {own.refine_steps})
 
 
 def plot(results: list[dict], path: Path) -> None:

@@ -16,6 +16,8 @@ def test_eval_on_buu_writes_the_report(run_cli, buu, tmp_path, random_checkpoint
     assert rows[("buu", "gamma")]["psnr"] == rows[("mean", "gamma")]["psnr"]
     assert abs(rows[("buu", "gamma")]["ssim"] - 0.870) < 1e-3
     assert report["frames"]["buu"]["test"] == ["1", "13", "19"] and report["frames"]["buu"]["views_used"] == 5
+    assert report["fill_unobserved"] and report["uncovered"]["buu"]["filled"]
+    assert all(0 <= value <= 1 for value in report["uncovered"]["buu"]["unobserved_fraction"])
     # The gamma curve aims at a mean of 0.45 where buu's ground truth is brighter: matching the
     # exposure (GT-mean PSNR) scores it higher.
     assert rows[("buu", "gamma")]["psnr_gt_mean"] > rows[("buu", "gamma")]["psnr"]
@@ -31,10 +33,11 @@ def test_eval_on_buu_writes_the_report(run_cli, buu, tmp_path, random_checkpoint
 
 def test_holdout_over_exposure(run_cli, buu, tmp_path, random_checkpoint):
     result = run_cli("eval", buu, "--mode", "over-exposure", "--protocol", "holdout", "--checkpoint", random_checkpoint,
-                     "--out", tmp_path / "report", "--max-views", 5, "--geometry", "network", "--json")
+                     "--out", tmp_path / "report", "--max-views", 5, "--geometry", "network", "--black-unobserved", "--json")
     assert result.code == 0, result.err
     report = json.loads(result.out)
     assert report["protocol"] == "holdout" and report["mode"] == "over-exposure"
+    assert not report["fill_unobserved"] and len(report["uncovered"]["buu"]["unobserved_fraction"]) == 3
     gamma = next(r for r in report["rows"] if r["method"] == "gamma")
     assert abs(gamma["psnr"] - 15.47) < 0.01
 

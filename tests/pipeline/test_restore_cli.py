@@ -162,6 +162,24 @@ def test_gaussian_grid_densifies_the_pixel_gaussians(run_cli, buu, tmp_path, ran
     expect_input_error(run_cli("restore", photos, "-o", tmp_path / "bad" / "scene.ply", "--checkpoint", random_checkpoint,
                                "--gaussian-grid", "0.5"), "--gaussian-grid 0.5")
     assert summary["exposure_prior"] is None  # a colour-regression model has no operator to expose
+    assert summary["uncovered"]["filled"] and len(summary["uncovered"]["unobserved_fraction"]) == 1
     expect_input_error(run_cli("restore", photos, "-o", tmp_path / "bad" / "scene.ply", "--checkpoint", random_checkpoint,
                                "--exposure-prior", "2"), "--exposure-prior 2", "0 (the model's own exposure) to 1")
     assert not (tmp_path / "bad").exists()
+
+
+def test_uncovered_pixels_are_filled_unless_asked_to_stay_black(run_cli, buu, tmp_path, random_checkpoint):
+    photos = _copy(buu, tmp_path, ["1.JPG", "2.JPG"])
+    views = {}
+    for flag in ("--fill-unobserved", "--black-unobserved"):
+        out = tmp_path / flag.strip("-") / "scene.ply"
+        result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "network",
+                         "--preset", "fast", flag, "--json")
+        assert result.code == 0, result.err
+        views[flag] = (json.loads(result.out)["uncovered"], cv2.imread(str(out.parent / "restored" / "1.png")).astype(int))
+    (filled, filled_view), (black, black_view) = views["--fill-unobserved"], views["--black-unobserved"]
+    assert filled["filled"] and not black["filled"]
+    assert filled["unobserved_fraction"] == black["unobserved_fraction"]  # the same scene, only the compositing differs
+    assert (filled_view >= black_view - 1).all()  # filling adds (1 - alpha) x colour: it never darkens
+    if black["unobserved_fraction"][0] > 0.001:
+        assert np.abs(filled_view - black_view).max() > 12

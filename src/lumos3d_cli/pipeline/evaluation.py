@@ -62,13 +62,14 @@ def evaluate_lom(
     checkpoint: Path | str | None = None, preset: str = DEFAULT_RESTORE_PRESET, geometry: str = "auto",
     max_views: int | None = None, device: str = "cpu", baseline: str = "gamma", lpips_weights: Path | str | None = None,
     on_scene: Callable[[str], None] | None = None, refine_steps: int | None = None, max_gaussians: int | None = None,
-    gaussian_grid: float | None = None, exposure_prior: float | None = None,
+    gaussian_grid: float | None = None, exposure_prior: float | None = None, fill_unobserved: bool | None = None,
 ) -> EvalReport:
     """Evaluate restoration on the LOM-layout scenes under `root` (all, or those named) with the
     paper's protocol; `on_scene(name)` is called after each scene. `refine_steps` overrides the
     preset's test-time refinement (fitted to the views in the scene, never to held-out ones),
     `max_gaussians` its Gaussian cap, `gaussian_grid` its grid of pixel Gaussians,
-    `exposure_prior` its exposure prior's strength."""
+    `exposure_prior` its exposure prior's strength, `fill_unobserved` whether the renders' uncovered
+    pixels are filled."""
     if mode not in MODES:
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
     if protocol not in PROTOCOLS:
@@ -76,7 +77,7 @@ def evaluate_lom(
     if baseline not in BASELINES:
         raise InputError(f"{baseline!r}: use one of {', '.join(BASELINES)}", parameter="baseline")
     check_geometry_source(geometry)
-    settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior)
+    settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior, fill_unobserved)
     limit = max_views or settings.max_views
     found = find_lom_scenes(root, mode, scenes)
     weights = resolve_checkpoint(checkpoint, mode)
@@ -93,6 +94,7 @@ def evaluate_lom(
         "root": str(root), "mode": mode, "protocol": protocol, "preset": settings.name, "geometry": geometry,
         "refine_steps": settings.refine_steps, "max_gaussians": settings.max_gaussians,
         "gaussian_grid": settings.gaussian_grid, "exposure_prior": settings.exposure_prior,
+        "fill_unobserved": settings.fill_unobserved,
         "max_views": limit, "checkpoint": {"name": weights.name, "sha256": file_sha256(weights)},
         "lpips": meter.lpips_note, "rows": rows,
         "frames": {r.scene: {"test": r.test_frames, "views_used": r.views_used, "lumos3d": r.ours, "gamma": r.baseline}
@@ -100,6 +102,7 @@ def evaluate_lom(
         "cameras": {r.scene: r.pose.as_dict() for r in results if r.pose is not None},
         "geometry_sources": {r.scene: r.geometry for r in results},
         "gaussians": {r.scene: r.gaussians for r in results},
+        "uncovered": {r.scene: r.uncovered for r in results},
     }
     return EvalReport(document, rows, results, methods)
 

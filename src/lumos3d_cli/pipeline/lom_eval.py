@@ -3,7 +3,9 @@
 context: all views of the scene (capped by max_views, always including the test frames) go
 through the network; the scene is rendered at the cameras of the test frames (from the geometry
 source: structure-from-motion over every frame, or the network), at the photos' resolution
-(500x375 for LOM), and compared with `high/`.
+(500x375 for LOM), and compared with `high/`. Pixels no Gaussian covers are filled from the
+render around them (render.hole_filling; never from the test photo) unless the preset's
+`fill_unobserved` is off; the report gives the fraction filled per test view.
 holdout: the same forward pass, but the test frames' pixel Gaussians are left out of the fused
 scene, so the test views are novel views of a scene built from the others.
 The blind auto-gamma baseline is scored on the same frames. When the scene's transforms files
@@ -54,6 +56,7 @@ class SceneEvaluation:
     pose: PoseAccuracy | None = None
     geometry: dict = field(default_factory=dict)
     gaussians: dict = field(default_factory=dict)  # kept and the budget the scene got
+    uncovered: dict = field(default_factory=dict)  # the test views' pixels no Gaussian covered, and if filled
 
 
 def _pose_accuracy(scene: LomScene, frames: list[str], predicted: torch.Tensor) -> PoseAccuracy | None:
@@ -101,7 +104,9 @@ def evaluate_lom_scene(
     built = build_scene(images, frames, model, preset, geometry, None, max_views, scene.mode, None,
                         required_views=test_positions, fuse_views=fuse_views)
     cameras = built.geometry.cameras
-    renders = render_views(built.gaussians, cameras[[cameras.names.index(f) for f in scene.test]], preset.sh_degree)
+    rendered = render_views(built.gaussians, cameras[[cameras.names.index(f) for f in scene.test]], preset.sh_degree,
+                            fill=preset.fill_unobserved)
+    renders = rendered.images
     inputs = images[test_positions]
     baseline_images = auto_gamma(inputs)
     used = [frames[i] for i in built.selected] if built.geometry.source == "network" else list(cameras.names)
@@ -110,4 +115,5 @@ def evaluate_lom_scene(
         scene.name, protocol, len(built.selected), list(scene.test), meter.measure(renders, references),
         meter.measure(baseline_images, references), time.perf_counter() - started, inputs, renders, baseline_images,
         references, pose, built.geometry.summary(), {"kept": len(built.gaussians), "budget": built.budget},
+        rendered.summary(),
     )

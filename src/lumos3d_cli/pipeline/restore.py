@@ -49,6 +49,7 @@ from lumos3d_cli.pipeline.scene_geometry import (
 )
 from lumos3d_cli.pipeline.scene_refinement import refine_scene, refinement_targets
 from lumos3d_cli.render.gaussian_budget import DEFAULT_MIN_WEIGHT, BudgetReport, fit_budget
+from lumos3d_cli.render.hole_filling import OBSERVED_ALPHA, fill_unobserved
 from lumos3d_cli.render.render import render
 
 logger = logging.getLogger(__name__)
@@ -86,6 +87,7 @@ class RestoredScene:
     refinement: dict | None = None  # the refinement's steps, loss curve, SH degree (None: not refined)
     budget: dict | None = None  # the Gaussian budget the scene got (BuiltScene.budget)
     exposure: dict | None = None  # the exposure prior's strength and gain (BuiltScene.exposure)
+    uncovered: dict | None = None  # the views' pixels no Gaussian covered and whether they were filled
 
     def summary(self, scene_path: Path | str | None = None, ply_bytes: int | None = None) -> dict:
         """The JSON summary of the run (summary.json); `ply_bytes`: the size of the written scene."""
@@ -101,23 +103,46 @@ class RestoredScene:
                           "ply_mib": None if ply_bytes is None else round(ply_bytes / 2**20, 3)},
             "seconds": {name: round(value, 3) for name, value in self.timings.items()},
             "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
-            "refinement": self.refinement, "exposure_prior": self.exposure,
+            "refinement": self.refinement, "exposure_prior": self.exposure, "uncovered": self.uncovered,
             "metrics": self.metrics,
         }
 
 
+@dataclass
+class RenderedViews:
+    """images: per camera [3, H, W] at its own size; unobserved: per camera the fraction of its
+    pixels no Gaussian covered (rendered alpha below render.hole_filling.OBSERVED_ALPHA); filled:
+    whether those were filled by inpainting (else they show the black background)."""
+
+    images: list[torch.Tensor]
+    unobserved: list[float]
+    filled: bool
+
+    def summary(self) -> dict:
+        """summary.json's / metrics.json's account of the uncovered pixels."""
+        return {"filled": self.filled, "unobserved_fraction": [round(value, 5) for value in self.unobserved]}
+
+
 def render_views(gaussians: Gaussians, cameras: Cameras, sh_degree: int | None,
-                 progress: JobProgress | None = None) -> list[torch.Tensor]:
-    """Per camera a [3, H, W] render at its own size, one view at a time (bounded memory at full
-    resolution)."""
+                 progress: JobProgress | None = None, fill: bool = False) -> RenderedViews:
+    """Every camera rendered at its own size, one view at a time (bounded memory at full
+    resolution); with `fill` the pixels no Gaussian covers are filled (render.hole_filling)."""
     degree = gaussians.sh_degree if sh_degree is None else min(sh_degree, gaussians.sh_degree)
-    views = []
+    images, unobserved = [], []
     for index in range(len(cameras)):
         with torch.no_grad():
-            views.append(render(gaussians, cameras[index], sh_degree=degree).images[0].cpu())
+            output = render(gaussians, cameras[index], sh_degree=degree)
+        image, alpha = output.images[0].cpu(), output.alphas[0].cpu()
+        if fill:
+            view = fill_unobserved(image, alpha)
+            image, fraction = view.image, view.unobserved
+        else:
+            fraction = float((alpha < OBSERVED_ALPHA).float().mean())
+        images.append(image)
+        unobserved.append(fraction)
         if progress is not None:
             progress.advance("render views")
-    return views
+    return RenderedViews(images, unobserved, fill)
 
 
 def _limit_sh(gaussians: Gaussians, sh_degree: int | None) -> Gaussians:
@@ -312,13 +337,13 @@ def restore_scene(
                        "max_views or use structure-from-motion): %s", len(missing), ", ".join(missing))
     progress.start("render views", len(cameras))
     started = time.perf_counter()
-    restored = render_views(built.gaussians, cameras, preset.sh_degree, progress)
+    rendered = render_views(built.gaussians, cameras, preset.sh_degree, progress, fill=preset.fill_unobserved)
     timings = built.timings | {"render": time.perf_counter() - started}
     inputs = [batch.photo(names.index(name)) for name in cameras.names]
     return RestoredScene(
-        built.gaussians, cameras, restored, inputs, list(cameras.names), list(batch.paths),
+        built.gaussians, cameras, rendered.images, inputs, list(cameras.names), list(batch.paths),
         built.selected, built.counts, built.network_size, built.geometry, preset.name, mode, timings=timings,
-        refinement=built.refinement, budget=built.budget, exposure=built.exposure,
+        refinement=built.refinement, budget=built.budget, exposure=built.exposure, uncovered=rendered.summary(),
     )
 
 
@@ -328,13 +353,15 @@ def restore(
     max_views: int | None = None, device: str = "cpu", reference: Path | str | None = None,
     lpips_weights: Path | str | None = None, progress: JobProgress | None = None, refine_steps: int | None = None,
     max_gaussians: int | None = None, gaussian_grid: float | None = None, exposure_prior: float | None = None,
+    fill_unobserved: bool | None = None,
 ) -> RestoredScene:
     """The whole restore job from files: photos (a folder or files: photos, camera RAW, EXR),
     the bundled model of `mode` or `checkpoint`, and optionally reference photos of the same
     views (same file stems) for PSNR/SSIM/LPIPS. `refine_steps` overrides the preset's
     test-time refinement (0: none), `max_gaussians` caps the scene's Gaussians and
     `gaussian_grid` sets the density of pixel Gaussians (`pipeline.gaussian_grid`),
-    `exposure_prior` the strength of the exposure prior (`model.appearance.exposure_prior`). Write the
+    `exposure_prior` the strength of the exposure prior (`model.appearance.exposure_prior`),
+    `fill_unobserved` whether pixels no Gaussian covers are filled (`render.hole_filling`). Write the
     result with `write_restored_scene`."""
     progress = progress or SilentProgress()
     started = time.perf_counter()
@@ -342,7 +369,7 @@ def restore(
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
     if max_views is not None and max_views < 1:
         raise InputError(f"{max_views}: use at least 1", parameter="max_views")
-    settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior)
+    settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior, fill_unobserved)
     check_geometry_source(geometry)
     weights = resolve_checkpoint(checkpoint, mode)
     meter = QualityMeter.create(lpips_weights) if reference is not None else None
