@@ -4,8 +4,8 @@ voxel size (relative to the model's pixel footprint), the steps of test-time ref
 (pipeline.scene_refinement), the most Gaussians a scene may keep (render.gaussian_budget), and
 two speed settings: the size structure-from-motion sees the photos at (geometry.sfm) and the
 resolution the budget renders the Gaussians' weights at; the size of the images refinement
-fits (`balanced` and `best` fit LOM's 500x375 photos at their own size, `fast` at most 256 px
-when asked to refine); the strength of the exposure prior (model.appearance.exposure_prior) and
+fits (`balanced` and `best` fit LOM's 500x375 photos at their own size, `fast` at most
+256 px); the strength of the exposure prior (model.appearance.exposure_prior) and
 whether the rendered views' uncovered pixels are filled (render.hole_filling), both the same in
 every preset."""
 
