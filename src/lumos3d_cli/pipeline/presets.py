@@ -68,7 +68,9 @@ RESTORE_PRESETS = {
     "balanced": _BALANCED,
     # best: the same scene refined to where the early stop ends it (200 steps; 400 gave the same
     # scene). The network at its trained resolution (1.25x scored 0.3-0.5 dB lower on buu's
-    # holdout); the grid of 1 (2 lost 0.8-1.2 dB): read off benchmarks/presets.py.
+    # holdout); the grid of 1 (2 lost 0.8-1.2 dB): read off benchmarks/presets.py. Since the
+    # views' uncovered pixels are filled, its steps after 25 gain nothing measurable on buu
+    # (+0.04 dB holdout, -0.10 context, the same SSIM): see docs/performance.md.
     "best": replace(_BALANCED, name="best", refine_steps=200),
 }
 DEFAULT_RESTORE_PRESET = "balanced"
