@@ -121,13 +121,15 @@ def plot(results: list[dict], path: Path) -> None:
         points = [point(np.log10(r["seconds"]), r["holdout"]["psnr"]) for r in rows]
         for start, end in zip(points, points[1:]):
             cv2.line(canvas, start, end, colour, 2, cv2.LINE_AA)
-        for row, position in zip(rows, points):
+        for order, (row, position) in enumerate(zip(rows, points)):
             cv2.circle(canvas, position, 4, colour, -1, cv2.LINE_AA)
-            cv2.putText(canvas, str(row["steps"]), (position[0] + 5, position[1] - 6), font, 0.4, colour, 1, cv2.LINE_AA)
+            # alternate above and below the line: neighbouring points can sit a few pixels apart
+            offset = -8 if order % 2 == 0 else 16
+            cv2.putText(canvas, str(row["steps"]), (position[0] - 6, position[1] + offset), font, 0.4, colour, 1, cv2.LINE_AA)
         for row in (r for r in results if r["preset"] == preset and r["grid_option"] is not None):
             position = point(np.log10(row["seconds"]), row["holdout"]["psnr"])
             cv2.circle(canvas, position, 5, colour, 2, cv2.LINE_AA)
-            cv2.putText(canvas, f"{row['steps']}, grid {row['grid_option']:g}", (position[0] + 7, position[1] + 14), font, 0.4,
+            cv2.putText(canvas, f"{row['steps']}, grid {row['grid_option']:g}", (position[0] - 30, position[1] - 10), font, 0.4,
                         colour, 1, cv2.LINE_AA)
         cv2.putText(canvas, preset, (margin + 10, margin + 22 + 20 * index), font, 0.55, colour, 2, cv2.LINE_AA)
     cv2.putText(canvas, "restore wall time on buu (s, log scale)", (width // 2 - 170, height - 20), font, 0.5, (0, 0, 0), 1,
