@@ -42,7 +42,7 @@ def main() -> None:
     for path in paths:
         scene = restore_scene(load_images([path]), model, preset)
         rows.append([(scene.inputs[0], f"input {path.name}"), (scene.restored[0], "lumos3d"),
-                     (auto_gamma(scene.inputs[:1])[0], "auto-gamma")])
+                     (auto_gamma(scene.inputs[0][None])[0], "auto-gamma")])
     write_image(args.output, contact_sheet(rows).astype(np.float32) / 255)
     print(f"wrote {args.output} ({len(rows)} photos)")
 
