@@ -1,5 +1,6 @@
 """The restore job: degraded photos -> registered cameras, one forward pass of the network, fused
-Gaussians, and every input view rendered back at its own camera and its photo's own size.
+Gaussians, and every input view rendered back at its own camera and its photo's own size (one
+photo alone: that photo restored in 2D, see `BuiltScene`).
 
 `restore` runs the whole job from files (what `lumos3d restore` does); `restore_scene` runs it on
 loaded images and a loaded model; `pipeline.restore_outputs.write_restored_scene` writes it."""
@@ -61,7 +62,7 @@ class RestoredScene:
 
     gaussians: the fused scene (world frame of the geometry source); cameras: one per restored
     view at its photo's own size; restored: per view [3, H, W], the render at its camera (photos
-    of different sizes give views of different sizes); inputs: per view [3, H, W] the photo;
+    of different sizes give views of different sizes; a one-photo scene: the photo restored in 2D); inputs: per view [3, H, W] the photo;
     names of the views; selected: indices (into the inputs) of the views the network saw;
     geometry: where the cameras came from and how well depth agrees; metrics/references (per
     view [3, H, W]) when reference photos were given; timings in seconds per stage.
