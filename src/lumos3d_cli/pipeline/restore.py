@@ -62,8 +62,8 @@ class RestoredScene:
 
     gaussians: the fused scene (world frame of the geometry source); cameras: one per restored
     view at its photo's own size; restored: per view [3, H, W], the render at its camera (photos
-    of different sizes give views of different sizes; a one-photo scene: the photo restored in 2D); inputs: per view [3, H, W] the photo;
-    names of the views; selected: indices (into the inputs) of the views the network saw;
+    of different sizes give views of different sizes; a one-photo scene: the photo restored in
+    2D); inputs: per view [3, H, W] the photo; names of the views; selected: indices (into the inputs) of the views the network saw;
     geometry: where the cameras came from and how well depth agrees; metrics/references (per
     view [3, H, W]) when reference photos were given; timings in seconds per stage.
     """
