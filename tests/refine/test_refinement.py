@@ -87,6 +87,33 @@ def test_progress_callback_sees_every_step(sparse_buu):
     assert seen == list(enumerate(result.loss_curve, start=1))
 
 
+@pytest.mark.parametrize("decay", [1.0, 0.01])
+def test_learning_rates_decay_by_the_factor_every_100_steps(sparse_buu, monkeypatch, decay):
+    """Every parameter group's rate at step k (from 0) is its first rate times decay ** (k / 100),
+    whatever the number of steps asked for."""
+    rates = []
+    original_step = torch.optim.Adam.step
+
+    def recording_step(optimizer, *args, **kwargs):
+        rates.append([group["lr"] for group in optimizer.param_groups])
+        return original_step(optimizer, *args, **kwargs)
+
+    monkeypatch.setattr(torch.optim.Adam, "step", recording_step)
+    steps = 5
+    result = refine_gaussians(sparse_buu.gaussians, sparse_buu.cameras, sparse_buu.targets,
+                              RefineSettings(steps=steps, max_side=64, patience=1000, lr_decay_per_100_steps=decay))
+    assert result.steps_run == steps == len(rates)
+    first = np.array(rates[0])
+    assert np.all(first > 0)
+    for step, row in enumerate(rates):
+        np.testing.assert_allclose(row, first * decay ** (step / 100), rtol=1e-12)
+    assert result.summary()["lr_decay_per_100_steps"] == decay
+    result.gaussians.require_finite()
+    shorter = refine_gaussians(sparse_buu.gaussians, sparse_buu.cameras, sparse_buu.targets,
+                               RefineSettings(steps=3, max_side=64, patience=1000, lr_decay_per_100_steps=decay))
+    assert shorter.loss_curve == result.loss_curve[:3]  # a shorter run is the start of a longer one
+
+
 @pytest.mark.parametrize("positions", ["ray", "fixed"])
 def test_positions_along_rays_or_fixed(sparse_buu, positions):
     result = refine_gaussians(sparse_buu.gaussians, sparse_buu.cameras, sparse_buu.targets,

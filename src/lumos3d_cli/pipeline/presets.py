@@ -32,6 +32,7 @@ class RestorePreset:
     sfm_long_side: int = SFM_LONG_SIDE  # the longest side structure-from-motion sees a photo at
     budget_resolution: float = 1.0  # the scale the Gaussian budget's weights are rendered at
     refine_side: int = RefineSettings.max_side  # the longer side of the images refinement fits (never enlarged)
+    refine_lr_decay: float = RefineSettings.lr_decay_per_100_steps  # the factor refinement's learning rates fall by every 100 steps
     exposure_prior: float = EXPOSURE_PRIOR_STRENGTH  # how far the scene's brightness moves to the key (0: none)
     fill_unobserved: bool = True  # fill the rendered views' pixels no Gaussian covers (render.hole_filling)
 

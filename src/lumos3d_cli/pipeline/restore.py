@@ -314,7 +314,8 @@ def build_scene(
             restored = _operator_restoration(network, images, selected)
         targets, cameras = refinement_targets(network, model, images, restored, selected, names,
                                               scene_geometry.cameras, fuse_views)
-        result = refine_scene(gaussians, targets, cameras, preset.refine_steps, progress, preset.refine_side)
+        result = refine_scene(gaussians, targets, cameras, preset.refine_steps, progress, preset.refine_side,
+                              preset.refine_lr_decay)
         gaussians, refinement = result.gaussians, result.summary()
         timings["refine"] = time.perf_counter() - started
     photo_restoration = None

@@ -57,13 +57,15 @@ def refinement_targets(
 
 def refine_scene(
     gaussians: Gaussians, targets: torch.Tensor, cameras: Cameras, steps: int, progress: JobProgress,
-    max_side: int = RefineSettings.max_side,
+    max_side: int = RefineSettings.max_side, lr_decay_per_100_steps: float = RefineSettings.lr_decay_per_100_steps,
 ) -> RefinementResult:
     """`steps` of refinement (fewer when the loss stops falling) against targets downsampled to a
-    longer side of at most `max_side`, otherwise with the default settings, shown as a "refine"
+    longer side of at most `max_side`, the learning rates falling by `lr_decay_per_100_steps`
+    every 100 steps, otherwise with the default settings, shown as a "refine"
     progress bar."""
     progress.start("refine", steps)
-    result = refine_gaussians(gaussians, cameras, targets, RefineSettings(steps=steps, max_side=max_side),
+    settings = RefineSettings(steps=steps, max_side=max_side, lr_decay_per_100_steps=lr_decay_per_100_steps)
+    result = refine_gaussians(gaussians, cameras, targets, settings,
                               on_step=lambda step, loss: progress.advance("refine"))
     logger.info("refinement: %d steps (%s), loss %.4f -> %.4f, SH degree %d", result.steps_run,
                 "stopped early" if result.stopped_early else "all asked", result.loss_curve[0] if result.loss_curve else 0.0,

@@ -33,7 +33,8 @@ class RefinementResult:
     without a usable camera); loss_curve: the photometric loss of each step's views at the
     working resolution; steps_run <= the steps asked for; stopped_early: the loss stopped falling
     (settings.patience, settings.tolerance); sh_degree: the degree kept; working_size: (width,
-    height) of the images fitted; seconds: wall time."""
+    height) of the images fitted; seconds: wall time; lr_decay_per_100_steps: the factor the
+    learning rates fell by every 100 steps (settings.lr_decay_per_100_steps)."""
 
     gaussians: Gaussians
     cameras: Cameras
@@ -43,12 +44,13 @@ class RefinementResult:
     sh_degree: int
     working_size: tuple[int, int]
     seconds: float
+    lr_decay_per_100_steps: float = 1.0
 
     def summary(self) -> dict:
         """The refinement's entry of summary.json."""
         return {
             "steps": self.steps_run, "stopped_early": self.stopped_early, "sh_degree": self.sh_degree,
-            "working_size": list(self.working_size),
+            "working_size": list(self.working_size), "lr_decay_per_100_steps": self.lr_decay_per_100_steps,
             "seconds": round(self.seconds, 3), "loss_curve": [round(value, 6) for value in self.loss_curve],
         }
 
@@ -127,7 +129,11 @@ def refine_gaussians(
                             torch.Generator().manual_seed(settings.seed))
     single_views = [working[[v]] for v in range(len(working))]
     curve: list[float] = []
+    initial_rates = [group["lr"] for group in optimizer.param_groups]
     for step in range(settings.steps):
+        decay = settings.lr_decay_per_100_steps ** (step / 100)
+        for group, rate in zip(optimizer.param_groups, initial_rates):
+            group["lr"] = rate * decay
         batch = next(batches)
         current = parameters.gaussians()
         losses = []
@@ -163,6 +169,7 @@ def refine_gaussians(
     return RefinementResult(
         refined, Cameras(extrinsics, cameras.intrinsics.clone(), list(cameras.sizes), list(cameras.names)),
         curve, len(curve), stop.should_stop, degree, (images.shape[-1], images.shape[-2]), time.perf_counter() - started,
+        settings.lr_decay_per_100_steps,
     )
 
 

@@ -21,7 +21,10 @@ class RefineSettings:
     positions and camera translations, relative to the scene's extent; early stop: when the
     running loss over all views has not fallen by `tolerance` (relative) for `patience` steps;
     ssim_weight: loss = (1 - w) L1 + w (1 - SSIM); choose_sh_degree: drop the SH bands that do
-    not lower the loss (`sh_degree.choose_sh_degree`); seed: the view order.
+    not lower the loss (`sh_degree.choose_sh_degree`); seed: the view order;
+    lr_decay_per_100_steps: every learning rate decays exponentially, by this factor every 100
+    steps (1: constant rates, as 3DGS's but for positions, which it decays by 0.01 over its 30,000
+    steps); the schedule does not depend on `steps`, so a shorter run is the start of a longer one.
 
     Defaults measured on buu's demo (benchmarks/refinement.py; 7 fitted views, 1 held out,
     60 steps): 3DGS's learning rates for positions and rotations, twice its opacity and scale
@@ -52,6 +55,7 @@ class RefineSettings:
     choose_sh_degree: bool = True
     sh_tolerance: float = 1e-3
     seed: int = 0
+    lr_decay_per_100_steps: float = 1.0
 
     def __post_init__(self) -> None:
         if self.steps < 0:
@@ -64,5 +68,7 @@ class RefineSettings:
             raise ValueError(f"positions={self.positions!r}: use 'free', 'ray' or 'fixed'")
         if not 0 <= self.ssim_weight <= 1:
             raise ValueError(f"ssim_weight={self.ssim_weight} must be in [0, 1]")
+        if not 0 < self.lr_decay_per_100_steps <= 1:
+            raise ValueError(f"lr_decay_per_100_steps={self.lr_decay_per_100_steps} must be in (0, 1]")
         if self.patience < 1 or self.tolerance < 0:
             raise ValueError(f"patience={self.patience} must be >= 1 and tolerance={self.tolerance} >= 0")
