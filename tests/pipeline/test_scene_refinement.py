@@ -10,7 +10,7 @@ from assertions import expect_input_error
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.lumos3d import build_model
 from lumos3d_cli.pipeline.network_pass import run_network
-from lumos3d_cli.pipeline.presets import RESTORE_PRESETS, get_restore_preset
+from lumos3d_cli.pipeline.presets import REFINE_LR_DECAY, RESTORE_PRESETS, get_restore_preset
 from lumos3d_cli.pipeline.scene_refinement import network_colours, refinement_targets
 
 
@@ -34,6 +34,9 @@ def test_restore_refines_and_reports_the_loss_curve(run_cli, buu, tmp_path, rand
     fast = run_cli("restore", photos, "-o", tmp_path / "fast" / "scene.ply", "--checkpoint", random_checkpoint,
                    "--geometry", "network", "--preset", "fast", "--refine-steps", 2, "--json")
     assert json.loads(fast.out)["refinement"]["working_size"] == [256, 192]  # fast downsamples to refine's 256 px
+    # every preset's learning rates decay, and summary.json says by how much
+    assert refinement["lr_decay_per_100_steps"] == json.loads(fast.out)["refinement"]["lr_decay_per_100_steps"]
+    assert refinement["lr_decay_per_100_steps"] == pytest.approx(REFINE_LR_DECAY) and REFINE_LR_DECAY < 1
     plain = run_cli("restore", photos, "-o", tmp_path / "plain" / "scene.ply", "--checkpoint", random_checkpoint,
                     "--geometry", "network", "--preset", "fast", "--refine-steps", 0, "--json")
     assert json.loads(plain.out)["refinement"] is None  # 0 steps: the forward pass as it is

@@ -5,9 +5,9 @@ voxel size (relative to the model's pixel footprint), the steps of test-time ref
 two speed settings: the size structure-from-motion sees the photos at (geometry.sfm) and the
 resolution the budget renders the Gaussians' weights at; the size of the images refinement
 fits (`balanced` and `best` fit LOM's 500x375 photos at their own size, `fast` at most
-256 px); the strength of the exposure prior (model.appearance.exposure_prior) and
-whether the rendered views' uncovered pixels are filled (render.hole_filling), both the same in
-every preset."""
+256 px); the decay of refinement's learning rates, the strength of the exposure prior
+(model.appearance.exposure_prior) and whether the rendered views' uncovered pixels are filled
+(render.hole_filling), all three the same in every preset."""
 
 from __future__ import annotations
 
@@ -17,6 +17,15 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.sfm import SFM_LONG_SIDE
 from lumos3d_cli.model.appearance.exposure_prior import EXPOSURE_PRIOR_STRENGTH
 from lumos3d_cli.refine.settings import RefineSettings
+
+
+# Refinement's learning rates fall by a tenth over 200 steps in every preset: at constant rates the
+# steps after 25 fit the noise the operator amplifies in the darkest photos (on buu's holdout frames
+# 200 steps scored 23.68 dB / 0.888 at constant rates and 23.76 / 0.891 decaying; on Strecha's
+# fountain-P11 darkened to exposure 0.1-0.2 with noise, a scene that is not LOM, 18.04 dB at 25
+# steps and 18.57 at 200 decaying). A hundredth over 200 steps lost 0.2 dB on fountain-P11; 25
+# decaying steps scored as 25 constant ones on buu (23.65 / 0.889).
+REFINE_LR_DECAY = 0.1 ** 0.5  # per 100 steps
 
 
 @dataclass(frozen=True)
@@ -32,7 +41,7 @@ class RestorePreset:
     sfm_long_side: int = SFM_LONG_SIDE  # the longest side structure-from-motion sees a photo at
     budget_resolution: float = 1.0  # the scale the Gaussian budget's weights are rendered at
     refine_side: int = RefineSettings.max_side  # the longer side of the images refinement fits (never enlarged)
-    refine_lr_decay: float = RefineSettings.lr_decay_per_100_steps  # the factor refinement's learning rates fall by every 100 steps
+    refine_lr_decay: float = REFINE_LR_DECAY  # the factor refinement's learning rates fall by every 100 steps
     exposure_prior: float = EXPOSURE_PRIOR_STRENGTH  # how far the scene's brightness moves to the key (0: none)
     fill_unobserved: bool = True  # fill the rendered views' pixels no Gaussian covers (render.hole_filling)
 
@@ -42,16 +51,12 @@ class RestorePreset:
 
 
 # balanced: best's scene (all views up to 32, voxels of one footprint, refinement against the
-# photos at their own size) with 25 refinement steps instead of 200. benchmarks/presets.py
-# measured that scene at 25 steps above the former balanced (16 views, refinement at 256 px) at
-# every step count; the first 25 steps take the views from sharpness 0.55 to about 0.95. Voxels
-# of two footprints merge neighbouring pixels of one view into Gaussians that do not cover their
-# seams: where only that view sees the scene (the borders of `make demo`'s views, the corner of
-# buu's frame 19) the black background showed through as dark streaks (rendered alpha below 0.9
-# on 22 % of a view against 11 %); on buu one footprint scored 0.1-0.2 dB higher PSNR and 0.005
-# lower SSIM at 25 steps, 0.06 dB and 0.002 lower at 200. The network keeps the model's
-# resolution: at 0.75x it misplaced the 8 photos of 250 px of `make demo` into ghosted, doubled
-# views.
+# photos at their own size) stopped at 25 refinement steps: the first 25 steps take the views from
+# sharpness 0.55 to about 0.85. Voxels of two footprints merge neighbouring pixels of one view into
+# Gaussians that do not cover their seams: where only that view sees the scene (the borders of
+# `make demo`'s views, the corner of buu's frame 19) the black background showed through as dark
+# streaks. The network keeps the model's resolution: at 0.75x it misplaced the 8 photos of 250 px
+# of `make demo` into ghosted, doubled views.
 _BALANCED = RestorePreset("balanced", max_views=32, resolution=1.0, sh_degree=None, voxel_scale=1.0, refine_steps=25,
                           refine_side=512)
 
@@ -67,11 +72,10 @@ RESTORE_PRESETS = {
     "fast": RestorePreset("fast", max_views=16, resolution=0.75, sh_degree=0, voxel_scale=1.0, refine_steps=15,
                           sfm_long_side=384, budget_resolution=0.5),
     "balanced": _BALANCED,
-    # best: the same scene refined to where the early stop ends it (200 steps; 400 gave the same
-    # scene). The network at its trained resolution (1.25x scored 0.3-0.5 dB lower on buu's
-    # holdout); the grid of 1 (2 lost 0.8-1.2 dB): read off benchmarks/presets.py. Since the
-    # views' uncovered pixels are filled, its steps after 25 gain nothing measurable on buu
-    # (+0.04 dB holdout, -0.10 context, the same SSIM): see docs/performance.md.
+    # best: the same scene refined for 200 steps (the early stop may end it sooner), at the
+    # network's trained resolution (1.25x scored 0.3-0.5 dB lower on buu's holdout) and the grid of
+    # 1: the grid of 2 refined for 200 decaying steps scored 23.58 dB / 0.884 on buu's holdout
+    # against 23.76 / 0.891. See docs/performance.md for the measured trade.
     "best": replace(_BALANCED, name="best", refine_steps=200),
 }
 DEFAULT_RESTORE_PRESET = "balanced"
