@@ -33,11 +33,12 @@ weights: $(STAMP)
 	$(BIN)/lumos3d train configs/default-teacher.yaml
 	$(BIN)/lumos3d train configs/default-low-light.yaml
 	$(BIN)/lumos3d train configs/default-over-exposure.yaml
-	# both modes ship with the appearance operator: a head-only stage on SICE brackets (issue 15)
+	# both modes ship with the appearance operator: a head-only stage on SICE brackets (issue 15),
+	# the step with the best held-out bracket PSNR (select: bracket_psnr)
 	$(BIN)/lumos3d train configs/operator-head-low-light.yaml
-	$(BIN)/lumos3d convert runs/operator-head-low-light/final.safetensors -o src/lumos3d_cli/weights/lumos3d-low-light.safetensors --dtype float16
+	$(BIN)/lumos3d convert runs/operator-head-low-light/selected.safetensors -o src/lumos3d_cli/weights/lumos3d-low-light.safetensors --dtype float16
 	$(BIN)/lumos3d train configs/operator-head-over-exposure.yaml
-	$(BIN)/lumos3d convert runs/operator-head-over-exposure/final.safetensors -o src/lumos3d_cli/weights/lumos3d-over-exposure.safetensors --dtype float16
+	$(BIN)/lumos3d convert runs/operator-head-over-exposure/selected.safetensors -o src/lumos3d_cli/weights/lumos3d-over-exposure.safetensors --dtype float16
 
 # Train the ablation students the model card reports (after `make weights`; hours on a CPU) and
 # rewrite its ablation table.

@@ -71,6 +71,7 @@ def train_command(
         "stage": settings.stage, "output": settings.output, "steps_done": result.steps_done,
         "stopped_early": result.stopped_early, "stop_signal": _signal_name(result.stop_signal),
         "final_checkpoint": str(result.final_checkpoint) if result.final_checkpoint else None,
+        "selected_checkpoint": str(result.selected_checkpoint) if result.selected_checkpoint else None,
         "last_terms": last.terms if last else {}, "world_size": context.world_size,
         "seconds_per_step": round(sum(r.seconds for r in result.history) / max(1, len(result.history)), 4),
     }
@@ -78,7 +79,8 @@ def train_command(
         print_json(summary)
     else:
         say(f"{settings.stage}: {result.steps_done} steps done; checkpoints in {settings.output}/checkpoints"
-            + (f"; final weights {result.final_checkpoint}" if result.final_checkpoint else ""))
+            + (f"; final weights {result.final_checkpoint}" if result.final_checkpoint else "")
+            + (f"; selected by {settings.select}: {result.selected_checkpoint}" if result.selected_checkpoint else ""))
     _stop_if_interrupted(result)
 
 

@@ -60,27 +60,38 @@ class BracketSamples:
 
     @torch.no_grad()
     def scores(self, model: Lumos3D, device: torch.device) -> dict[str, float]:
-        """Mean PSNR / SSIM of the first `validation_samples` held-out pairs restored at the network
-        size: {"bracket_psnr", "bracket_ssim", "bracket_samples"} for the restoration pairs and
-        {"bracket_well_exposed_psnr", "bracket_well_exposed_ssim"} for as many well-exposed ones
-        (how much the head disturbs a photo that needs little or nothing)."""
+        """Mean PSNR / SSIM of the held-out pairs restored at the network size (every pair, or
+        `validation_samples` per mode spread evenly over them, so every held-out bracket counts):
+        {"bracket_psnr", "bracket_ssim", "bracket_samples"} for the restoration pairs and
+        {"bracket_well_exposed_psnr", "bracket_well_exposed_ssim", "bracket_well_exposed_samples"}
+        for the well-exposed ones (how much the head disturbs a photo that needs little or nothing)."""
         restore_psnr, restore_ssim, count = self._scores(model, self.validation, device)
-        well_psnr, well_ssim, _ = self._scores(model, self.validation_well_exposed, device)
+        well_psnr, well_ssim, well_count = self._scores(model, self.validation_well_exposed, device)
         return {"bracket_psnr": restore_psnr, "bracket_ssim": restore_ssim, "bracket_samples": count,
-                "bracket_well_exposed_psnr": well_psnr, "bracket_well_exposed_ssim": well_ssim}
+                "bracket_well_exposed_psnr": well_psnr, "bracket_well_exposed_ssim": well_ssim,
+                "bracket_well_exposed_samples": well_count}
 
     def _scores(self, model: Lumos3D, datasets: list[BracketDataset], device: torch.device) -> tuple[float, float, int]:
-        count = min(self.config.validation_samples, sum(len(d) for d in datasets))
         psnrs, ssims = [], []
-        for sample_id in range(count):
-            inputs, targets = self._batch(datasets, [sample_id])
-            inputs, targets = inputs.to(device), targets.to(device)
-            restored = model.predict_appearance(inputs).apply(inputs).clamp(0, 1)
-            # an input that is its own target can be returned exactly: PSNR capped at 100 dB
-            mse = max(float(torch.mean((restored.double() - targets.double()) ** 2)), 1e-10)
-            psnrs.append(10 * math.log10(1 / mse))
-            ssims.append(float(ssim_map_mean(restored.double(), targets.double()).mean()))
-        return float(np.mean(psnrs)), float(np.mean(ssims)), count
+        for dataset in datasets:
+            for index in validation_indices(len(dataset), self.config.validation_samples):
+                sample = dataset[int(index)]
+                inputs, targets = sample["images"][None].to(device), sample["targets"][None].to(device)
+                restored = model.predict_appearance(inputs).apply(inputs).clamp(0, 1)
+                # an input that is its own target can be returned exactly: PSNR capped at 100 dB
+                mse = max(float(torch.mean((restored.double() - targets.double()) ** 2)), 1e-10)
+                psnrs.append(10 * math.log10(1 / mse))
+                ssims.append(float(ssim_map_mean(restored.double(), targets.double()).mean()))
+        return float(np.mean(psnrs)), float(np.mean(ssims)), len(psnrs)
+
+
+def validation_indices(count: int, limit: int | None) -> np.ndarray:
+    """Indices of the held-out pairs validation scores: all `count` (limit None), or `limit` of
+    them evenly spaced from the first to the last. The pairs are sorted by bracket, so spacing
+    them (not taking the first `limit`) keeps every held-out bracket in a small validation."""
+    if limit is None or limit >= count:
+        return np.arange(count)
+    return np.unique(np.linspace(0, count - 1, limit).round().astype(int))
 
 
 def check_bracket_model(model: Lumos3D, config: BracketConfig) -> None:

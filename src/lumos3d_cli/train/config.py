@@ -18,6 +18,7 @@ from lumos3d_cli.data.degradations import Degradation
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.losses.appearance import SSIM_WEIGHT
 from lumos3d_cli.losses.loss_config import LossConfig
+from lumos3d_cli.train.selection import SELECTION_SCORES
 from lumos3d_cli.typed_config import apply_override, from_dict, to_dict
 
 
@@ -48,7 +49,8 @@ class DataConfig:
 class BracketConfig:
     """root: the brackets folder (None: no bracket samples); weight of their appearance loss in
     the total; batch_size: bracket samples per step (each one view); ssim_weight: w of the
-    appearance loss; validation_samples: held-out pairs scored at each validation;
+    appearance loss; validation_samples: held-out pairs of each mode scored at each validation,
+    spread evenly over them (None: every pair of the 20 held-out brackets);
     well_exposed: also train on inputs that are already (nearly) well exposed, paired with the
     target (data/brackets.py), so the head learns to leave such photos as they are. Validation
     scores both kinds apart: bracket_psnr on the restoration pairs (comparable across runs),
@@ -58,11 +60,11 @@ class BracketConfig:
     weight: float = 1.0
     batch_size: int = 4
     ssim_weight: float = SSIM_WEIGHT
-    validation_samples: int = 16
+    validation_samples: int | None = None
     well_exposed: bool = False
 
     def __post_init__(self) -> None:
-        if self.batch_size < 1 or self.validation_samples < 1 or self.weight < 0:
+        if self.batch_size < 1 or (self.validation_samples is not None and self.validation_samples < 1) or self.weight < 0:
             raise ValueError("brackets.batch_size and brackets.validation_samples must be at least 1, brackets.weight >= 0")
 
 
@@ -116,6 +118,9 @@ class TrainConfig:
     validate_every: int = 0  # 0: no validation renders
     validation_views: int = 2  # views per row block of the validation picture
     validation_samples: int = 8  # samples scored at each validation (validation.jsonl)
+    # the validation.jsonl score that picks the checkpoint (train/selection.py; e.g. bracket_psnr):
+    # each validation that beats every earlier one writes output/selected.safetensors; None: none
+    select: str | None = None
     max_nonfinite_steps: int = 5
     tensorboard: bool = False
 
@@ -128,6 +133,13 @@ class TrainConfig:
             raise ValueError("multiview_loss: appearance scores a restoration: it needs stage 'student'")
         if self.batch_size < 1 or self.optim.steps < 1 or self.validation_samples < 1:
             raise ValueError("batch_size, optim.steps and validation_samples must be at least 1")
+        if self.select is not None:
+            if self.select not in SELECTION_SCORES:
+                raise ValueError(f"select: {self.select!r} is not a validation score; use one of {', '.join(SELECTION_SCORES)}")
+            if self.select.startswith("bracket_") and self.brackets.root is None:
+                raise ValueError(f"select: {self.select} scores the held-out brackets: set brackets.root")
+            if not self.validate_every:
+                raise ValueError("select needs validations: set validate_every")
 
 
 def load_config(path: Path | str, overrides: list[str] = ()) -> TrainConfig:

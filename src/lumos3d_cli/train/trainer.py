@@ -40,6 +40,7 @@ from lumos3d_cli.train.config import TrainConfig, config_to_yaml
 from lumos3d_cli.train.distributed import DistributedContext, all_reduce_mean, any_rank
 from lumos3d_cli.train.run_logs import RunLogs
 from lumos3d_cli.train.schedule import learning_rate_factor
+from lumos3d_cli.train.selection import SELECTED_FILE, best_earlier_score, drop_stale_selection, is_improvement
 from lumos3d_cli.train.trainable import restrict_training
 from lumos3d_cli.train.validation import render_views, validate
 
@@ -60,7 +61,9 @@ class StepReport:
 @dataclass
 class TrainResult:
     """What `Trainer.run` did. `stop_signal`: the signal that stopped the run early (after a
-    checkpoint was saved), None when it ran to its end or stopped on `stop_after`."""
+    checkpoint was saved), None when it ran to its end or stopped on `stop_after`.
+    `selected_checkpoint`: output/selected.safetensors when the run selects (config `select`)
+    and it exists."""
 
     steps_done: int
     history: list[StepReport] = field(default_factory=list)
@@ -68,6 +71,7 @@ class TrainResult:
     stopped_early: bool = False
     stop_signal: int | None = None
     last_checkpoint: Path | None = None
+    selected_checkpoint: Path | None = None
 
 
 # Signals that stop training after a checkpoint (SIGHUP: the terminal of an interactive run closed).
@@ -347,14 +351,26 @@ class Trainer:
             yield (batch, *self.inputs_and_targets(batch, sample_id))
 
     def validate(self, step: int) -> Path | None:
-        """Validation after `step` steps on rank 0 (train/validation.py); returns the picture's path."""
+        """Validation after `step` steps on rank 0 (train/validation.py), and the selection of
+        the best step so far (train/selection.py); returns the picture's path."""
         if not self.context.is_main:
             return None
         extra = self.brackets.scores(self.model.eval(), self.device) if self.brackets is not None else None
-        path = validate(self.model, self._validation_samples(), step, self.output, self.config.validation_views,
-                        self.config.loss.background, self._autocast, extra)
+        line, path = validate(self.model, self._validation_samples(), step, self.output, self.config.validation_views,
+                              self.config.loss.background, self._autocast, extra)
         self.model.train()
+        if self.config.select is not None:
+            self._select(step, line[self.config.select])
         return path
+
+    def _select(self, step: int, score: float) -> None:
+        key = self.config.select
+        best = best_earlier_score(self.output / "validation.jsonl", key, step)
+        if is_improvement(score, best):
+            save_checkpoint(self.model, self.output / SELECTED_FILE,
+                            {**self._provenance(step), "selected_by": key, "score": score})
+            logger.info("selected step %d: %s %.4f (best before: %s)", step, key, score,
+                        "none" if best is None else f"{best:.4f}")
 
     # -- the loop -------------------------------------------------------------------------------
 
@@ -372,6 +388,8 @@ class Trainer:
         start = self.resume() if resume else 0
         if self._logs is not None:
             self._logs.truncate(start)
+        if self.context.is_main:
+            drop_stale_selection(self.output, start)
         if self.context.is_main:
             (self.output / "config.yaml").write_text(config_to_yaml(self.config))
         end = min(self.config.optim.steps, max_steps) if max_steps is not None else self.config.optim.steps
@@ -404,6 +422,8 @@ class Trainer:
                 self.save(result.steps_done)
             if self.context.is_main and result.steps_done >= self.config.optim.steps:
                 result.final_checkpoint = save_checkpoint(self.model, self.output / "final.safetensors", self._provenance(result.steps_done))
+            if self.config.select is not None and (self.output / SELECTED_FILE).is_file():
+                result.selected_checkpoint = self.output / SELECTED_FILE
             return result
         finally:
             for signum, handler in previous.items():

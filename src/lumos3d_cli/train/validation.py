@@ -46,12 +46,13 @@ def validate(
     background: tuple[float, float, float],
     autocast: Callable[[], AbstractContextManager],
     extra: dict[str, float] | None = None,
-) -> Path:
+) -> tuple[dict, Path]:
     """Score `samples` (batch of one sample, network input [1, V, 3, H, W], normal-light targets
     [1, V, 3, H, W]): PSNR of the renders against the targets and, for samples with dataset
     cameras, the accuracy of the predicted cameras (eval/pose_accuracy.py); append the line to
     output/validation.jsonl; write the first sample's first `views` views as rows of
-    input | render | target to output/validation/step_<step>.png and return its path.
+    input | render | target to output/validation/step_<step>.png; return the line and the
+    picture's path.
     `model` is left in eval mode; `autocast()` gives the run's precision context; `extra` scores
     (e.g. the held-out brackets') join the line.
     """
@@ -85,4 +86,4 @@ def validate(
     grid = torch.cat(rows, dim=-2).permute(1, 2, 0).float().cpu().numpy()
     path = output / "validation" / f"step_{step:08d}.png"
     write_image(path, grid)
-    return path
+    return line, path
