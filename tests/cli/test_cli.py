@@ -146,6 +146,31 @@ def test_degrade_corrupt_jpeg_among_good_ones_leaves_no_partial_output(run_cli, 
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in"]
 
 
+def _linear(srgb_uint8):
+    # IEC 61966-2-1, written out here as the oracle
+    x = srgb_uint8.astype(np.float64) / 255
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+
+
+def test_degrade_exposure_and_gamma_ranges_replace_the_modes(run_cli, buu, tmp_path):
+    inputs = _copy_images(buu / "high", tmp_path / "high", 2)
+    result = run_cli("degrade", inputs, "-o", tmp_path / "dark", "--exposure", "0.02", "0.03", "--gamma", "1.0", "1.2",
+                     "--per-image", "--json")
+    assert result.code == 0, result.err
+    summary = json.loads(result.out)
+    assert summary["exposure_range"] == [0.02, 0.03] and summary["gamma_range"] == [1.0, 1.2]
+    assert all(0.02 <= r["exposure"] <= 0.03 and 1.0 <= r["gamma"] <= 1.2 for r in summary["images"])
+    # gamma 1: the linear light is the photo's times the exposure
+    exact = run_cli("degrade", inputs / "1.JPG", "-o", tmp_path / "third.png", "--exposure", "0.3", "0.3",
+                    "--gamma", "1", "1", "--bit-depth", "16")
+    assert exact.code == 0, exact.err
+    degraded = cv2.imread(str(tmp_path / "third.png"), cv2.IMREAD_UNCHANGED).astype(np.float64) / 65535
+    linear = np.where(degraded <= 0.04045, degraded / 12.92, ((degraded + 0.055) / 1.055) ** 2.4)
+    assert linear.mean() / _linear(cv2.imread(str(inputs / "1.JPG"))).mean() == pytest.approx(0.3, rel=0.01)
+    defaults = json.loads(run_cli("degrade", inputs, "-o", tmp_path / "default", "--json").out)
+    assert defaults["exposure_range"] == [0.05, 0.1] and defaults["gamma_range"] == [1.3, 1.4]
+
+
 def test_degrade_bad_values(run_cli, buu, tmp_path):
     image = buu / "high" / "1.JPG"
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--mode", "sunny"), "--mode 'sunny'", "low-light")
@@ -154,6 +179,9 @@ def test_degrade_bad_values(run_cli, buu, tmp_path):
     expect_input_error(run_cli("degrade", buu / "high", "-o", tmp_path / "one.png"), "names one file but there are 25 inputs")
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--colour-cast", "0.5"), "--colour-cast 0.5", "at least 1")
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--jpeg-quality", "0"), "--jpeg-quality 0", "1 to 100")
+    expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--exposure", "0.5", "0.1"), "--exposure 0.5 0.1", "0 < low <= high")
+    expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--gamma", "0", "1"), "--gamma 0.0 1.0", "0 < low <= high")
+    assert not (tmp_path / "o").exists()
 
 
 def test_info_on_a_scene_file(run_cli, tmp_path):

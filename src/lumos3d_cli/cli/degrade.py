@@ -18,6 +18,7 @@ EXAMPLES = """
   lumos3d degrade photo.jpg -o dark.png --noise
   lumos3d degrade photos/ -o dark/ --noise --colour-cast 1.25 --jpeg-quality 85
   lumos3d degrade photos/ -o bright/ --mode over-exposure --per-image --bit-depth 16
+  lumos3d degrade photos/ -o darker/ --exposure 0.02 0.05 --gamma 1.0 1.5 --noise --per-image
 """
 
 
@@ -35,6 +36,12 @@ def degrade_command(
         1.0, "--colour-cast", help="Largest wrong white-balance gain: red and blue scaled by [1/G, G] in linear light (1: none)."
     ),
     jpeg_quality: int | None = typer.Option(None, "--jpeg-quality", help="Compress as JPEG at this quality (1-100) before writing."),
+    exposure: tuple[float, float] | None = typer.Option(
+        None, "--exposure", help="Linear exposure gain range LOW HIGH (default: the mode's, low light 0.05 0.1, over-exposure 5 15)."
+    ),
+    gamma: tuple[float, float] | None = typer.Option(
+        None, "--gamma", help="Tone-curve gamma range LOW HIGH (default: the mode's, low light 1.3 1.4, over-exposure 1.5 2)."
+    ),
     json_output: bool = typer.Option(False, "--json", help="Print a JSON summary on stdout."),
 ) -> None:
     """Synthesise low-light (the paper's model) or over-exposed images from normal-light ones."""
@@ -44,7 +51,7 @@ def degrade_command(
     check_degrade_output(paths, output, bit_depth)
     with progress_bar() as bars:
         summary = degrade_files(paths, output, mode, seed, noise, per_image, bit_depth, ProgressBars(bars),
-                                colour_cast, jpeg_quality)
+                                colour_cast, jpeg_quality, exposure, gamma)
     if json_output:
         print_json(summary)
     else:

@@ -96,6 +96,11 @@ class Degradation:
             raise ValueError(f"colour_cast={self.colour_cast} must satisfy 0 < low <= high")
         if self.jpeg_quality is not None and not 1 <= self.jpeg_quality[0] <= self.jpeg_quality[1] <= 100:
             raise ValueError(f"jpeg_quality={self.jpeg_quality} must satisfy 1 <= low <= high <= 100")
+        for name, bounds in (("exposure", self.exposure), ("gamma", self.gamma), ("low_light.exposure", self.low_light.exposure),
+                             ("low_light.gamma", self.low_light.gamma), ("over_exposure.exposure", self.over_exposure.exposure),
+                             ("over_exposure.gamma", self.over_exposure.gamma)):
+            if bounds is not None and not 0 < bounds[0] <= bounds[1] < float("inf"):
+                raise ValueError(f"degrade.{name}={bounds} must satisfy 0 < low <= high (finite)")
         if self.mode == "mixed" and (self.exposure is not None or self.gamma is not None):
             raise ValueError("degrade.mode=mixed takes its ranges from degrade.low_light and degrade.over_exposure; "
                              "remove degrade.exposure and degrade.gamma")

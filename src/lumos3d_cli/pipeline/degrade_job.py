@@ -46,12 +46,15 @@ def degrade_files(
     paths: list[Path], output: Path, mode: str = "low-light", seed: int = 0, noise: bool = False,
     per_image: bool = False, bit_depth: int = 8, progress: JobProgress | None = None,
     colour_cast: float = 1.0, jpeg_quality: int | None = None,
+    exposure: tuple[float, float] | None = None, gamma: tuple[float, float] | None = None,
 ) -> dict:
     """Degrade every photo in `paths` into `output` (a folder of PNGs plus degradation.json, or one
     .png/.jpg for one input) and return the summary: the parameters drawn for each image. One draw
     is shared by all images (one camera setting) unless `per_image`. The camera-pipeline stages of
     training are available too: `colour_cast` g draws red and blue linear gains in [1/g, g];
-    `jpeg_quality` compresses at that quality before writing."""
+    `jpeg_quality` compresses at that quality before writing; `exposure` and `gamma` (low, high)
+    replace the mode's documented ranges (data.degradations.DOCUMENTED_RANGES), as a training
+    config's `degrade` section does."""
     progress = progress or SilentProgress()
     if mode not in MODES:
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
@@ -60,8 +63,12 @@ def degrade_files(
         raise InputError(f"{colour_cast}: the largest colour-cast gain must be at least 1 (1: no cast)", parameter="colour_cast")
     if jpeg_quality is not None and not 1 <= jpeg_quality <= 100:
         raise InputError(f"{jpeg_quality}: use a JPEG quality from 1 to 100", parameter="jpeg_quality")
-    degradation = Degradation(mode, noise=noise, colour_cast=(1 / colour_cast, colour_cast),
+    for name, bounds in (("exposure", exposure), ("gamma", gamma)):
+        if bounds is not None and not 0 < bounds[0] <= bounds[1] < float("inf"):
+            raise InputError(f"{bounds[0]} {bounds[1]}: the {name} range needs 0 < low <= high (finite)", parameter=name)
+    degradation = Degradation(mode, exposure=exposure, gamma=gamma, noise=noise, colour_cast=(1 / colour_cast, colour_cast),
                               jpeg_quality=None if jpeg_quality is None else (jpeg_quality, jpeg_quality))
+    ranges = degradation.ranges(mode)
     generator = torch.Generator().manual_seed(seed)
     shared = None if per_image else sample_parameters(degradation, (), generator)
     started = time.perf_counter()
@@ -77,7 +84,8 @@ def degrade_files(
             records.append({"input": str(source), "output": str(target), **parameters.as_dict()})
             progress.advance(f"degrade ({mode})")
         summary = {
-            "mode": mode, "seed": seed, "noise": noise, "colour_cast": colour_cast, "jpeg_quality": jpeg_quality,
+            "mode": mode, "seed": seed, "exposure_range": list(ranges.exposure), "gamma_range": list(ranges.gamma),
+            "noise": noise, "colour_cast": colour_cast, "jpeg_quality": jpeg_quality,
             "shared_parameters": not per_image,
             "count": len(records), "seconds": round(time.perf_counter() - started, 3), "images": records,
         }
