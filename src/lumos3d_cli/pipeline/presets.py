@@ -62,8 +62,8 @@ _BALANCED = RestorePreset("balanced", max_views=32, resolution=1.0, sh_degree=No
 
 RESTORE_PRESETS = {
     # fast: a smaller network image without view-dependent colour, 15 refinement steps against
-    # the photos at 256 px (on buu's holdout frames 22.26 dB without refinement, 23.11 with 15
-    # steps, 23.06 with 25, for 3-4 s more; the first steps are what sharpen the views),
+    # the photos at 256 px (on buu's holdout frames 22.26 dB without refinement, 23.10 with 15
+    # steps, 23.08 with 25 at 10 % more time; the first steps are what sharpen the views),
     # structure-from-motion on photos of at most 384 px (on buu and Strecha 0.4 degrees median
     # rotation error against 0.3 at 512, in 40-60 % of the time) and the budget's weights at half
     # resolution (up to 0.08 dB lost). 8 views left buu's holdout scene to 5 photos whose
