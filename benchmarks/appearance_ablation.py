@@ -4,7 +4,8 @@ brackets, with and without the degraded multi-view scenes, with and without the 
 gain grid; and the operator against the colour-regression model it started from.
 
 Scores, none of them on buu:
-- held-out brackets: the 20 SICE validation pairs at the network size (what validation reports);
+- held-out brackets: every low-light pair (51) of the 20 held-out SICE brackets at the network
+  size (what validation reports);
 - Strecha 2D: the six ground-truth-camera scenes (never trained on), every view darkened with the
   training's camera-pipeline model at a fixed seed per scene, restored by the operator predicted
   from up to 8 of them at long side 768; PSNR / SSIM / sharpness against the clean photos;
@@ -100,7 +101,7 @@ def darkened_strecha(settings, views: int | None = VIEWS) -> dict[str, tuple[tor
 
 
 def bracket_scores(model, root: str) -> tuple[float, float]:
-    """Mean PSNR / SSIM of the 20 held-out low-light bracket pairs at the network size."""
+    """Mean PSNR / SSIM of every low-light pair of the 20 held-out brackets at the network size."""
     dataset = BracketDataset(root, "low-light", "validation", (224, 168), (1.0, 1.0), flip=False, seed=0)
     psnrs, ssims = [], []
     with torch.no_grad():
