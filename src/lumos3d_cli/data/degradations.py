@@ -63,6 +63,11 @@ DOCUMENTED_RANGES = {
 }
 
 
+def is_valid_range(bounds: tuple[float, float]) -> bool:
+    """Whether an exposure or gamma range (low, high) is finite with 0 < low <= high."""
+    return 0 < bounds[0] <= bounds[1] < math.inf
+
+
 @dataclass(frozen=True)
 class Degradation:
     """What to synthesise: the settings of `lumos3d degrade` and of the training config's
@@ -99,7 +104,7 @@ class Degradation:
         for name, bounds in (("exposure", self.exposure), ("gamma", self.gamma), ("low_light.exposure", self.low_light.exposure),
                              ("low_light.gamma", self.low_light.gamma), ("over_exposure.exposure", self.over_exposure.exposure),
                              ("over_exposure.gamma", self.over_exposure.gamma)):
-            if bounds is not None and not 0 < bounds[0] <= bounds[1] < float("inf"):
+            if bounds is not None and not is_valid_range(bounds):
                 raise ValueError(f"degrade.{name}={bounds} must satisfy 0 < low <= high (finite)")
         if self.mode == "mixed" and (self.exposure is not None or self.gamma is not None):
             raise ValueError("degrade.mode=mixed takes its ranges from degrade.low_light and degrade.over_exposure; "

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import torch
 
-from lumos3d_cli.data.degradations import MODES, Degradation, apply_degradation, sample_parameters
+from lumos3d_cli.data.degradations import MODES, Degradation, apply_degradation, is_valid_range, sample_parameters
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import atomic_directory
 from lumos3d_cli.io.image_files import PHOTO_SUFFIXES
@@ -64,7 +64,7 @@ def degrade_files(
     if jpeg_quality is not None and not 1 <= jpeg_quality <= 100:
         raise InputError(f"{jpeg_quality}: use a JPEG quality from 1 to 100", parameter="jpeg_quality")
     for name, bounds in (("exposure", exposure), ("gamma", gamma)):
-        if bounds is not None and not 0 < bounds[0] <= bounds[1] < float("inf"):
+        if bounds is not None and not is_valid_range(bounds):
             raise InputError(f"{bounds[0]} {bounds[1]}: the {name} range needs 0 < low <= high (finite)", parameter=name)
     degradation = Degradation(mode, exposure=exposure, gamma=gamma, noise=noise, colour_cast=(1 / colour_cast, colour_cast),
                               jpeg_quality=None if jpeg_quality is None else (jpeg_quality, jpeg_quality))

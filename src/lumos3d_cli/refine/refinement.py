@@ -129,11 +129,9 @@ def refine_gaussians(
                             torch.Generator().manual_seed(settings.seed))
     single_views = [working[[v]] for v in range(len(working))]
     curve: list[float] = []
-    initial_rates = [group["lr"] for group in optimizer.param_groups]
+    # closed form from the first rates: step k's rate depends on k alone, not on the steps asked
+    schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda step: settings.lr_decay_per_100_steps ** (step / 100))
     for step in range(settings.steps):
-        decay = settings.lr_decay_per_100_steps ** (step / 100)
-        for group, rate in zip(optimizer.param_groups, initial_rates):
-            group["lr"] = rate * decay
         batch = next(batches)
         current = parameters.gaussians()
         losses = []
@@ -148,6 +146,7 @@ def refine_gaussians(
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
+        schedule.step()
         parameters.normalise()
         curve.append(loss.item())
         if on_step is not None:

@@ -390,7 +390,6 @@ class Trainer:
             self._logs.truncate(start)
         if self.context.is_main:
             drop_stale_selection(self.output, start)
-        if self.context.is_main:
             (self.output / "config.yaml").write_text(config_to_yaml(self.config))
         end = min(self.config.optim.steps, max_steps) if max_steps is not None else self.config.optim.steps
         # A signal the process was started with ignored (nohup: SIGHUP) stays ignored.
