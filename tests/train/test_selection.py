@@ -18,9 +18,10 @@ from lumos3d_cli.train.trainer import Trainer
 
 
 def _head_only(tiny_config, brackets, **changes):
+    settings = {"optim__steps": 4, "optim__lr": 0.02, "optim__warmup_steps": 0, **changes}
     return tiny_config(stage="student", name="head", model="tiny-operator", multiview=False, validate_every=1,
-                       validation_samples=1, optim__steps=4, optim__lr=0.02, optim__warmup_steps=0,
-                       brackets={"root": str(brackets), "batch_size": 2, "validation_samples": 3}, **changes)
+                       validation_samples=1, brackets={"root": str(brackets), "batch_size": 2, "validation_samples": 3},
+                       **settings)
 
 
 def test_the_selected_weights_are_those_of_the_best_validation(tiny_config, brackets):
@@ -41,6 +42,21 @@ def test_the_selected_weights_are_those_of_the_best_validation(tiny_config, brac
     assert again["bracket_psnr"] == pytest.approx(best["bracket_psnr"], abs=1e-4)
 
 
+def test_the_starting_weights_are_a_candidate_with_validate_at_start(tiny_config, brackets):
+    # lr 0: no step changes the weights (nor does weight decay), so no later validation beats step 0
+    config = _head_only(tiny_config, brackets, select="bracket_psnr", validate_at_start=True, optim__lr=0.0)
+    trainer = Trainer(load_config(config), setup_distributed("cpu"))
+    start = {name: value.clone() for name, value in trainer.model.state_dict().items()}
+    result = trainer.run()
+    run = Path(str(config).replace(".yaml", ""))
+    lines = [json.loads(line) for line in (run / "validation.jsonl").read_text().splitlines()]
+    assert [line["step"] for line in lines] == [0, 1, 2, 3, 4]
+    assert len({line["bracket_psnr"] for line in lines}) == 1
+    selected = read_checkpoint(result.selected_checkpoint)
+    assert selected.provenance["steps"] == 0
+    assert all(torch.equal(selected.tensors[name], value) for name, value in start.items())
+
+
 def test_selection_is_checked_in_the_config(tiny_config, brackets):
     with pytest.raises(InputError, match="select: 'loss' is not a validation score"):
         load_config(_head_only(tiny_config, brackets, select="loss"))
@@ -48,6 +64,8 @@ def test_selection_is_checked_in_the_config(tiny_config, brackets):
         load_config(tiny_config(select="psnr"))
     with pytest.raises(InputError, match="scores the held-out brackets: set brackets.root"):
         load_config(tiny_config(select="bracket_psnr", validate_every=2))
+    with pytest.raises(InputError, match="validate_at_start .* set validate_every"):
+        load_config(tiny_config(validate_at_start=True))
 
 
 def test_best_earlier_score_and_improvement(tmp_path):

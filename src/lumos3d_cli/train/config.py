@@ -116,6 +116,9 @@ class TrainConfig:
     log_every: int = 10
     checkpoint_every: int = 500
     validate_every: int = 0  # 0: no validation renders
+    # also validate the starting weights (step 0) of a fresh run, so that a stage that fine-tunes a
+    # trained model can select them when no step of its own scores better
+    validate_at_start: bool = False
     validation_views: int = 2  # views per row block of the validation picture
     validation_samples: int = 8  # samples scored at each validation (validation.jsonl)
     # the validation.jsonl score that picks the checkpoint (train/selection.py; e.g. bracket_psnr):
@@ -140,6 +143,8 @@ class TrainConfig:
                 raise ValueError(f"select: {self.select} scores the held-out brackets: set brackets.root")
             if not self.validate_every:
                 raise ValueError("select needs validations: set validate_every")
+        if self.validate_at_start and not self.validate_every:
+            raise ValueError("validate_at_start adds a validation to those of validate_every: set validate_every")
 
 
 def load_config(path: Path | str, overrides: list[str] = ()) -> TrainConfig:

@@ -391,6 +391,8 @@ class Trainer:
         if self.context.is_main:
             drop_stale_selection(self.output, start)
             (self.output / "config.yaml").write_text(config_to_yaml(self.config))
+        if self.config.validate_at_start and start == 0:
+            self.validate(0)
         end = min(self.config.optim.steps, max_steps) if max_steps is not None else self.config.optim.steps
         # A signal the process was started with ignored (nohup: SIGHUP) stays ignored.
         previous = {s: signal.signal(s, self._request_stop) for s in STOP_SIGNALS if signal.getsignal(s) is not signal.SIG_IGN}
