@@ -37,6 +37,11 @@ weights: $(STAMP)
 	# the step with the best held-out bracket PSNR (select: bracket_psnr)
 	$(BIN)/lumos3d train configs/operator-head-low-light.yaml
 	$(BIN)/lumos3d convert runs/operator-head-low-light/selected.safetensors -o src/lumos3d_cli/weights/lumos3d-low-light.safetensors --dtype float16
+	# then the mixed-batch stage over the whole low-light network (multi-view scenes with the full
+	# objective + bracket pairs); validate_at_start: it ships its start unless a step beats it on the
+	# held-out brackets (none did in its run: model-card.md)
+	$(BIN)/lumos3d train configs/operator-low-light.yaml
+	$(BIN)/lumos3d convert runs/operator-low-light/selected.safetensors -o src/lumos3d_cli/weights/lumos3d-low-light.safetensors --dtype float16
 	$(BIN)/lumos3d train configs/operator-head-over-exposure.yaml
 	$(BIN)/lumos3d convert runs/operator-head-over-exposure/selected.safetensors -o src/lumos3d_cli/weights/lumos3d-over-exposure.safetensors --dtype float16
 

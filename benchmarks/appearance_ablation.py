@@ -1,29 +1,35 @@
-"""Issue 15's appearance ablation at the tiny scale, scored without LOM: the low-light
-illumination head trained alone (configs/operator-head-low-light.yaml) with and without the SICE
+"""Issue 15's appearance ablation at the tiny scale, scored without LOM, for one mode: the
+illumination head trained alone (configs/operator-head-<mode>.yaml) with and without the SICE
 brackets, with and without the degraded multi-view scenes, with and without the per-view local
-gain grid; and the operator against the colour-regression model it started from.
+gain grid; the colour-regression model the operator started from; the bundled model; and (low
+light) the mixed-batch stage of configs/operator-low-light.yaml, which this script scores but does
+not train (hours on a CPU: run `lumos3d train configs/operator-low-light.yaml` first).
 
 Scores, none of them on buu:
-- held-out brackets: every low-light pair (51) of the 20 held-out SICE brackets at the network
-  size (what validation reports);
-- Strecha 2D: the six ground-truth-camera scenes (never trained on), every view darkened with the
+- held-out brackets: every pair of the mode (low light 51, over-exposure 36) of the 20 held-out
+  SICE brackets at the network size (what validation reports), and every already well-exposed
+  pair (how much a model disturbs a photo that needs nothing). The operators restore the pair's
+  input with their predicted operator; the regression model renders its one-view Gaussians at
+  its own camera;
+- Strecha 2D: the six ground-truth-camera scenes (never trained on), every view degraded with the
   training's camera-pipeline model at a fixed seed per scene, restored by the operator predicted
-  from up to 8 of them at long side 768; PSNR / SSIM / sharpness against the clean photos;
-- Strecha 3D: fountain-P11 darkened the same way and restored by `lumos3d restore --poses` (its
-  ground-truth cameras) with each model, restored views against the clean photos: this is the only
-  row where the regression model can take part.
+  from up to 8 of them; PSNR / SSIM / sharpness against the clean photos;
+- Strecha 3D: fountain-P11 degraded the same way and restored by `lumos3d restore --poses` (its
+  ground-truth cameras) with each model, restored views against the clean photos.
 
-    .venv/bin/python benchmarks/appearance_ablation.py --train   # train missing variants, score
-    .venv/bin/python benchmarks/appearance_ablation.py           # score the runs in runs/
+    .venv/bin/python benchmarks/appearance_ablation.py --train                       # low light
+    .venv/bin/python benchmarks/appearance_ablation.py --train --mode over-exposure
 
 Each variant trains `--steps` head-only steps (0.1-2 s a step on 2 CPU cores, depending on what
-else runs). The table is the "appearance-ablation" section of docs/model-card.md.
+else runs). The tables are the "appearance-ablation" and "appearance-ablation-over-exposure"
+sections of docs/model-card.md.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import tempfile
 from dataclasses import dataclass
@@ -41,39 +47,72 @@ from report import machine_description, markdown_table, write_section  # noqa: E
 from lumos3d_cli.data.brackets import BracketDataset  # noqa: E402
 from lumos3d_cli.data.degradations import degrade  # noqa: E402
 from lumos3d_cli.eval.metrics import auto_gamma, psnr, sharpness, ssim  # noqa: E402
+from lumos3d_cli.model.appearance.conversion import with_appearance  # noqa: E402
 from lumos3d_cli.model.appearance.photo_restoration import restore_photos  # noqa: E402
 from lumos3d_cli.model.bundled_models import resolve_checkpoint  # noqa: E402
+from lumos3d_cli.model.checkpoints import save_checkpoint  # noqa: E402
 from lumos3d_cli.model.loading import load_model  # noqa: E402
+from lumos3d_cli.train.bracket_samples import BracketSamples  # noqa: E402
 from lumos3d_cli.train.config import load_config  # noqa: E402
+from lumos3d_cli.train.validation import render_views  # noqa: E402
 
-CONFIG = "configs/operator-head-low-light.yaml"
 MODEL_CARD = REPO / "docs" / "model-card.md"
 STRECHA = REPO.parent / "shared" / "data" / "gt_cameras"
 LONG_SIDE = 512
 VIEWS = 8  # per scene, evenly spaced: the network's input and the views scored
+NETWORK_SIZE = (224, 168)
 
 
 @dataclass(frozen=True)
 class Variant:
+    """A model of the table: `run`/`weights` (None: the bundled model), trained by this script
+    with the mode's head config and `overrides` when `trained_here`."""
+
     label: str
-    run: str
+    run: str | None
     overrides: tuple[str, ...] = ()
+    weights: str = "final.safetensors"
+    trained_here: bool = True
+
+    def checkpoint(self, mode: str) -> Path:
+        return resolve_checkpoint(None, mode) if self.run is None else REPO / self.run / self.weights
 
 
 SCENES = ("multiview=true", "multiview_loss=appearance")  # add the degraded multi-view scenes
-VARIANTS = (
-    Variant("operator: brackets, local grid (shipped)", "runs/operator-head-low-light"),
-    Variant("operator: brackets + degraded scenes, local grid", "runs/ablation-appearance-mixed", SCENES),
-    Variant("operator: brackets + degraded scenes, no local grid", "runs/ablation-appearance-nolocal",
-            (*SCENES, "local_correction_channels=0")),
-    Variant("operator: degraded scenes only, local grid", "runs/ablation-appearance-scenes", (*SCENES, "brackets.root=null")),
-)
+NO_LOCAL_GRID = ("local_correction_channels=0",)
+BUNDLED = Variant("bundled model (its head: the head config's 1,000 steps)", None, trained_here=False)
+VARIANTS = {
+    "low-light": (
+        BUNDLED,
+        Variant("operator: brackets, local grid (the head config)", "runs/ablation-appearance-brackets"),
+        Variant("operator: brackets, no local grid", "runs/ablation-appearance-brackets-nolocal", NO_LOCAL_GRID),
+        Variant("operator: brackets + degraded scenes, local grid", "runs/ablation-appearance-mixed", SCENES),
+        Variant("operator: brackets + degraded scenes, no local grid", "runs/ablation-appearance-nolocal",
+                (*SCENES, *NO_LOCAL_GRID)),
+        Variant("operator: degraded scenes only, local grid", "runs/ablation-appearance-scenes", (*SCENES, "brackets.root=null")),
+        # its selection is step 0 (the bundled model): this row shows what 200 of its steps did
+        Variant("bundled model + 200 steps of mixed batches, whole network (configs/operator-low-light.yaml)",
+                "runs/operator-low-light", weights="checkpoints/step_00000200", trained_here=False),
+    ),
+    "over-exposure": (
+        BUNDLED,
+        Variant("operator: brackets, local grid (the head config)", "runs/ablation-overexp-brackets"),
+        Variant("operator: brackets, no local grid", "runs/ablation-overexp-brackets-nolocal", NO_LOCAL_GRID),
+        Variant("operator: brackets + degraded scenes, local grid", "runs/ablation-overexp-mixed",
+                ("multiview=true", "multiview_loss=appearance")),
+    ),
+}
+SECTIONS = {"low-light": "appearance-ablation", "over-exposure": "appearance-ablation-over-exposure"}
 
 
-def _train(variant: Variant, steps: int) -> None:
+def _head_config(mode: str) -> str:
+    return f"configs/operator-head-{mode}.yaml"
+
+
+def _train(variant: Variant, mode: str, steps: int, student: Path) -> None:
     print(f"training {variant.run} ({variant.label})", flush=True)
-    run_lumos3d(["train", CONFIG, f"output={variant.run}", f"optim.steps={steps}", f"checkpoint_every={steps}",
-                 "validate_every=0", *variant.overrides])
+    run_lumos3d(["train", _head_config(mode), f"output={variant.run}", f"model={student}", f"optim.steps={steps}",
+                 f"checkpoint_every={steps}", "validate_every=0", "select=null", *variant.overrides])
 
 
 def _read(path: Path) -> torch.Tensor:
@@ -85,8 +124,8 @@ def _read(path: Path) -> torch.Tensor:
     return torch.from_numpy(pixels.astype(np.float32) / 255).permute(2, 0, 1)
 
 
-def darkened_strecha(settings, views: int | None = VIEWS) -> dict[str, tuple[torch.Tensor, torch.Tensor, list[str]]]:
-    """scene -> (darkened [V, 3, H, W], clean [V, 3, H, W], file names), V <= `views` evenly
+def degraded_strecha(settings, views: int | None = VIEWS) -> dict[str, tuple[torch.Tensor, torch.Tensor, list[str]]]:
+    """scene -> (degraded [V, 3, H, W], clean [V, 3, H, W], file names), V <= `views` evenly
     spaced (None: all): the training's degradation, one draw per scene, seeded by the scene's
     position."""
     scenes = {}
@@ -100,18 +139,29 @@ def darkened_strecha(settings, views: int | None = VIEWS) -> dict[str, tuple[tor
     return scenes
 
 
-def bracket_scores(model, root: str) -> tuple[float, float]:
-    """Mean PSNR / SSIM of every low-light pair of the 20 held-out brackets at the network size."""
-    dataset = BracketDataset(root, "low-light", "validation", (224, 168), (1.0, 1.0), flip=False, seed=0)
-    psnrs, ssims = [], []
-    with torch.no_grad():
-        for index in range(len(dataset)):
-            sample = dataset[index]
-            inputs, target = sample["images"][None], sample["targets"][None]
-            restored = model.predict_appearance(inputs).apply(inputs).clamp(0, 1)
-            psnrs.append(float(psnr(restored[0, 0], target[0, 0])))
-            ssims.append(float(ssim(restored[0, 0], target[0, 0])))
-    return float(np.mean(psnrs)), float(np.mean(ssims))
+def operator_bracket_scores(model, mode: str, root: str) -> dict[str, float]:
+    """Held-out bracket scores of an operator model, exactly as validation computes them."""
+    config = load_config(REPO / _head_config(mode)).brackets
+    samples = BracketSamples(config, mode, NETWORK_SIZE, (1.0, 1.0), seed=0)
+    return samples.scores(model, torch.device("cpu"))
+
+
+def regression_bracket_scores(model, mode: str, root: str) -> dict[str, float]:
+    """The same pairs for a colour-regression model: its one-view Gaussians rendered at its own
+    predicted camera, at the network size (PSNR capped at 100 dB as in validation)."""
+    scores = {}
+    for inputs_kind, key in (("restore", "bracket"), ("well-exposed", "bracket_well_exposed")):
+        dataset = BracketDataset(root, mode, "validation", NETWORK_SIZE, (1.0, 1.0), flip=False, seed=0, inputs=inputs_kind)
+        psnrs, ssims = [], []
+        with torch.no_grad():
+            for index in range(len(dataset)):
+                sample = dataset[index]
+                rendered, _ = render_views(model(sample["images"][None]), (0.0, 0.0, 0.0))
+                restored, target = rendered[0, 0].clamp(0, 1), sample["targets"][0]
+                psnrs.append(min(float(psnr(restored, target)), 100.0))
+                ssims.append(float(ssim(restored, target)))
+        scores.update({f"{key}_psnr": float(np.mean(psnrs)), f"{key}_ssim": float(np.mean(ssims))})
+    return scores
 
 
 def strecha_2d_scores(model, scenes) -> tuple[float, float, float]:
@@ -133,11 +183,11 @@ def gamma_2d_scores(scenes) -> tuple[float, float, float]:
     return tuple(float(v) for v in torch.cat(rows).mean(dim=0))
 
 
-def strecha_3d_scores(checkpoint: Path, scene, folder: Path) -> tuple[float, float, float, float]:
-    """(PSNR, SSIM, sharpness, seconds) of `lumos3d restore --poses` on darkened fountain-P11 (all
-    11 views)."""
+def strecha_3d_scores(checkpoint: Path, scene, folder: Path, mode: str, name: str) -> tuple[float, float, float]:
+    """(PSNR, SSIM, sharpness) of `lumos3d restore --poses --mode MODE` on degraded fountain-P11
+    (all 11 views); the scene is written under `folder`/`name`."""
     dark, clean, names = scene
-    inputs, references = folder / "dark", folder / "clean"
+    inputs, references = folder / "degraded", folder / "clean"
     if not inputs.exists():
         inputs.mkdir(parents=True)
         references.mkdir()
@@ -145,55 +195,79 @@ def strecha_3d_scores(checkpoint: Path, scene, folder: Path) -> tuple[float, flo
             stem = Path(name).stem
             cv2.imwrite(str(inputs / f"{stem}.png"), (image.permute(1, 2, 0).numpy()[..., ::-1] * 255).round().astype(np.uint8))
             cv2.imwrite(str(references / f"{stem}.png"), (reference.permute(1, 2, 0).numpy()[..., ::-1] * 255).round().astype(np.uint8))
-    output = folder / checkpoint.stem / "scene.ply"
-    summary, seconds = run_lumos3d_json(["restore", str(inputs), "-o", str(output), "--checkpoint", str(checkpoint),
-                                         "--poses", str(STRECHA / "fountain-P11" / "sparse" / "0"), "--reference", str(references)])
+    output = folder / name / "scene.ply"
+    summary, _ = run_lumos3d_json(["restore", str(inputs), "-o", str(output), "--checkpoint", str(checkpoint), "--mode", mode,
+                                   "--poses", str(STRECHA / "fountain-P11" / "sparse" / "0"), "--reference", str(references)])
     restored = torch.stack([torch.from_numpy(cv2.imread(str(output.parent / "restored" / f"{Path(n).stem}.png"))[..., ::-1]
                                              .astype(np.float32) / 255).permute(2, 0, 1) for n in names])
     mean = summary["metrics"]["mean"]
-    return mean["psnr"], mean["ssim"], float(sharpness(restored, clean).mean()), seconds
+    return mean["psnr"], mean["ssim"], float(sharpness(restored, clean).mean())
+
+
+def _regression_student(mode: str) -> Path:
+    """The colour-regression student inside the bundled model of `mode` (the operator network
+    holds all its tensors; conversion.with_appearance drops the illumination head): the regression
+    row, and what the head-only variants start from (the head configs name the student of
+    `make weights`, runs/default-<mode>/final.safetensors, which this saves a retraining)."""
+    operator = load_model(resolve_checkpoint(None, mode))
+    regression = with_appearance(operator, "regression")
+    return save_checkpoint(regression, REPO / "runs" / f"ablation-student-{mode}.safetensors", regression.provenance)
+
+
+def _row(label: str, brackets: dict[str, float] | None, two_d, three_d) -> list[str]:
+    cells = [label]
+    cells += ["–"] * 4 if brackets is None else [
+        f"{brackets['bracket_psnr']:.2f}", f"{brackets['bracket_ssim']:.3f}",
+        f"{brackets['bracket_well_exposed_psnr']:.2f}", f"{brackets['bracket_well_exposed_ssim']:.3f}"]
+    cells += ["–"] * 3 if two_d is None else [f"{two_d[0]:.2f}", f"{two_d[1]:.3f}", f"{two_d[2]:.2f}"]
+    cells += ["–", "–"] if three_d is None else [f"{three_d[0]:.2f} / {three_d[1]:.3f}", f"{three_d[2]:.2f}"]
+    return cells
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--train", action="store_true", help="train the variants whose final weights are missing")
-    parser.add_argument("--steps", type=int, default=500, help="head-only steps per variant (the shipped config's 500)")
+    parser.add_argument("--mode", choices=tuple(VARIANTS), default="low-light")
+    parser.add_argument("--train", action="store_true", help="train the head-only variants whose final weights are missing")
+    parser.add_argument("--steps", type=int, default=500, help="head-only steps per variant (the head configs train 1,000)")
     args = parser.parse_args()
-    config = load_config(REPO / CONFIG)
-    for variant in VARIANTS:
-        if args.train and not (REPO / variant.run / "final.safetensors").exists():
-            _train(variant, args.steps)
-    scenes = darkened_strecha(config.degrade)
-    rows = []
+    mode, variants = args.mode, VARIANTS[args.mode]
+    config = load_config(REPO / _head_config(mode))
+    student = _regression_student(mode)
+    for variant in variants:
+        if args.train and variant.trained_here and not variant.checkpoint(mode).exists():
+            _train(variant, mode, args.steps, student)
+    scenes = degraded_strecha(config.degrade)
     gamma = gamma_2d_scores(scenes)
-    rows.append(["auto-gamma curve (no learning)", "–", "–", f"{gamma[0]:.2f}", f"{gamma[1]:.3f}", f"{gamma[2]:.2f}", "–", "–"])
+    rows = [_row("auto-gamma curve (no learning)", None, gamma, None)]
     with tempfile.TemporaryDirectory() as scratch:
-        fountain = darkened_strecha(config.degrade, views=None)["fountain-P11"]
-        regression = resolve_checkpoint(None, "low-light")
-        p, s, sharp, _ = strecha_3d_scores(regression, fountain, Path(scratch))
-        rows.append(["regression (bundled low-light model, its colours regressed)", "–", "–", "–", "–", "–",
-                     f"{p:.2f} / {s:.3f}", f"{sharp:.2f}"])
-        for variant in VARIANTS:
-            weights = REPO / variant.run / "final.safetensors"
+        fountain = degraded_strecha(config.degrade, views=None)["fountain-P11"]
+        rows.append(_row("regression (the student inside the bundled model, its colours regressed)",
+                         regression_bracket_scores(load_model(student).eval(), mode, config.brackets.root), None,
+                         strecha_3d_scores(student, fountain, Path(scratch), mode, "regression")))
+        print(json.dumps({"variant": "regression", "row": rows[-1]}), flush=True)
+        for index, variant in enumerate(variants):
+            weights = variant.checkpoint(mode)
             if not weights.exists():
-                print(f"skipping {variant.run}: no final.safetensors (run with --train)", flush=True)
+                print(f"skipping {variant.label}: no {weights} (train it first)", flush=True)
                 continue
             model = load_model(weights).eval()
-            bracket_psnr, bracket_ssim = bracket_scores(model, config.brackets.root)
-            two_d = strecha_2d_scores(model, scenes)
-            p, s, sharp, _ = strecha_3d_scores(weights, fountain, Path(scratch))
-            rows.append([variant.label, f"{bracket_psnr:.2f}", f"{bracket_ssim:.3f}", f"{two_d[0]:.2f}", f"{two_d[1]:.3f}",
-                         f"{two_d[2]:.2f}", f"{p:.2f} / {s:.3f}", f"{sharp:.2f}"])
+            rows.append(_row(variant.label, operator_bracket_scores(model, mode, config.brackets.root),
+                             strecha_2d_scores(model, scenes), strecha_3d_scores(weights, fountain, Path(scratch), mode,
+                                                                                f"variant-{index}")))
             print(json.dumps({"variant": variant.label, "row": rows[-1]}), flush=True)
-    header = ["variant", "held-out brackets PSNR", "SSIM", "Strecha 2D PSNR", "SSIM", "sharpness",
-              "fountain-P11 restore PSNR / SSIM", "sharpness"]
-    text = (f"Script: `benchmarks/appearance_ablation.py --steps {args.steps}` ({machine_description()}). Head-only "
-            f"training from the bundled low-light model, {args.steps} steps each, seed 1, config "
-            f"`{CONFIG}` with the row's change. Darkening: the config's camera-pipeline model (exposure "
-            f"{config.degrade.exposure}, gamma {config.degrade.gamma}, noise, colour cast, 8-bit, JPEG), one seeded draw per "
-            f"scene. Strecha images at long side {LONG_SIDE}. Sharpness: high-frequency energy over the clean photo's "
-            "(1 = as sharp). No LOM data is used.\n\n" + markdown_table(header, rows))
-    write_section("appearance-ablation", text, MODEL_CARD)
+    header = ["variant", "held-out brackets PSNR", "SSIM", "well-exposed held-out PSNR", "SSIM", "Strecha 2D PSNR", "SSIM",
+              "sharpness", "fountain-P11 restore PSNR / SSIM", "sharpness"]
+    degradation = (f"exposure {config.degrade.exposure}, gamma {config.degrade.gamma}, noise, colour cast, 8-bit, JPEG"
+                   if mode == "low-light" else "the over-exposure tone curve at its documented ranges")
+    text = (f"Script: `benchmarks/appearance_ablation.py --mode {mode} --steps {args.steps}` ({machine_description()}). "
+            f"Head-only rows: a fresh head trained over the {mode} student (the bundled model without its head; "
+            f"everything else frozen), {args.steps} steps "
+            f"each, seed 1, config `{_head_config(mode)}` with the row's change. Degradation of the Strecha scenes: "
+            f"the config's camera-pipeline model ({degradation}), one seeded draw per scene, images at long side "
+            f"{LONG_SIDE}. Held-out brackets at {NETWORK_SIZE[0]}x{NETWORK_SIZE[1]}: the mode's pairs and the "
+            "already well-exposed ones. Sharpness: high-frequency energy over the clean photo's (1 = as sharp). "
+            "No LOM data is used.\n\n" + markdown_table(header, rows))
+    write_section(SECTIONS[mode], text, MODEL_CARD)
     print(text)
 
 
