@@ -3,7 +3,7 @@ illumination head trained alone (configs/operator-head-<mode>.yaml) with and wit
 brackets, with and without the degraded multi-view scenes, with and without the per-view local
 gain grid; the colour-regression model the operator started from; the bundled model; and (low
 light) the mixed-batch stage of configs/operator-low-light.yaml, which this script scores but does
-not train (hours on a CPU: run `lumos3d train configs/operator-low-light.yaml` first).
+not train (about 4 s a step on 2 CPU cores: run `lumos3d train configs/operator-low-light.yaml`).
 
 Scores, none of them on buu:
 - held-out brackets: every pair of the mode (low light 51, over-exposure 36) of the 20 held-out
@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import tempfile
 from dataclasses import dataclass
@@ -44,7 +43,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cli_runs import REPO, run_lumos3d, run_lumos3d_json  # noqa: E402
 from report import machine_description, markdown_table, write_section  # noqa: E402
 
-from lumos3d_cli.data.brackets import BracketDataset  # noqa: E402
 from lumos3d_cli.data.degradations import degrade  # noqa: E402
 from lumos3d_cli.eval.metrics import auto_gamma, psnr, sharpness, ssim  # noqa: E402
 from lumos3d_cli.model.appearance.conversion import with_appearance  # noqa: E402
@@ -98,8 +96,7 @@ VARIANTS = {
         BUNDLED,
         Variant("operator: brackets, local grid (the head config)", "runs/ablation-overexp-brackets"),
         Variant("operator: brackets, no local grid", "runs/ablation-overexp-brackets-nolocal", NO_LOCAL_GRID),
-        Variant("operator: brackets + degraded scenes, local grid", "runs/ablation-overexp-mixed",
-                ("multiview=true", "multiview_loss=appearance")),
+        Variant("operator: brackets + degraded scenes, local grid", "runs/ablation-overexp-mixed", SCENES),
     ),
 }
 SECTIONS = {"low-light": "appearance-ablation", "over-exposure": "appearance-ablation-over-exposure"}
@@ -139,29 +136,11 @@ def degraded_strecha(settings, views: int | None = VIEWS) -> dict[str, tuple[tor
     return scenes
 
 
-def operator_bracket_scores(model, mode: str, root: str) -> dict[str, float]:
-    """Held-out bracket scores of an operator model, exactly as validation computes them."""
-    config = load_config(REPO / _head_config(mode)).brackets
-    samples = BracketSamples(config, mode, NETWORK_SIZE, (1.0, 1.0), seed=0)
-    return samples.scores(model, torch.device("cpu"))
-
-
-def regression_bracket_scores(model, mode: str, root: str) -> dict[str, float]:
-    """The same pairs for a colour-regression model: its one-view Gaussians rendered at its own
-    predicted camera, at the network size (PSNR capped at 100 dB as in validation)."""
-    scores = {}
-    for inputs_kind, key in (("restore", "bracket"), ("well-exposed", "bracket_well_exposed")):
-        dataset = BracketDataset(root, mode, "validation", NETWORK_SIZE, (1.0, 1.0), flip=False, seed=0, inputs=inputs_kind)
-        psnrs, ssims = [], []
-        with torch.no_grad():
-            for index in range(len(dataset)):
-                sample = dataset[index]
-                rendered, _ = render_views(model(sample["images"][None]), (0.0, 0.0, 0.0))
-                restored, target = rendered[0, 0].clamp(0, 1), sample["targets"][0]
-                psnrs.append(min(float(psnr(restored, target)), 100.0))
-                ssims.append(float(ssim(restored, target)))
-        scores.update({f"{key}_psnr": float(np.mean(psnrs)), f"{key}_ssim": float(np.mean(ssims))})
-    return scores
+def render_one_view(model, inputs: torch.Tensor) -> torch.Tensor:
+    """A colour-regression model's "restoration" of one photo: its Gaussians rendered at its own
+    predicted camera, at the network size ([1, 1, 3, H, W] in and out)."""
+    rendered, _ = render_views(model(inputs), (0.0, 0.0, 0.0))
+    return rendered
 
 
 def strecha_2d_scores(model, scenes) -> tuple[float, float, float]:
@@ -233,6 +212,8 @@ def main() -> None:
     mode, variants = args.mode, VARIANTS[args.mode]
     config = load_config(REPO / _head_config(mode))
     student = _regression_student(mode)
+    brackets = BracketSamples(config.brackets, mode, NETWORK_SIZE, (1.0, 1.0), seed=0)  # what validation scores
+    cpu = torch.device("cpu")
     for variant in variants:
         if args.train and variant.trained_here and not variant.checkpoint(mode).exists():
             _train(variant, mode, args.steps, student)
@@ -242,7 +223,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as scratch:
         fountain = degraded_strecha(config.degrade, views=None)["fountain-P11"]
         rows.append(_row("regression (the student inside the bundled model, its colours regressed)",
-                         regression_bracket_scores(load_model(student).eval(), mode, config.brackets.root), None,
+                         brackets.scores(load_model(student).eval(), cpu, render_one_view), None,
                          strecha_3d_scores(student, fountain, Path(scratch), mode, "regression")))
         print(json.dumps({"variant": "regression", "row": rows[-1]}), flush=True)
         for index, variant in enumerate(variants):
@@ -251,7 +232,7 @@ def main() -> None:
                 print(f"skipping {variant.label}: no {weights} (train it first)", flush=True)
                 continue
             model = load_model(weights).eval()
-            rows.append(_row(variant.label, operator_bracket_scores(model, mode, config.brackets.root),
+            rows.append(_row(variant.label, brackets.scores(model, cpu),
                              strecha_2d_scores(model, scenes), strecha_3d_scores(weights, fountain, Path(scratch), mode,
                                                                                 f"variant-{index}")))
             print(json.dumps({"variant": variant.label, "row": rows[-1]}), flush=True)

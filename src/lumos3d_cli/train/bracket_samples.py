@@ -6,6 +6,8 @@ is what validation reports for model selection."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+
 import numpy as np
 import torch
 
@@ -15,6 +17,11 @@ from lumos3d_cli.losses.appearance import appearance_loss
 from lumos3d_cli.losses.ssim import ssim_map_mean
 from lumos3d_cli.model.lumos3d import Lumos3D
 from lumos3d_cli.train.config import BracketConfig
+
+
+def restore_with_operator(model: Lumos3D, inputs: torch.Tensor) -> torch.Tensor:
+    """The model's predicted operator applied to `inputs` [B, V, 3, H, W] (same shape)."""
+    return model.predict_appearance(inputs).apply(inputs)
 
 
 class BracketSamples:
@@ -59,25 +66,28 @@ class BracketSamples:
         return appearance_loss(operator.apply(inputs), targets, self.config.ssim_weight)
 
     @torch.no_grad()
-    def scores(self, model: Lumos3D, device: torch.device) -> dict[str, float]:
+    def scores(self, model: Lumos3D, device: torch.device,
+               restore: Callable[[Lumos3D, torch.Tensor], torch.Tensor] = restore_with_operator) -> dict[str, float]:
         """Mean PSNR / SSIM of the held-out pairs restored at the network size (every pair, or
-        `validation_samples` per mode spread evenly over them, so every held-out bracket counts):
+        `validation_samples` per mode spread evenly over them, so every held-out bracket counts)
+        by `restore` (model, inputs [1, 1, 3, H, W]) -> [1, 1, 3, H, W] (default: the model's operator):
         {"bracket_psnr", "bracket_ssim", "bracket_samples"} for the restoration pairs and
         {"bracket_well_exposed_psnr", "bracket_well_exposed_ssim", "bracket_well_exposed_samples"}
         for the well-exposed ones (how much the head disturbs a photo that needs little or nothing)."""
-        restore_psnr, restore_ssim, count = self._scores(model, self.validation, device)
-        well_psnr, well_ssim, well_count = self._scores(model, self.validation_well_exposed, device)
+        restore_psnr, restore_ssim, count = self._scores(model, self.validation, device, restore)
+        well_psnr, well_ssim, well_count = self._scores(model, self.validation_well_exposed, device, restore)
         return {"bracket_psnr": restore_psnr, "bracket_ssim": restore_ssim, "bracket_samples": count,
                 "bracket_well_exposed_psnr": well_psnr, "bracket_well_exposed_ssim": well_ssim,
                 "bracket_well_exposed_samples": well_count}
 
-    def _scores(self, model: Lumos3D, datasets: list[BracketDataset], device: torch.device) -> tuple[float, float, int]:
+    def _scores(self, model: Lumos3D, datasets: list[BracketDataset], device: torch.device,
+                restore: Callable[[Lumos3D, torch.Tensor], torch.Tensor]) -> tuple[float, float, int]:
         psnrs, ssims = [], []
         for dataset in datasets:
             for index in validation_indices(len(dataset), self.config.validation_samples):
                 sample = dataset[int(index)]
                 inputs, targets = sample["images"][None].to(device), sample["targets"][None].to(device)
-                restored = model.predict_appearance(inputs).apply(inputs).clamp(0, 1)
+                restored = restore(model, inputs).clamp(0, 1)
                 # an input that is its own target can be returned exactly: PSNR capped at 100 dB
                 mse = max(float(torch.mean((restored.double() - targets.double()) ** 2)), 1e-10)
                 psnrs.append(10 * math.log10(1 / mse))
