@@ -68,3 +68,15 @@ def test_batches_are_deterministic_and_mixed_mode_alternates(brackets):
     loss = samples.loss(model, step=3, rank=0, world_size=1, device=torch.device("cpu"))
     loss.backward()
     assert bool(torch.isfinite(loss)) and model.illumination_head.scene_out.weight.grad is not None
+
+
+def test_held_out_crops_do_not_depend_on_the_run_seed(brackets):
+    # SICE frames are square: the network's 4:3 crop has a free vertical position
+    size = (56, 42)
+    first, second = (BracketSamples(BracketConfig(root=str(brackets)), "low-light", size, (0.6, 1.0), seed=s) for s in (0, 1))
+    for one, other in ((first.validation[0], second.validation[0]), (first.validation_well_exposed[0], second.validation_well_exposed[0])):
+        for index in (0, len(one) // 2, len(one) - 1):
+            assert torch.equal(one[index]["images"], other[index]["images"])
+            assert torch.equal(one[index]["targets"], other[index]["targets"])
+    # training crops do follow the seed
+    assert not torch.equal(first.train[0][0]["images"], second.train[0][0]["images"])
