@@ -7,6 +7,7 @@ the same radius keeps covariances in range and the browser's near/far planes sen
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,3 +63,26 @@ def frame_scene(gaussians: Gaussians, cameras: Cameras | None) -> ViewerFrame:
     centre = means.median(dim=0).values
     radius = float(torch.quantile((means - centre).norm(dim=-1), _RADIUS_QUANTILE))
     return ViewerFrame(centre, VIEWER_RADIUS / radius if radius > 0 else 1.0, up)
+
+
+def view_position_showing(points: np.ndarray, direction: np.ndarray, up: np.ndarray, fov: float,
+                          fill: float = 0.8) -> np.ndarray:
+    """[3] a viewpoint on the ray from the viewer origin along `direction` [3], looking at the
+    origin with vertical field of view `fov` (radians), far enough that every point of `points`
+    [P, 3] lies in front of it and within `fill` of the half field of view, vertically and
+    horizontally (the window is assumed no narrower than it is tall). Starts at the length of
+    `direction` and only moves back: a scene photographed from far away with a long lens puts its
+    cameras at several scene radii, beside the line of sight of a view placed just behind them."""
+    distance = float(np.linalg.norm(direction))
+    axis = direction / max(distance, 1e-9)
+    right = np.cross(-axis, up)
+    right /= max(float(np.linalg.norm(right)), 1e-9)
+    true_up = np.cross(right, -axis)
+    limit = math.tan(fill * fov / 2)
+    for _ in range(64):  # distance grows by 1.15 each time: up to 7,000 times the start
+        relative = points - distance * axis
+        depth = relative @ -axis
+        if np.all(depth > 0) and np.all(np.abs(relative @ right) <= limit * depth) and np.all(np.abs(relative @ true_up) <= limit * depth):
+            break
+        distance *= 1.15
+    return distance * axis

@@ -20,7 +20,7 @@ import numpy as np
 import viser
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.viewer.framing import VIEWER_RADIUS, ViewerFrame, frame_scene
+from lumos3d_cli.viewer.framing import VIEWER_RADIUS, ViewerFrame, frame_scene, view_position_showing
 from lumos3d_cli.viewer.panel import panel_markdown
 from lumos3d_cli.viewer.scene_folder import ViewerScene, load_viewer_scene
 from lumos3d_cli.viewer.splats import DEFAULT_MAX_SPLATS, splat_arrays
@@ -99,7 +99,8 @@ def _vertical_fov(intrinsics: np.ndarray, height: int) -> float:
 
 
 def _set_initial_view(server: viser.ViserServer, scene: ViewerScene, frame: ViewerFrame) -> None:
-    """Start behind and above the cameras looking at the scene centre (or in front of a bare scene)."""
+    """Start behind and above the cameras, far enough back to show them all, looking at the scene
+    centre (or in front of a bare scene)."""
     up = frame.up
     if scene.cameras is not None and len(scene.cameras):
         wxyz, positions = frame.camera_poses(scene.cameras)
@@ -109,9 +110,10 @@ def _set_initial_view(server: viser.ViserServer, scene: ViewerScene, frame: View
         right = np.cross(forward, -up)
         right /= max(np.linalg.norm(right), 1e-9)
         # Oblique, so that relief shows: a view along the cameras' axis looks like a flat photo.
-        position = positions.mean(axis=0) + VIEWER_RADIUS * (-0.5 * forward + 0.3 * up + 0.4 * right)
+        behind_cameras = positions.mean(axis=0) + VIEWER_RADIUS * (-0.5 * forward + 0.3 * up + 0.4 * right)
         width, height = scene.cameras.sizes[0]
         fov = _vertical_fov(scene.cameras.intrinsics[0].numpy(), height)
+        position = view_position_showing(positions, behind_cameras, up, fov)
     else:
         # World frame = first camera (OpenCV): the scene lies along +z.
         position = np.array([0.0, 0.0, -2.5 * VIEWER_RADIUS]) + 0.5 * VIEWER_RADIUS * up
