@@ -73,16 +73,14 @@ def view_position_showing(points: np.ndarray, direction: np.ndarray, up: np.ndar
     horizontally (the window is assumed no narrower than it is tall). Starts at the length of
     `direction` and only moves back: a scene photographed from far away with a long lens puts its
     cameras at several scene radii, beside the line of sight of a view placed just behind them."""
-    distance = float(np.linalg.norm(direction))
-    axis = direction / max(distance, 1e-9)
+    start = float(np.linalg.norm(direction))
+    axis = direction / max(start, 1e-9)
     right = np.cross(-axis, up)
     right /= max(float(np.linalg.norm(right)), 1e-9)
     true_up = np.cross(right, -axis)
-    limit = math.tan(fill * fov / 2)
-    for _ in range(64):  # distance grows by 1.15 each time: up to 7,000 times the start
-        relative = points - distance * axis
-        depth = relative @ -axis
-        if np.all(depth > 0) and np.all(np.abs(relative @ right) <= limit * depth) and np.all(np.abs(relative @ true_up) <= limit * depth):
-            break
-        distance *= 1.15
-    return distance * axis
+    # Moving back along the axis leaves a point's offsets across the line of sight unchanged and
+    # adds to its depth (distance - point . axis): each point needs depth >= its larger offset over
+    # tan(fill * fov / 2), and a little more than nothing when it lies on the axis.
+    across = np.maximum(np.abs(points @ right), np.abs(points @ true_up))
+    needed = points @ axis + np.maximum(across / math.tan(fill * fov / 2), 1e-6)
+    return max(start, float(needed.max(initial=-np.inf))) * axis
