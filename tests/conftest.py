@@ -7,6 +7,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import yaml
+
+from lumos3d_cli.model.checkpoints import save_checkpoint
+from lumos3d_cli.model.lumos3d import build_model
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = Path(os.environ.get("LUMOS3D_SHARED_DATA", REPO_ROOT.parent / "shared" / "data"))
@@ -53,3 +57,39 @@ def run_cli(capsys):
         return CliResult(code, captured.out, captured.err)
 
     return run
+
+
+@pytest.fixture
+def tiny_config(tmp_path, shared_data):
+    """Write a small, fast training config and return its path; `changes` update it."""
+
+    def make(stage="teacher", name="run", **changes):
+        values = {
+            "stage": stage,
+            "output": str(tmp_path / name),
+            "model": "tiny",
+            "data": {"root": str(shared_data / "scenes"), "views": 2, "width": 56, "height": 42,
+                     "scenes": ["video_fox", "statue", "llff_fern"]},
+            "optim": {"steps": 6, "warmup_steps": 2},
+            "log_every": 1,
+            "checkpoint_every": 0,
+        }
+        for key, value in changes.items():
+            section, _, field = key.partition("__")
+            if field:
+                values.setdefault(section, {})[field] = value
+            else:
+                values[key] = value
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(yaml.safe_dump(values))
+        return path
+
+    return make
+
+
+@pytest.fixture(scope="session")
+def random_checkpoint(tmp_path_factory):
+    """A tiny model with random weights, saved in our format (tests only: it restores nothing)."""
+    path = tmp_path_factory.mktemp("weights") / "tiny-random.safetensors"
+    save_checkpoint(build_model("tiny", seed=0), path, {"weights": "random, for tests"})
+    return path

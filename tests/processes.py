@@ -12,6 +12,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from lumos3d_cli.io.manifest import MANIFEST_NAME
+
 # One thread per child: the machine running the tests is shared.
 _ENV = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
 
@@ -74,8 +76,9 @@ def cli_started(process: subprocess.Popen) -> bool:
 
 
 def hidden_entries(folder: Path) -> list[Path]:
-    """Hidden files and folders anywhere under `folder` (where temporaries live)."""
-    return sorted(p for p in folder.rglob(".*"))
+    """Hidden files and folders anywhere under `folder` (where temporaries live), but for the
+    manifests of what lumos3d wrote (io/manifest.py)."""
+    return sorted(p for p in folder.rglob(".*") if p.name != MANIFEST_NAME)
 
 
 def expected_exit(signum: int) -> int:

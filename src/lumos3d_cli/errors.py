@@ -1,6 +1,12 @@
-"""Exceptions that the CLI turns into one-line messages and exit code 2."""
+"""Exceptions that the CLI turns into one-line messages and exit codes: bad input (2), a failed
+run (1), a run stopped by a signal (128 + the signal's number)."""
 
 from __future__ import annotations
+
+import signal
+
+# The signals that stop a command cleanly (Ctrl-C, `kill`, a closed terminal).
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 class InputError(Exception):
@@ -27,3 +33,30 @@ class NonFiniteError(InputError):
 
 class RunError(Exception):
     """A long run stopped for a reason its message explains (e.g. training diverged)."""
+
+
+class Interrupted(BaseException):
+    """A command stopped by a signal. Like KeyboardInterrupt it is no `Exception`, so the
+    `except Exception` blocks on its way out do not swallow it, while `finally` blocks run.
+
+    `detail` says what was kept (e.g. the checkpoint a stopped training run saved)."""
+
+    def __init__(self, signum: int, detail: str = ""):
+        super().__init__(signum, detail)
+        self.signum = signum
+        self.detail = detail
+
+    @property
+    def exit_code(self) -> int:
+        """The shell's code for a process ended by this signal: 128 + its number."""
+        return 128 + self.signum
+
+    @property
+    def signal_name(self) -> str:
+        return signal.Signals(self.signum).name
+
+    def message(self) -> str:
+        """The one line the CLI prints."""
+        return f"interrupted by {self.signal_name}" + (
+            f": {self.detail}" if self.detail else "; nothing half-written was left behind"
+        )

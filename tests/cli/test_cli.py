@@ -14,6 +14,7 @@ from lumos3d_cli.io.ply import write_ply
 
 from factories import random_gaussians
 from assertions import expect_input_error
+from output_files import listing
 
 
 def test_help_lists_every_command_with_examples(run_cli):
@@ -62,7 +63,7 @@ def test_degrade_writes_every_image_and_a_record(run_cli, buu, tmp_path):
     assert result.code == 0, result.err
     summary = json.loads(result.out)
     assert summary["count"] == 3 and summary["mode"] == "low-light" and summary["shared_parameters"]
-    written = sorted(p.name for p in (tmp_path / "dark").iterdir())
+    written = listing(tmp_path / "dark")
     assert written == sorted([f"{p.stem}.png" for p in inputs.iterdir()] + ["degradation.json"])
     first = cv2.imread(str(tmp_path / "dark" / "1.png"))
     original = cv2.imread(str(inputs / "1.JPG"))
@@ -102,7 +103,7 @@ def test_degrade_single_file_and_raw(run_cli, shared_data, tmp_path):
     result = run_cli("degrade", shared_data / "raw" / "Blackmagic.dng", "-o", tmp_path / "dark.png", "--quiet")
     assert result.code == 0, result.err
     assert cv2.imread(str(tmp_path / "dark.png")).shape == (2176, 4128, 3)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["dark.png"]
+    assert listing(tmp_path) == ["dark.png"]
 
 
 def _write_exr_with_nan(path):

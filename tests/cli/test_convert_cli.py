@@ -9,6 +9,7 @@ from lumos3d_cli.model.checkpoints import save_checkpoint
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import build_model
 from assertions import expect_input_error
+from output_files import listing
 from factories import random_gaussians
 
 
@@ -92,4 +93,4 @@ def test_scene_and_checkpoint_suffixes_do_not_mix(tmp_path, run_cli):
     expect_input_error(
         run_cli("convert", str(tmp_path / "scene.ply"), "-o", str(tmp_path / "x.splat"), "--dtype", "float16"), "--dtype", "checkpoints"
     )
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["full.safetensors", "scene.ply"]
+    assert listing(tmp_path) == ["full.safetensors", "scene.ply"]

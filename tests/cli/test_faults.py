@@ -20,18 +20,11 @@ from lumos3d_cli.model.lumos3d import build_model
 from lumos3d_cli.viewer.scene_folder import load_viewer_scene
 
 from assertions import expect_input_error
+from output_files import listing
 from factories import random_gaussians
 from processes import cli_started, hidden_entries, interrupt_when, run_lumos3d, signal_name
 
 SIGNALS = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP]
-
-
-@pytest.fixture(scope="module")
-def tiny_weights(tmp_path_factory):
-    """A tiny model with random weights (it restores nothing; the tests are about files)."""
-    path = tmp_path_factory.mktemp("weights") / "tiny-random.safetensors"
-    save_checkpoint(build_model("tiny", seed=0), path, {"weights": "random, for tests"})
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -58,10 +51,10 @@ def _restore(photos, output, weights, *extra):
 
 
 @pytest.fixture(scope="module")
-def first_restore(tmp_path_factory, photos, tiny_weights):
+def first_restore(tmp_path_factory, photos, random_checkpoint):
     """The outputs of one restore of six photos (copied by the tests that change them)."""
     out = tmp_path_factory.mktemp("first") / "out"
-    result = run_lumos3d(*_restore(photos, out / "scene.ply", tiny_weights))
+    result = run_lumos3d(*_restore(photos, out / "scene.ply", random_checkpoint))
     assert result.code == 0, result.err
     return out
 
@@ -111,24 +104,24 @@ def test_leftovers_of_a_killed_render_are_removed_by_the_next_run(tmp_path, scen
     again = run_lumos3d(*_render_args(tmp_path, frames_count=3))
     assert again.code == 0, again.err
     assert hidden_entries(tmp_path) == []
-    assert sorted(p.name for p in (tmp_path / "frames").iterdir()) == ["00000.png", "00001.png", "00002.png"]
+    assert listing(tmp_path / "frames") == ["00000.png", "00001.png", "00002.png"]
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=signal_name)
-def test_restore_stopped_while_writing_keeps_the_earlier_outputs(tmp_path, first_restore, photos, tiny_weights, signum):
+def test_restore_stopped_while_writing_keeps_the_earlier_outputs(tmp_path, first_restore, photos, random_checkpoint, signum):
     out = shutil.copytree(first_restore, tmp_path / "out")
     before = _contents(out)
-    result = interrupt_when(_restore(photos, out / "scene.ply", tiny_weights), lambda _: _has_staging(out), signum)
+    result = interrupt_when(_restore(photos, out / "scene.ply", random_checkpoint), lambda _: _has_staging(out), signum)
     _expect_interrupted(result, signum)
     assert hidden_entries(tmp_path) == []
     assert _contents(out) == before
 
 
-def test_ctrl_c_during_start_up_ends_in_one_line_and_leaves_nothing(tmp_path, photos, tiny_weights):
+def test_ctrl_c_during_start_up_ends_in_one_line_and_leaves_nothing(tmp_path, photos, random_checkpoint):
     """The signal lands while the subcommands import torch and pycolmap (whose C extension would
     turn it into an error telling the user to reinstall pycolmap)."""
     out = tmp_path / "new" / "out"
-    result = interrupt_when(_restore(photos, out / "scene.ply", tiny_weights), cli_started, signal.SIGINT)
+    result = interrupt_when(_restore(photos, out / "scene.ply", random_checkpoint), cli_started, signal.SIGINT)
     _expect_interrupted(result, signal.SIGINT)
     assert list(tmp_path.iterdir()) == []
 
@@ -136,12 +129,12 @@ def test_ctrl_c_during_start_up_ends_in_one_line_and_leaves_nothing(tmp_path, ph
 # -- row 2: re-runs -----------------------------------------------------------------------------------
 
 
-def test_rerun_with_fewer_views_replaces_the_output_set(tmp_path, buu, first_restore, tiny_weights):
+def test_rerun_with_fewer_views_replaces_the_output_set(tmp_path, buu, first_restore, random_checkpoint):
     out = shutil.copytree(first_restore, tmp_path / "out")
     assert len(list((out / "restored").iterdir())) == 6
     (out / "notes.txt").write_text("the user's own file beside the outputs")
     fewer = _photos(buu, tmp_path / "fewer", ["2.JPG", "4.JPG", "6.JPG"])
-    result = run_lumos3d(*_restore(fewer, out / "scene.ply", tiny_weights))
+    result = run_lumos3d(*_restore(fewer, out / "scene.ply", random_checkpoint))
     assert result.code == 0, result.err
     assert sorted(p.name for p in (out / "restored").iterdir()) == ["2.png", "4.png", "6.png"]
     summary = json.loads((out / "summary.json").read_text())
@@ -156,8 +149,8 @@ def test_rerun_with_fewer_views_replaces_the_output_set(tmp_path, buu, first_res
 # -- row 3: the same photo twice -----------------------------------------------------------------------
 
 
-def test_the_same_photo_twice_is_refused(tmp_path, photos, buu, tiny_weights):
-    twice = run_lumos3d(*_restore(photos / "1.JPG", tmp_path / "a" / "scene.ply", tiny_weights), photos / "1.JPG")
+def test_the_same_photo_twice_is_refused(tmp_path, photos, buu, random_checkpoint):
+    twice = run_lumos3d(*_restore(photos / "1.JPG", tmp_path / "a" / "scene.ply", random_checkpoint), photos / "1.JPG")
     expect_input_error(twice, f"{photos / '1.JPG'}: the same photo is given twice")
     other = _photos(buu, tmp_path / "other", ["1.JPG"])
     same_name = run_lumos3d("degrade", photos, other / "1.JPG", "-o", tmp_path / "b")
@@ -168,17 +161,17 @@ def test_the_same_photo_twice_is_refused(tmp_path, photos, buu, tiny_weights):
 # -- row 4: an output under a regular file -------------------------------------------------------------
 
 
-def test_outputs_under_a_regular_file_are_refused_before_any_work(tmp_path, buu, photos, scene_file, tiny_weights):
+def test_outputs_under_a_regular_file_are_refused_before_any_work(tmp_path, buu, photos, scene_file, random_checkpoint):
     blocker = tmp_path / "file"
     blocker.write_text("a regular file")
     cases = [
-        (_restore(photos, blocker / "scene.ply", tiny_weights), "-o", blocker / "scene.ply"),
-        (_restore(photos, tmp_path / "out" / "scene.ply", tiny_weights, "--video", blocker / "v.mp4"), "--video", blocker / "v.mp4"),
+        (_restore(photos, blocker / "scene.ply", random_checkpoint), "-o", blocker / "scene.ply"),
+        (_restore(photos, tmp_path / "out" / "scene.ply", random_checkpoint, "--video", blocker / "v.mp4"), "--video", blocker / "v.mp4"),
         (("eval", buu.parent, "--scenes", "buu", "--out", blocker / "report"), "--out", blocker / "report"),
         (("render", scene_file, "--orbit", 2, "-o", blocker / "frames"), "-o", blocker / "frames"),
         (("render", scene_file, "--orbit", 2, "-o", tmp_path / "frames", "--video", blocker / "v.mp4"), "--video", blocker / "v.mp4"),
         (("degrade", photos, "-o", blocker / "dark"), "-o", blocker / "dark"),
-        (("convert", tiny_weights, "-o", blocker / "w.safetensors"), "-o", blocker / "w.safetensors"),
+        (("convert", random_checkpoint, "-o", blocker / "w.safetensors"), "-o", blocker / "w.safetensors"),
     ]
     for args, option, path in cases:
         result = run_lumos3d(*args)

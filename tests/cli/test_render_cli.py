@@ -12,6 +12,7 @@ from lumos3d_cli.render.render import render
 
 from factories import random_scene
 from assertions import expect_input_error
+from output_files import listing
 
 
 def _scene(tmp_path):
@@ -31,7 +32,7 @@ def test_render_from_poses_matches_the_library(run_cli, tmp_path):
     assert result.code == 0, result.err
     summary = json.loads(result.out)
     assert summary["frames"] == 3 and (summary["width"], summary["height"]) == (48, 32)
-    assert sorted(p.name for p in (tmp_path / "views").iterdir()) == ["00000.png", "00001.png", "00002.png"]
+    assert listing(tmp_path / "views") == ["00000.png", "00001.png", "00002.png"]
     written = cv2.imread(str(tmp_path / "views" / "00001.png"))[..., ::-1] / 255.0
     from lumos3d_cli.io.ply import read_ply
 

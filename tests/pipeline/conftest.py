@@ -2,16 +2,6 @@ import shutil
 
 import pytest
 
-from lumos3d_cli.model.checkpoints import save_checkpoint
-from lumos3d_cli.model.lumos3d import build_model
-
-
-@pytest.fixture(scope="session")
-def random_checkpoint(tmp_path_factory):
-    """A tiny model with random weights, saved in our format (tests only: it restores nothing)."""
-    path = tmp_path_factory.mktemp("weights") / "tiny-random.safetensors"
-    save_checkpoint(build_model("tiny", seed=0), path, {"weights": "random, for tests"})
-    return path
 
 
 @pytest.fixture

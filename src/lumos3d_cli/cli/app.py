@@ -12,8 +12,8 @@ from rich.text import Text
 
 from lumos3d_cli import __version__
 from lumos3d_cli.cli.console import configure_logging, state, stderr_console
-from lumos3d_cli.cli.interrupts import Interrupted, interruption_behind, signals_raise_interrupted
-from lumos3d_cli.errors import InputError, RunError
+from lumos3d_cli.cli.interrupts import interruption_behind, signals_raise_interrupted
+from lumos3d_cli.errors import InputError, Interrupted, RunError
 
 EXAMPLES = """
 [bold]Examples[/bold]
@@ -125,13 +125,13 @@ def _run(args: list[str], debug: bool, claim_signals: Callable[[], None]) -> int
     except SystemExit as done:
         return done.code if isinstance(done.code, int) else 0 if done.code is None else 1
     except InputError as error:
-        if debug:
-            raise
+        if debug:  # the traceback, then the same line and exit code as without --debug
+            traceback.print_exc()
         stderr_console().print(f"[bold red]error:[/bold red] {_for_command_line(error)}", highlight=False)
         return 2
     except RunError as error:
         if debug:
-            raise
+            traceback.print_exc()
         stderr_console().print(f"[bold red]error:[/bold red] {error}", highlight=False)
         return 1
     except Exception as error:  # noqa: BLE001 - the CLI's last line of defence

@@ -11,6 +11,7 @@ import typer
 from lumos3d_cli.cli.console import print_json, say
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.output_paths import check_output_path
+from lumos3d_cli.io.output_set import OutputSet
 from lumos3d_cli.io.ply import read_ply
 from lumos3d_cli.io.splat import write_splat
 from lumos3d_cli.io.weight_files import STORAGE_DTYPES, storage_dtype
@@ -37,9 +38,17 @@ def _converts_a_scene(source: Path, output: Path, dtype: str, architecture: str 
     return scene_in
 
 
+def _written_once(source: Path, output: Path) -> OutputSet:
+    """The one file convert writes: never over a file lumos3d did not write, never its input."""
+    return OutputSet(output.parent, "convert", f"convert {output.name}", [source]).add_file(output.name)
+
+
 def _scene_to_splat(source: Path, output: Path, as_json: bool) -> None:
-    gaussians = read_ply(source)
-    write_splat(output, gaussians)
+    outputs = _written_once(source, output)
+    with outputs.reserved():
+        gaussians = read_ply(source)
+        with outputs.staged() as staging:
+            write_splat(staging.root / output.name, gaussians)
     summary = {"output": str(output), "format": "splat", "gaussians": len(gaussians), "bytes": output.stat().st_size,
                "source_sh_degree": gaussians.sh_degree}
     if as_json:
@@ -64,10 +73,13 @@ def convert_command(
         return
     storage_dtype(dtype)  # refuse a bad --dtype before the (possibly large) checkpoint is read
     check_output_path(output, "output")
-    model = load_model(source, architecture=get_architecture(architecture) if architecture else None)
-    provenance = {key: value for key, value in model.provenance.items() if key not in ("path", "format")}
-    provenance["converted_from"] = {"file": Path(source).name, "format": model.provenance.get("format"), "dtype": dtype}
-    save_checkpoint(model, output, provenance, dtype=dtype)
+    outputs = _written_once(source, output)
+    with outputs.reserved():
+        model = load_model(source, architecture=get_architecture(architecture) if architecture else None)
+        provenance = {key: value for key, value in model.provenance.items() if key not in ("path", "format")}
+        provenance["converted_from"] = {"file": Path(source).name, "format": model.provenance.get("format"), "dtype": dtype}
+        with outputs.staged() as staging:
+            save_checkpoint(model, staging.root / output.name, provenance, dtype=dtype)
     summary = summarize_checkpoint(output)
     if as_json:
         print_json(summary)

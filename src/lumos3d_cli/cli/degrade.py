@@ -11,7 +11,7 @@ from lumos3d_cli.cli.console import ProgressBars, print_json, progress_bar, say
 from lumos3d_cli.data.degradations import MODES
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.image_files import list_images
-from lumos3d_cli.pipeline.degrade_job import check_degrade_output, degrade_files
+from lumos3d_cli.pipeline.degrade_job import degrade_files, degrade_outputs
 
 EXAMPLES = """
   lumos3d degrade photos/ -o dark/ --mode low-light --seed 0
@@ -48,10 +48,10 @@ def degrade_command(
     if mode not in MODES:
         raise InputError(f"--mode {mode!r}: use one of {', '.join(MODES)}")
     paths = list_images(inputs)
-    check_degrade_output(paths, output, bit_depth)
-    with progress_bar() as bars:
+    outputs = degrade_outputs(paths, output, bit_depth, inputs)
+    with outputs.reserved(), progress_bar() as bars:
         summary = degrade_files(paths, output, mode, seed, noise, per_image, bit_depth, ProgressBars(bars),
-                                colour_cast, jpeg_quality, exposure, gamma)
+                                colour_cast, jpeg_quality, exposure, gamma, inputs)
     if json_output:
         print_json(summary)
     else:

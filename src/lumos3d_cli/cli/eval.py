@@ -13,7 +13,7 @@ from lumos3d_cli.cli import preset_options
 from lumos3d_cli.cli.console import print_json, progress_bar, stdout_console
 from lumos3d_cli.data.degradations import MODES
 from lumos3d_cli.io.output_paths import check_output_path
-from lumos3d_cli.pipeline.evaluation import EvalReport, evaluate_lom, write_eval_report
+from lumos3d_cli.pipeline.evaluation import EvalReport, eval_outputs, evaluate_lom, write_eval_report
 from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET
 from lumos3d_cli.pipeline.scene_geometry import GEOMETRY_SOURCES
 
@@ -76,7 +76,9 @@ def eval_command(
     """Evaluate restoration on LOM scenes (PSNR on [0,1], SSIM 11x11 sigma 1.5, LPIPS)."""
     check_output_path(out, "out", folder=True)
     names = [n.strip() for n in scenes.split(",") if n.strip()] if scenes else None
-    with progress_bar() as bars:
+    inputs = [root, checkpoint, lpips_weights]
+    outputs = eval_outputs(out, names or [], inputs)
+    with outputs.reserved(), progress_bar() as bars:
         task = bars.add_task(f"eval ({protocol})", total=len(names) if names else None)
         report = evaluate_lom(
             root, names, mode=mode, protocol=protocol, checkpoint=checkpoint, preset=preset, geometry=geometry,
@@ -84,7 +86,7 @@ def eval_command(
             exposure_prior=exposure_prior, fill_unobserved=fill_unobserved, device=device, baseline=baseline, lpips_weights=lpips_weights,
             on_scene=lambda _: bars.advance(task),
         )
-    write_eval_report(report, out)
+        write_eval_report(report, out, inputs)
     if json_output:
         print_json(report.document)
         return

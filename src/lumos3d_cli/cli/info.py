@@ -62,6 +62,9 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
     """Every summary that applies to `path`; `deep` decodes images (see `_image_summary`)."""
     if not path.exists():
         raise InputError(f"{path}: no such file or folder")
+    if not (path.is_file() or path.is_dir()):
+        raise InputError(f"{path}: is neither a file nor a folder (a device, pipe or socket); pass a .ply, checkpoint, "
+                         "camera file, image or folder")
     if path.is_file():
         suffix = path.suffix.lower()
         if suffix == ".ply":

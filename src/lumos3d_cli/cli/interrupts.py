@@ -10,34 +10,8 @@ import signal
 import threading
 from collections.abc import Callable, Iterator
 
-HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+from lumos3d_cli.errors import STOP_SIGNALS, Interrupted
 
-
-class Interrupted(BaseException):
-    """A command stopped by a signal. Like KeyboardInterrupt it is no `Exception`, so the
-    `except Exception` blocks on its way out do not swallow it, while `finally` blocks run.
-
-    `detail` says what was kept (e.g. the checkpoint a stopped training run saved)."""
-
-    def __init__(self, signum: int, detail: str = ""):
-        super().__init__(signum, detail)
-        self.signum = signum
-        self.detail = detail
-
-    @property
-    def exit_code(self) -> int:
-        """The shell's code for a process ended by this signal: 128 + its number."""
-        return 128 + self.signum
-
-    @property
-    def signal_name(self) -> str:
-        return signal.Signals(self.signum).name
-
-    def message(self) -> str:
-        """The one line the CLI prints."""
-        return f"interrupted by {self.signal_name}" + (
-            f": {self.detail}" if self.detail else "; nothing half-written was left behind"
-        )
 
 
 def interruption_behind(error: BaseException) -> Interrupted | None:
@@ -77,7 +51,7 @@ def signals_raise_interrupted() -> Iterator[Callable[[], None]]:
             raised = True
             raise Interrupted(signum)
 
-    previous = {signum: signal.getsignal(signum) for signum in HANDLED_SIGNALS}
+    previous = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
     handled = [signum for signum, old in previous.items() if old is not signal.SIG_IGN]
 
     def claim() -> None:

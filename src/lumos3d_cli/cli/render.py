@@ -13,7 +13,7 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.io.ply import read_ply
 from lumos3d_cli.io.video import video_kind
-from lumos3d_cli.pipeline.render_job import render_cameras, render_frames
+from lumos3d_cli.pipeline.render_job import render_cameras, render_frames, render_outputs
 
 EXAMPLES = """
   lumos3d render out/scene.ply --orbit 60 -o frames/ --video orbit.mp4
@@ -59,9 +59,12 @@ def render_command(
     check_output_path(video, "video")
     started = time.perf_counter()
     gaussians = read_ply(scene)
+    if len(gaussians) == 0:
+        raise InputError(f"{scene}: holds no Gaussians; there is nothing to render")
     cameras, source = render_cameras(scene, gaussians, poses, orbit, width, height)
-    with progress_bar() as bars:
-        frames = render_frames(gaussians, cameras, output, video, fps, colour, antialiased, ProgressBars(bars))
+    outputs = render_outputs(len(cameras), output, video, [scene, poses])
+    with outputs.reserved(), progress_bar() as bars:
+        frames = render_frames(gaussians, cameras, output, video, fps, colour, antialiased, ProgressBars(bars), [scene, poses])
     summary = {
         "scene": str(scene), "gaussians": len(gaussians), "sh_degree": gaussians.sh_degree,
         "cameras": source, "frames": frames.frames, "width": frames.size[0], "height": frames.size[1],

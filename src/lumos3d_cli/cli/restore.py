@@ -13,13 +13,14 @@ from lumos3d_cli.cli.console import ProgressBars, print_json, progress_bar, say
 from lumos3d_cli.cli.view import EXIT_INTERRUPTED, announce
 from lumos3d_cli.data.degradations import MODES
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.image_files import list_images
 from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.io.video import video_kind
 from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET
 from lumos3d_cli.pipeline.restore import RestoredScene, restore
-from lumos3d_cli.pipeline.restore_outputs import check_view_format, write_restored_scene
+from lumos3d_cli.pipeline.orbit_video import DEFAULT_ORBIT_FRAMES
+from lumos3d_cli.pipeline.restore_outputs import check_view_format, restore_outputs, write_restored_scene
 from lumos3d_cli.pipeline.scene_geometry import GEOMETRY_SOURCES
-from lumos3d_cli.viewer.orbit_video import DEFAULT_ORBIT_FRAMES, write_orbit_video
 from lumos3d_cli.viewer.server import DEFAULT_HOST, DEFAULT_PORT, serve_scene
 
 EXAMPLES = """
@@ -62,17 +63,19 @@ def restore_command(
     check_view_format(output_format)
     if video is not None:
         video_kind(video)
-    with progress_bar() as bars:
+    # Everything the outputs must stay clear of; checked, with what is already in the way, before any
+    # work, while the output folder is held against other runs (io/output_set.py).
+    inputs = [*list_images(photos), *photos, poses, reference, checkpoint, lpips_weights]
+    outputs = restore_outputs(output, inputs, video)
+    with outputs.reserved(), progress_bar() as bars:
         scene = restore(
             photos, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,
             max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, gaussian_grid=gaussian_grid,
             exposure_prior=exposure_prior, fill_unobserved=fill_unobserved, device=device, reference=reference, lpips_weights=lpips_weights,
             progress=ProgressBars(bars),
         )
-        summary = write_restored_scene(scene, output, output_format)
-        if video is not None:
-            frames = bars.add_task("orbit video", total=DEFAULT_ORBIT_FRAMES)
-            write_orbit_video(scene.gaussians, scene.cameras, video, on_frame=lambda: bars.advance(frames))
+        frames = bars.add_task("orbit video", total=DEFAULT_ORBIT_FRAMES, visible=video is not None)
+        summary = write_restored_scene(scene, output, output_format, video, inputs, on_video_frame=lambda: bars.advance(frames))
     if json_output:
         print_json(summary)
     else:

@@ -5,13 +5,15 @@ from __future__ import annotations
 
 import logging
 import signal
+from dataclasses import replace
 from pathlib import Path
 
 import typer
 
 from lumos3d_cli.cli.console import print_json, progress_bar, say, state
-from lumos3d_cli.cli.interrupts import Interrupted
-from lumos3d_cli.train.config import load_config
+from lumos3d_cli.errors import InputError, Interrupted
+from lumos3d_cli.train.config import load_config, training_inputs
+from lumos3d_cli.train.run_folder import check_run_folder, earlier_run, numbered_folder, read_run
 from lumos3d_cli.train.distributed import setup_distributed, shutdown_distributed
 from lumos3d_cli.train.trainer import StepReport, Trainer, TrainResult, check_max_steps
 
@@ -19,6 +21,7 @@ EXAMPLES = """
   lumos3d train configs/tiny-cpu.yaml
   lumos3d train configs/low-light.yaml optim.steps=2000 output=runs/ll
   lumos3d train configs/low-light.yaml --resume
+  lumos3d train configs/low-light.yaml --new-run          [dim]# output holds a run: start in output-2[/dim]
   torchrun --nproc_per_node 8 -m lumos3d_cli train configs/vggt-1b-gpu.yaml
 """
 
@@ -33,7 +36,8 @@ def _describe(report: StepReport) -> str:
 def train_command(
     config: Path = typer.Argument(..., help="Training config (YAML)."),
     overrides: list[str] = typer.Argument(None, help="key=value overrides, e.g. optim.lr=1e-4 data.views=6."),
-    resume: bool = typer.Option(False, "--resume", help="Continue from the output folder's latest checkpoint."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the run in the output folder from its latest checkpoint."),
+    new_run: bool = typer.Option(False, "--new-run", help="If the output folder holds another run, start in the next free numbered folder beside it (output-2, ...)."),
     max_steps: int | None = typer.Option(None, "--max-steps", help="Stop (with a checkpoint) after this many steps in total."),
     json_output: bool = typer.Option(False, "--json", help="Print a JSON summary on stdout (rank 0)."),
 ) -> None:
@@ -42,7 +46,18 @@ def train_command(
     Stopped by SIGINT, SIGTERM or SIGHUP, it saves a checkpoint after the current step and exits
     with 128 + the signal number (130, 143, 129), so that a scheduler sees an unfinished run."""
     check_max_steps(max_steps)
+    if resume and new_run:
+        raise InputError("--resume continues the run in the output folder and --new-run starts another: give one")
     settings = load_config(config, overrides or [])
+    output = Path(settings.output)
+    if new_run and earlier_run(output) is not None:
+        output = numbered_folder(output)
+        say(f"{settings.output} holds {earlier_run(Path(settings.output))}; this run starts in {output}")
+        settings = replace(settings, output=str(output))
+    check_run_folder(output, training_inputs(settings, config), resume)
+    if resume:
+        run = read_run(output)
+        say(f"resuming {run.describe() if run is not None else 'the run'} in {output}")
     context = setup_distributed(settings.device)
     if not context.is_main:
         logging.getLogger("lumos3d_cli").setLevel(logging.ERROR)
@@ -60,7 +75,7 @@ def train_command(
                     say(f"resuming from step {step} ({folder})")
 
             trainer = Trainer(settings, context, on_step if not state.quiet else None, on_resume)
-            result = trainer.run(resume=resume, max_steps=max_steps)
+            result = trainer.run(resume=resume, max_steps=max_steps, config_file=config)
     finally:
         shutdown_distributed()
     if not context.is_main:

@@ -5,11 +5,16 @@ Temporary names are hidden and carry the writing process's id and a tag of its h
 cannot clean up after itself; the next run writing into the same folder recognises such
 leftovers — their process no longer exists on this host — and removes them, while the
 temporaries of a run still going on (same host, live process) or of another host are left alone.
+
+A leftover staging folder that holds a commit journal (io/output_set.py) was killed while it
+moved its outputs into place: its remaining moves are finished first (roll forward), so the
+folder holds the complete new set, then it is removed.
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import os
 import re
@@ -33,13 +38,13 @@ _OWNER = re.compile(r"\.(?P<pid>\d+)-(?P<host>[0-9a-f]{8})\.[a-z0-9_]+\.tmp(\.[^
 _cleaned: set[Path] = set()
 
 
-def _current_umask() -> int:
+def current_umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
 
 
-def _prefix(name: str) -> str:
+def temporary_prefix(name: str) -> str:
     """The start of this process's temporary names for an output called `name`."""
     return f".{name}.{os.getpid()}-{_HOST}."
 
@@ -72,6 +77,24 @@ def _remove(path: Path) -> None:
         path.unlink(missing_ok=True)
 
 
+COMMIT_JOURNAL = ".commit.json"
+
+
+def finish_commit(staging: Path) -> None:
+    """Carry out the moves that `staging`'s commit journal lists and that have not happened.
+
+    The journal is a list of [source, destination, done_when] written before the first move.
+    A move of a new file into place is done when its source (in staging) is gone; a move of an
+    old file out of the way is done when its destination (in staging's `.replaced`) exists —
+    its source path is taken again by the new file, so "source gone" would not tell."""
+    for source, destination, done_when in json.loads((staging / COMMIT_JOURNAL).read_text()):
+        source, destination = Path(source), Path(destination)
+        done = destination.exists() if done_when == "destination-exists" else not (source.exists() or source.is_symlink())
+        if not done:
+            destination.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(source, destination)
+
+
 def remove_leftovers(folder: Path | str) -> list[Path]:
     """Remove the temporaries in `folder` left by killed runs on this host (once per folder and
     process); returns what was removed."""
@@ -85,12 +108,15 @@ def remove_leftovers(folder: Path | str) -> list[Path]:
     _cleaned.add(folder)
     removed = [entry for entry in entries if _is_leftover(entry.name)]
     for entry in removed:
+        if (entry / COMMIT_JOURNAL).is_file():
+            finish_commit(entry)
+            logger.warning("finished moving the outputs of an earlier run into %s: it was killed while it did", folder)
         _remove(entry)
         logger.info("removed %s, left behind by an earlier run that was killed", entry)
     return removed
 
 
-def _make_folder(folder: Path) -> list[Path]:
+def make_folders(folder: Path) -> list[Path]:
     """mkdir -p `folder`; returns the folders it created, outermost first (to undo on failure)."""
     missing = [parent for parent in [folder, *folder.parents] if not parent.exists()]
     blocker = blocking_file(folder / "output")
@@ -100,8 +126,8 @@ def _make_folder(folder: Path) -> list[Path]:
     return missing[::-1]
 
 
-def _remove_created(created: list[Path]) -> None:
-    """Remove folders `_make_folder` created, innermost first, where they are still empty."""
+def remove_created_folders(created: list[Path]) -> None:
+    """Remove folders `make_folders` created, innermost first, where they are still empty."""
     for folder in reversed(created):
         with contextlib.suppress(OSError):
             folder.rmdir()
@@ -113,90 +139,20 @@ def atomic_path(final: Path | str) -> Iterator[Path]:
     succeeds; when the block raises (an interruption included) delete it and any folder created
     for it."""
     final = Path(final)
-    created = _make_folder(final.parent)
+    created = make_folders(final.parent)
     remove_leftovers(final.parent)
-    handle, name = tempfile.mkstemp(prefix=_prefix(final.stem), suffix=f".tmp{final.suffix}", dir=final.parent)
+    handle, name = tempfile.mkstemp(prefix=temporary_prefix(final.stem), suffix=f".tmp{final.suffix}", dir=final.parent)
     os.close(handle)
     temporary = Path(name)
     try:
         yield temporary
         # mkstemp (and writers that replace the file, like safetensors) create 0600; outputs follow the umask
-        os.chmod(temporary, 0o666 & ~_current_umask())
+        os.chmod(temporary, 0o666 & ~current_umask())
         os.replace(temporary, final)
     except BaseException:
         temporary.unlink(missing_ok=True)
-        _remove_created(created)
+        remove_created_folders(created)
         raise
-
-
-def _check_kinds(staging: Path, final: Path, replace_folders: bool) -> None:
-    """Refuse, before anything moves, an output whose name is taken by the other kind (a file
-    where a folder goes, or a folder where a file goes): a half-moved output set would remain."""
-    items = staging.iterdir() if replace_folders else staging.rglob("*")
-    for item in items:
-        target = final / item.relative_to(staging)
-        if target.exists() and item.is_dir() != target.is_dir():
-            found, needed = ("a folder", "a file") if target.is_dir() else ("a file", "a folder")
-            raise InputError(f"{target}: is {found} but the output written there is {needed}; move it away or choose another output")
-
-
-def _move_into(staging: Path, final: Path, replace_folders: bool) -> None:
-    """Move the staged outputs into `final`. An existing folder being replaced is renamed into the
-    staging folder first (deleted with it), so the new one takes its place in one rename."""
-    items = sorted(staging.iterdir())
-    replaced = staging / ".replaced"
-    for item in items:
-        target = final / item.name
-        if item.is_dir() and replace_folders:
-            if target.exists() or target.is_symlink():
-                replaced.mkdir(exist_ok=True)
-                os.replace(target, replaced / item.name)
-            os.replace(item, target)
-        elif item.is_dir():
-            for inner in sorted(item.rglob("*")):
-                destination = final / inner.relative_to(staging)
-                if inner.is_dir():
-                    destination.mkdir(parents=True, exist_ok=True)
-                else:
-                    destination.parent.mkdir(parents=True, exist_ok=True)
-                    os.replace(inner, destination)
-        else:
-            os.replace(item, target)
-
-
-@contextlib.contextmanager
-def atomic_directory(final: Path | str, replace_folders: bool = False) -> Iterator[Path]:
-    """Yield an empty staging folder (hidden, inside `final`); when the block succeeds its contents
-    move into `final`, which is created if needed.
-
-    Files replace files of the same name; everything else already in `final` stays. Sub-folders
-    merge file by file, or with `replace_folders` replace the folder of the same name whole, so
-    that e.g. `restored/` holds exactly the views this run wrote and none of an earlier run's.
-    `final` itself is never replaced or emptied: it may be the user's home folder.
-    When the block raises (an interruption included) the staging folder is removed and `final`
-    is left as it was (removed if this call created it).
-    """
-    final = Path(final)
-    created = _make_folder(final)
-    remove_leftovers(final)
-    prefix = _prefix("staging")
-    earlier = {item.name for item in final.iterdir() if item.name.startswith(prefix)}
-    staging, succeeded = None, False
-    try:
-        staging = Path(tempfile.mkdtemp(prefix=prefix, suffix=".tmp", dir=final))
-        yield staging
-        _check_kinds(staging, final, replace_folders)
-        _move_into(staging, final, replace_folders)
-        succeeded = True
-    finally:
-        # A signal can land after mkdtemp made the folder but before `staging` names it: then the
-        # folder to remove is the one of this process's staging folders that was not there before.
-        made = [staging] if staging is not None else [
-            item for item in final.iterdir() if item.name.startswith(prefix) and item.name not in earlier]
-        for folder in made:
-            shutil.rmtree(folder, ignore_errors=True)
-        if not succeeded:
-            _remove_created(created)
 
 
 def write_bytes_atomic(final: Path | str, data: bytes) -> None:

@@ -161,9 +161,14 @@ class Cameras:
         require_finite(f"{where}.intrinsics", self.intrinsics)
         rotation = self.extrinsics[:, :, :3].double()
         identity = torch.eye(3, dtype=torch.float64).expand_as(rotation)
-        if not torch.allclose(rotation @ rotation.transpose(1, 2), identity, atol=1e-4) or (
-            torch.linalg.det(rotation) < 0
-        ).any():
-            raise ValueError(f"{where}: extrinsics hold a matrix that is not a rotation")
-        if (self.intrinsics[:, 0, 0] <= 0).any() or (self.intrinsics[:, 1, 1] <= 0).any():
-            raise ValueError(f"{where}: focal lengths must be positive")
+        not_rotations = ((rotation @ rotation.transpose(1, 2) - identity).abs().amax(dim=(1, 2)) > 1e-4) | (
+            torch.linalg.det(rotation) < 0)
+        if not_rotations.any():
+            raise ValueError(f"{where}: the pose of {self._view_name(int(not_rotations.nonzero()[0]))} holds a matrix that "
+                             "is not a rotation (scaled, sheared, mirrored or singular)")
+        bad_focal = (self.intrinsics[:, 0, 0] <= 0) | (self.intrinsics[:, 1, 1] <= 0)
+        if bad_focal.any():
+            raise ValueError(f"{where}: the focal length of {self._view_name(int(bad_focal.nonzero()[0]))} is not positive")
+
+    def _view_name(self, index: int) -> str:
+        return f"view {index} ({self.names[index]})" if self.names and self.names[index] else f"view {index}"

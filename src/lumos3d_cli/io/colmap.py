@@ -1,5 +1,7 @@
 """COLMAP sparse models: cameras, images and points3D, read in text or binary form (binary
-through pycolmap), written in text form.
+through pycolmap), written in both: the text form for people and tools that read text, the
+binary form (which COLMAP and pycolmap prefer when both are there) because COLMAP's text reader
+cuts an image name at its first space.
 
 COLMAP stores world->camera rotations as wxyz quaternions and uses the same pixel convention
 as `Cameras` (origin at the top-left pixel corner). Only the pinhole part of each camera model
@@ -182,7 +184,10 @@ def read_colmap_model(folder: Path | str) -> Cameras:
         intrinsics[i] = torch.tensor([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1]], dtype=torch.float64)
         sizes.append((cam.width, cam.height))
     result = Cameras(extrinsics, intrinsics, sizes, [v.name for v in views])
-    result.require_valid(str(folder))
+    try:
+        result.require_valid(str(folder))
+    except ValueError as error:
+        raise InputError(f"{error}; correct the model") from None
     return result
 
 
@@ -262,9 +267,10 @@ def _observation_lines(cameras: Cameras, points: SparsePoints | None) -> tuple[l
 
 
 def write_colmap_model(folder: Path | str, cameras: Cameras, points: SparsePoints | None = None) -> None:
-    """Write cameras.txt (PINHOLE, one per view), images.txt and points3D.txt; `points` (their
-    `view` indexing `cameras`) fill points3D.txt with tracks and images.txt with 2D points, so
-    the model opens in COLMAP as a reconstruction; without them points3D.txt is empty."""
+    """Write cameras.txt (PINHOLE, one per view), images.txt and points3D.txt, and the same model
+    in binary (cameras.bin, images.bin, points3D.bin, and COLMAP's rigs.bin and frames.bin);
+    `points` (their `view` indexing `cameras`) fill points3D with tracks and images with 2D
+    points, so the model opens in COLMAP as a reconstruction; without them points3D is empty."""
     folder = Path(folder)
     cameras.require_valid("cameras to save")
     observations, point_lines = _observation_lines(cameras, points)
@@ -291,3 +297,9 @@ def write_colmap_model(folder: Path | str, cameras: Cameras, points: SparsePoint
     write_bytes_atomic(folder / "cameras.txt", ("\n".join(camera_lines) + "\n").encode())
     write_bytes_atomic(folder / "images.txt", ("\n".join(image_lines) + "\n").encode())
     write_bytes_atomic(folder / "points3D.txt", ("\n".join(points_lines) + "\n").encode())
+    # The binary copy, by pycolmap from the text just written; its text reader cut each name at
+    # the first space, so the names are set again from ours (image i + 1 is view i).
+    reconstruction = pycolmap.Reconstruction(str(folder))
+    for image_id, image in reconstruction.images.items():
+        image.name = cameras.names[image_id - 1] or f"{image_id - 1:05d}.png"
+    reconstruction.write_binary(str(folder))

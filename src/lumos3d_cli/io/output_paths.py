@@ -18,12 +18,25 @@ def blocking_file(path: Path) -> Path | None:
     return None
 
 
-def check_output_path(path: Path | str | None, parameter: str, folder: bool = False) -> None:
+def dangling_link(path: Path) -> Path | None:
+    """The first of `path` and its ancestors that is a symbolic link to nothing, else None
+    (writing through it would fail, or replace the link, only after all the work)."""
+    for candidate in [path, *path.absolute().parents]:
+        if candidate.is_symlink() and not candidate.exists():
+            return candidate
+    return None
+
+
+def check_output_path(path: Path | str | None, parameter: str | None, folder: bool = False) -> None:
     """InputError (naming `parameter` and `path`) unless `path` can be written: as a folder when
     `folder`, else as a file. None (an optional output not asked for) passes."""
     if path is None:
         return
     path = Path(path)
+    link = dangling_link(path)
+    if link is not None:
+        raise InputError(f"{path}: {link} is a link to {os.readlink(link)}, which does not exist; create it or choose "
+                         "another path", parameter=parameter)
     blocker = blocking_file(path)
     if blocker is not None:
         raise InputError(f"{path}: cannot be created because {blocker} is a file, not a folder; choose another path",

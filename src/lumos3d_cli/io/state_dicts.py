@@ -64,9 +64,15 @@ def load_torch_state_dict(path: Path) -> dict[str, torch.Tensor]:
             # Files saved with the legacy (non-zip) serialisation cannot be memory-mapped.
             loaded = torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as error:
-        raise InputError(f"{path}: holds objects other than tensors; refusing to unpickle them ({error})") from None
+        # torch explains weights_only over a paragraph; its own reason is the last line before the advice
+        reasons = [line.strip() for line in str(error).splitlines() if line.strip() and not line.startswith(
+            ("Weights only load failed", "Please file an issue", "Check the documentation"))]
+        reason = reasons[-1] if reasons else type(error).__name__
+        raise InputError(f"{path}: damaged, or holds objects other than tensors, which lumos3d does not unpickle "
+                         f"({reason})") from None
     except (RuntimeError, EOFError, OSError) as error:
-        raise InputError(f"{path}: cannot read as a torch checkpoint ({error})") from None
+        reason = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+        raise InputError(f"{path}: cannot read as a torch checkpoint ({reason})") from None
     for wrapper in ("model", "state_dict"):  # training checkpoints wrap the state dict
         if isinstance(loaded, dict) and isinstance(loaded.get(wrapper), dict):
             loaded = loaded[wrapper]

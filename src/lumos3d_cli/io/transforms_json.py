@@ -82,7 +82,10 @@ def read_transforms_json(path: Path | str, warn_on_distortion: bool = True) -> C
     if distorted and warn_on_distortion:
         logger.warning("%s: lens distortion coefficients are ignored (pinhole model)", path)
     cameras = Cameras.from_camera_to_world(torch.stack(camera_to_world), make_intrinsics(fx, fy, cx, cy), sizes, names)
-    cameras.require_valid(str(path))
+    try:
+        cameras.require_valid(str(path))
+    except ValueError as error:
+        raise InputError(f"{error}; correct the file") from None
     return cameras
 
 

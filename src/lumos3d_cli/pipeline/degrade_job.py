@@ -5,27 +5,29 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import torch
 
 from lumos3d_cli.data.degradations import MODES, Degradation, apply_degradation, is_valid_range, sample_parameters
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.atomic import atomic_directory
 from lumos3d_cli.io.image_files import PHOTO_SUFFIXES
 from lumos3d_cli.io.image_write import write_image
 from lumos3d_cli.io.images import read_image, to_srgb
 from lumos3d_cli.io.output_paths import check_output_path
+from lumos3d_cli.io.output_set import OutputSet
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
 
 SINGLE_FILE_SUFFIXES = (".png", ".jpg", ".jpeg")  # what io.image_write encodes
 BIT_DEPTHS = (8, 16)
 
 
-def check_degrade_output(inputs: list[Path], output: Path, bit_depth: int) -> bool:
-    """Validate the output before any image is read; True when it names a single output file
-    rather than a folder. Messages name the user's path (the files are written under temporary
-    names)."""
+def degrade_outputs(inputs: list[Path], output: Path, bit_depth: int, given: Sequence[Path] = ()) -> OutputSet:
+    """The outputs of degrading the image files `inputs` into `output` (a folder, or one .png/.jpg
+    file for one input), validated before any image is read and kept clear of the inputs and the
+    folders `given` for them. Messages name the user's path (the files are written under
+    temporary names)."""
     if bit_depth not in BIT_DEPTHS:
         raise InputError(f"{bit_depth}: use 8 or 16", parameter="bit_depth")
     suffix = output.suffix.lower()
@@ -37,9 +39,17 @@ def check_degrade_output(inputs: list[Path], output: Path, bit_depth: int) -> bo
         if bit_depth != 8 and suffix != ".png":
             raise InputError(f"{output}: JPEG holds 8 bits only; use .png for 16-bit output", parameter="output")
         check_output_path(output, "output")
-        return True
+        return OutputSet(output.parent, "degrade", f"degrade {output.name}", [*inputs, *given]).add_file(output.name)
     check_output_path(output, "output", folder=True)
-    return False
+    outputs = OutputSet(output, "degrade", "degrade", [*inputs, *given])
+    for name in [*(f"{path.stem}.png" for path in inputs), "degradation.json"]:
+        outputs.add_file(name)
+    return outputs
+
+
+def is_single_file(output: Path) -> bool:
+    """Whether `output` names one image file rather than a folder."""
+    return output.suffix.lower() in PHOTO_SUFFIXES
 
 
 def degrade_files(
@@ -47,6 +57,7 @@ def degrade_files(
     per_image: bool = False, bit_depth: int = 8, progress: JobProgress | None = None,
     colour_cast: float = 1.0, jpeg_quality: int | None = None,
     exposure: tuple[float, float] | None = None, gamma: tuple[float, float] | None = None,
+    given: Sequence[Path] = (),
 ) -> dict:
     """Degrade every photo in `paths` into `output` (a folder of PNGs plus degradation.json, or one
     .png/.jpg for one input) and return the summary: the parameters drawn for each image. One draw
@@ -54,11 +65,14 @@ def degrade_files(
     training are available too: `colour_cast` g draws red and blue linear gains in [1/g, g];
     `jpeg_quality` compresses at that quality before writing; `exposure` and `gamma` (low, high)
     replace the mode's documented ranges (data.degradations.DOCUMENTED_RANGES), as a training
-    config's `degrade` section does."""
+    config's `degrade` section does. The outputs never touch the inputs or the folders `given`
+    for them, nor a file lumos3d did not write (io/output_set.py)."""
     progress = progress or SilentProgress()
     if mode not in MODES:
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
-    single_file = check_degrade_output(paths, output, bit_depth)
+    outputs = degrade_outputs(paths, output, bit_depth, given)
+    outputs.check()
+    single_file = is_single_file(output)
     if colour_cast < 1:
         raise InputError(f"{colour_cast}: the largest colour-cast gain must be at least 1 (1: no cast)", parameter="colour_cast")
     if jpeg_quality is not None and not 1 <= jpeg_quality <= 100:
@@ -74,13 +88,13 @@ def degrade_files(
     started = time.perf_counter()
     records = []
     progress.start(f"degrade ({mode})", len(paths))
-    with atomic_directory(output.parent if single_file else output) as staging:
+    with outputs.staged() as staging:
         for source in paths:
             target = output if single_file else output / f"{source.stem}.png"
             image = torch.from_numpy(to_srgb(read_image(source))).permute(2, 0, 1)
             parameters = shared if shared is not None else sample_parameters(degradation, (), generator)
             degraded = apply_degradation(image, mode, parameters, generator)
-            write_image(staging / target.name, degraded.permute(1, 2, 0).numpy(), bit_depth=bit_depth)
+            write_image(staging.root / target.name, degraded.permute(1, 2, 0).numpy(), bit_depth=bit_depth)
             records.append({"input": str(source), "output": str(target), **parameters.as_dict()})
             progress.advance(f"degrade ({mode})")
         summary = {
@@ -90,5 +104,5 @@ def degrade_files(
             "count": len(records), "seconds": round(time.perf_counter() - started, 3), "images": records,
         }
         if not single_file:
-            (staging / "degradation.json").write_text(json.dumps(summary, indent=2) + "\n")
+            (staging.root / "degradation.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary

@@ -6,7 +6,7 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,9 +16,9 @@ from lumos3d_cli.data.degradations import MODES
 from lumos3d_cli.data.lom import find_lom_scenes
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.eval.contact_sheet import contact_sheet
-from lumos3d_cli.io.atomic import atomic_directory
 from lumos3d_cli.io.file_digest import file_sha256
 from lumos3d_cli.io.image_write import write_image
+from lumos3d_cli.io.output_set import OutputSet
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.pipeline.lom_eval import PROTOCOLS, SceneEvaluation, evaluate_lom_scene
 from lumos3d_cli.pipeline.model_loading import load_restoration_model
@@ -121,16 +121,25 @@ def eval_contact_sheet(result: SceneEvaluation, mode: str, with_baseline: bool) 
     return contact_sheet(rows)
 
 
-def write_eval_report(report: EvalReport, out: Path | str) -> None:
-    """metrics.json, metrics.csv and contact_sheet_<scene>.png into `out`, all or nothing."""
-    with atomic_directory(out) as staging:
-        (staging / "metrics.json").write_text(json.dumps(report.document, indent=2) + "\n")
+def eval_outputs(out: Path | str, scenes: Sequence[str], inputs: Sequence[Path | str | None] = ()) -> OutputSet:
+    """The report's files in `out` (metrics.json, metrics.csv, a contact sheet per scene; the
+    sheets of scenes an earlier report had and this one has not go), kept clear of `inputs`."""
+    outputs = OutputSet(Path(out), "eval", "eval", inputs).add_file("metrics.json").add_file("metrics.csv")
+    for scene in scenes:
+        outputs.add_file(f"contact_sheet_{scene}.png")
+    return outputs
+
+
+def write_eval_report(report: EvalReport, out: Path | str, inputs: Sequence[Path | str | None] = ()) -> None:
+    """metrics.json, metrics.csv and contact_sheet_<scene>.png into `out`, all or nothing, never
+    over a file lumos3d did not write nor over `inputs` (io/output_set.py)."""
+    with eval_outputs(out, [result.scene for result in report.scenes], inputs).staged() as staging:
+        (staging.root / "metrics.json").write_text(json.dumps(report.document, indent=2) + "\n")
         buffer = io.StringIO()
         writer = csv.DictWriter(buffer, fieldnames=["scene", "method", *METRIC_KEYS])
         writer.writeheader()
         writer.writerows(report.rows)
-        (staging / "metrics.csv").write_text(buffer.getvalue())
+        (staging.root / "metrics.csv").write_text(buffer.getvalue())
         for result in report.scenes:
             sheet = eval_contact_sheet(result, report.mode, "gamma" in report.methods)
-            write_image(staging / f"contact_sheet_{result.scene}.png", sheet.astype(np.float32) / 255)
-
+            write_image(staging.root / f"contact_sheet_{result.scene}.png", sheet.astype(np.float32) / 255)

@@ -6,17 +6,18 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import torch
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.atomic import atomic_directory, atomic_path
 from lumos3d_cli.io.camera_files import find_camera_source, read_cameras
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.io.image_write import write_image
+from lumos3d_cli.io.output_set import OutputSet
 from lumos3d_cli.io.video import VideoWriter, probe_video, video_kind
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
 from lumos3d_cli.render.camera_paths import orbit_from_cameras, orbit_from_gaussians
@@ -78,16 +79,30 @@ class RenderedFrames:
     video: dict | None
 
 
+def render_outputs(frames: int, output: Path, video: Path | None = None, inputs: Sequence[Path | None] = ()) -> OutputSet:
+    """The outputs of a render: `frames` PNGs in `output` (an earlier render's other frames there
+    go) and `video`, kept clear of `inputs` (the scene, the camera file)."""
+    outputs = OutputSet(output, "render", "render", inputs)
+    for index in range(frames):
+        outputs.add_file(f"{index:05d}.png")
+    if video is not None:
+        outputs.add_elsewhere(video, f"video {video.name}")
+    return outputs
+
+
 def render_frames(
     gaussians: Gaussians, cameras: Cameras, output: Path, video: Path | None = None, fps: int = 30,
     background: tuple[float, float, float] = (0.0, 0.0, 0.0), antialiased: bool = False,
-    progress: JobProgress | None = None,
+    progress: JobProgress | None = None, inputs: Sequence[Path | None] = (),
 ) -> RenderedFrames:
     """Render every camera, each at its own size, into `output`/00000.png ... (and `video`, .mp4 or
     .gif, whose frames share the first camera's size); the folder's frames and the video appear
-    when all are written (io.atomic)."""
+    when all are written, never over a file lumos3d did not write nor over `inputs`
+    (io/output_set.py)."""
     progress = progress or SilentProgress()
     kind = video_kind(video) if video is not None else None
+    if len(gaussians) == 0:
+        raise InputError("holds no Gaussians: there is nothing to render", parameter="scene")
     if video is not None and len(set(cameras.sizes)) > 1:
         logger.warning("the cameras have %d different image sizes; a video has one: every frame is rendered at %dx%d",
                        len(set(cameras.sizes)), *cameras.sizes[0])
@@ -95,20 +110,19 @@ def render_frames(
     frame_width, frame_height = cameras.sizes[0]
     render_seconds = 0.0
     progress.start("render", len(cameras))
-    with atomic_directory(output) as staging:
-        with atomic_path(video) if video is not None else contextlib.nullcontext() as video_temporary:
-            with (VideoWriter(video_temporary, frame_width, frame_height, fps, kind)
-                  if video_temporary is not None else contextlib.nullcontext()) as writer:
-                for index in range(len(cameras)):
-                    started = time.perf_counter()
-                    with torch.no_grad():
-                        image = render(gaussians, cameras[index], background=background, antialiased=antialiased).images[0]
-                    render_seconds += time.perf_counter() - started
-                    pixels = image.permute(1, 2, 0).numpy()
-                    write_image(staging / f"{index:05d}.png", pixels)
-                    if writer is not None:
-                        writer.write(pixels)
-                    progress.advance("render")
+    with render_outputs(len(cameras), output, video, inputs).staged() as staging:
+        with (VideoWriter(staging.files[video], frame_width, frame_height, fps, kind)
+              if video is not None else contextlib.nullcontext()) as writer:
+            for index in range(len(cameras)):
+                started = time.perf_counter()
+                with torch.no_grad():
+                    image = render(gaussians, cameras[index], background=background, antialiased=antialiased).images[0]
+                render_seconds += time.perf_counter() - started
+                pixels = image.permute(1, 2, 0).numpy()
+                write_image(staging.root / f"{index:05d}.png", pixels)
+                if writer is not None:
+                    writer.write(pixels)
+                progress.advance("render")
     written = None
     if video is not None:
         # What the file holds as ffmpeg reads it back (H.264 pads odd sides).

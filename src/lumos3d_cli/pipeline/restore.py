@@ -18,6 +18,7 @@ import torch
 
 from lumos3d_cli.data.degradations import MODES
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.geometry.given_poses import read_given_poses
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.file_digest import file_sha256
 from lumos3d_cli.io.gaussians import Gaussians
@@ -26,7 +27,7 @@ from lumos3d_cli.io.images import ImageBatch, load_images
 from lumos3d_cli.model.appearance.footprint import footprint_colours
 from lumos3d_cli.model.appearance.gaussian_colours import with_operator_colours
 from lumos3d_cli.model.appearance.operator import AppearanceOperator
-from lumos3d_cli.model.appearance.photo_restoration import restore_photos
+from lumos3d_cli.model.appearance.photo_restoration import frames_without_content, restore_photos
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D, Lumos3DPrediction
 from lumos3d_cli.model.pixel_footprint import DEFAULT_FOOTPRINT_SCALE
@@ -369,6 +370,21 @@ def restore_scene(
     )
 
 
+def check_photo_contents(batch: ImageBatch, patch_size: int) -> None:
+    """InputError naming a photo too small to hold one network patch (`patch_size` pixels a side);
+    a warning naming the photos that are all black or all saturated (nothing to restore there)."""
+    names = [path.name for path in batch.paths]
+    for name, (width, height) in zip(names, batch.original_sizes):
+        if min(width, height) < patch_size:
+            raise InputError(f"{name}: is {width}x{height} pixels, too small for the network (at least {patch_size} "
+                             "pixels a side); leave it out")
+    black, saturated = frames_without_content(batch.images)
+    for kind, indices in (("black", black), ("saturated", saturated)):
+        if indices:
+            logger.warning("%s %s entirely %s: nothing to restore there (it stays %s)", ", ".join(names[i] for i in indices),
+                           "is" if len(indices) == 1 else "are", kind, "black" if kind == "black" else "white")
+
+
 def restore(
     photos: Path | str | Sequence[Path | str], mode: str = "low-light", checkpoint: Path | str | None = None,
     preset: str = DEFAULT_RESTORE_PRESET, geometry: str = "auto", poses: Path | str | None = None,
@@ -400,16 +416,22 @@ def restore(
     paths = list_images(photos)
     progress.start("load images", len(paths))
     batch = load_images(paths, progress=lambda _: progress.advance("load images"))
+    if poses is not None:  # a camera file that does not fit the photos stops the run before the work
+        read_given_poses(poses, [path.name for path in paths], batch.original_sizes)
+    # References are matched and read before the work, so that a missing one stops the run at once.
+    references = None if reference is None else dict(zip(
+        (path.name for path in paths), load_references(reference, [path.name for path in paths], batch.original_sizes)))
     timings["load"] = time.perf_counter() - stage_started
     stage_started = time.perf_counter()
     model = load_restoration_model(weights, device)
     timings["load_model"] = time.perf_counter() - stage_started
+    check_photo_contents(batch, model.architecture.patch_size)
     scene = restore_scene(batch, model, settings, geometry, poses, max_views, mode, progress)
     scene.device = device
     scene.checkpoint = {"name": weights.name, "sha256": file_sha256(weights)}
     if reference is not None:
         stage_started = time.perf_counter()
-        scene.references = load_references(reference, scene.names, scene.cameras.sizes)
+        scene.references = [references[name] for name in scene.names]
         per_view = meter.measure(scene.restored, scene.references)
         scene.metrics = {"views": dict(zip(scene.names, per_view)), "mean": mean_metrics(per_view),
                          "lpips_note": meter.lpips_note}

@@ -1,11 +1,13 @@
 """Write a restored scene to disk: the `.ply`, the cameras (transforms.json and a COLMAP model),
-the restored views (each at its photo's own size), a contact sheet, a point preview and
-summary.json — all or nothing."""
+the restored views (each at its photo's own size), a contact sheet, a point preview,
+summary.json and optionally an orbit video — all or nothing, and only over lumos3d's own
+earlier outputs (io/output_set.py)."""
 
 from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -13,14 +15,15 @@ import torch
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.eval.contact_sheet import contact_sheet
-from lumos3d_cli.io.atomic import atomic_directory
 from lumos3d_cli.io.colmap import write_colmap_model
 from lumos3d_cli.io.colour import srgb_to_linear
 from lumos3d_cli.io.image_write import write_exr, write_image
+from lumos3d_cli.io.output_set import OutputSet
 from lumos3d_cli.io.ply import write_ply
 from lumos3d_cli.io.preview_glb import write_preview_glb
 from lumos3d_cli.io.transforms_json import write_transforms_json
 from lumos3d_cli.pipeline.restore import RestoredScene
+from lumos3d_cli.pipeline.orbit_video import write_orbit_video
 
 # output format -> (file suffix, bit depth; 0 for linear EXR)
 VIEW_FORMATS = {"png": (".png", 8), "png16": (".png", 16), "exr": (".exr", 0)}
@@ -56,27 +59,56 @@ def scene_contact_sheet(scene: RestoredScene) -> np.ndarray:
     return contact_sheet(rows)
 
 
-def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_format: str = "png") -> dict:
-    """Write every output of `scene` beside `scene_path` (a `.ply`) and return the summary
-    written to summary.json. The files appear together when all are written (io.atomic)."""
+# The files beside the scene, and the folders of lumos3d's own (they hold nothing else).
+SIDE_FILES = ("cameras.json", "contact_sheet.png", "preview.glb", "summary.json")
+OWN_FOLDERS = ("restored", "colmap")
+
+
+def restore_outputs(scene_path: Path | str, inputs: Sequence[Path | str | None] = (), video: Path | str | None = None) -> OutputSet:
+    """The outputs of a restore into `scene_path`'s folder (and `video`), kept clear of `inputs`:
+    the photos and the folders given for them, the camera file, the references, the checkpoint.
+    `check()` it before the work; `write_restored_scene` writes through it."""
     scene_path = Path(scene_path)
     if scene_path.suffix.lower() != ".ply":
         raise InputError(f"{scene_path}: the scene file must end in .ply", parameter="output")
+    outputs = OutputSet(scene_path.parent, "restore", f"restore {scene_path.name}", inputs)
+    for name in (scene_path.name, *SIDE_FILES):
+        outputs.add_file(name)
+    for name in OWN_FOLDERS:
+        outputs.add_folder(name)
+    if video is not None:
+        outputs.add_elsewhere(Path(video), f"video {Path(video).name}")
+    return outputs
+
+
+def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_format: str = "png",
+                         video: Path | str | None = None, inputs: Sequence[Path | str | None] = (),
+                         on_video_frame: Callable[[], None] | None = None) -> dict:
+    """Write every output of `scene` beside `scene_path` (a `.ply`), and an orbit `video` (.mp4 or
+    .gif) when asked, and return the summary written to summary.json. The files appear together
+    when all are written; a file in the way that lumos3d did not write, or an output that would
+    touch an input (the scene's photos, and `inputs`), refuses the write
+    (io/output_set.py)."""
+    scene_path = Path(scene_path)
     check_view_format(output_format)
     suffix = VIEW_FORMATS[output_format][0]
     started = time.perf_counter()
-    with atomic_directory(scene_path.parent, replace_folders=True) as staging:
-        write_ply(staging / scene_path.name, scene.gaussians)
-        write_transforms_json(staging / "cameras.json", scene.cameras)
-        write_colmap_model(staging / "colmap", scene.cameras, scene.geometry.points)
-        (staging / "restored").mkdir()
+    outputs = restore_outputs(scene_path, [*scene.input_paths, *inputs], video)
+    with outputs.staged() as staging:
+        root = staging.root
+        write_ply(root / scene_path.name, scene.gaussians)
+        write_transforms_json(root / "cameras.json", scene.cameras)
+        write_colmap_model(root / "colmap", scene.cameras, scene.geometry.points)
+        (root / "restored").mkdir()
         for name, image in zip(scene.names, scene.restored):
-            write_view(staging / "restored" / f"{Path(name).stem}{suffix}", image, output_format)
-        write_image(staging / "contact_sheet.png", scene_contact_sheet(scene).astype(np.float32) / 255)
-        write_preview_glb(staging / "preview.glb", scene.gaussians, scene.cameras)
+            write_view(root / "restored" / f"{Path(name).stem}{suffix}", image, output_format)
+        write_image(root / "contact_sheet.png", scene_contact_sheet(scene).astype(np.float32) / 255)
+        write_preview_glb(root / "preview.glb", scene.gaussians, scene.cameras)
+        if video is not None:
+            write_orbit_video(scene.gaussians, scene.cameras, staging.files[Path(video)], on_frame=on_video_frame)
         scene.timings["write"] = time.perf_counter() - started
         if "total" in scene.timings:
             scene.timings["total"] += scene.timings["write"]
-        summary = scene.summary(scene_path, (staging / scene_path.name).stat().st_size)
-        (staging / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        summary = scene.summary(scene_path, (root / scene_path.name).stat().st_size)
+        (root / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary

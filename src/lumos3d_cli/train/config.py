@@ -8,6 +8,7 @@ reconstruction + cross-illumination distillation from a frozen teacher + the Lum
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -79,6 +80,23 @@ class OptimConfig:
     grad_clip: float = 1.0
     backbone_lr_multiplier: float = 1.0  # the aggregator's lr = lr * this
 
+    def __post_init__(self) -> None:
+        positive = {"grad_clip": self.grad_clip}
+        # lr 0 is allowed: a run that only validates, or tests that the weights stay put
+        non_negative = {"lr": self.lr, "weight_decay": self.weight_decay, "backbone_lr_multiplier": self.backbone_lr_multiplier}
+        for key, value in positive.items():
+            if not math.isfinite(value) or value <= 0:
+                raise ValueError(f"{key}: {value} must be a positive number")
+        for key, value in non_negative.items():
+            if not math.isfinite(value) or value < 0:
+                raise ValueError(f"{key}: {value} must be a number of at least 0")
+        if not all(math.isfinite(beta) and 0 <= beta < 1 for beta in self.betas):
+            raise ValueError(f"betas: {list(self.betas)} must be two numbers in [0, 1)")
+        if not 0 <= self.min_lr_ratio <= 1:
+            raise ValueError(f"min_lr_ratio: {self.min_lr_ratio} must be in [0, 1]")
+        if self.warmup_steps < 0:
+            raise ValueError(f"warmup_steps: {self.warmup_steps} must be at least 0")
+
 
 @dataclass
 class TrainConfig:
@@ -145,6 +163,15 @@ class TrainConfig:
                 raise ValueError("select needs validations: set validate_every")
         if self.validate_at_start and not self.validate_every:
             raise ValueError("validate_at_start adds a validation to those of validate_every: set validate_every")
+
+
+def training_inputs(config: TrainConfig, config_file: Path | str) -> list[Path]:
+    """The files and folders a run reads (the outputs must stay clear of them): the config file,
+    the data, the brackets, the teacher and a starting checkpoint."""
+    paths = [config_file, config.data.root, config.brackets.root, config.teacher]
+    if Path(config.model).suffix or Path(config.model).exists():  # a checkpoint, not an architecture name
+        paths.append(config.model)
+    return [Path(path) for path in paths if path]
 
 
 def load_config(path: Path | str, overrides: list[str] = ()) -> TrainConfig:

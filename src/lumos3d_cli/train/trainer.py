@@ -21,7 +21,7 @@ from torch.nn.parallel import DistributedDataParallel
 from lumos3d_cli.data.degradations import degrade, white_balance_shift
 from lumos3d_cli.data.multiview_dataset import MultiViewDataset
 from lumos3d_cli.data.scene_records import scan_dl3dv, scan_scene_folders
-from lumos3d_cli.errors import InputError, NonFiniteError, RunError
+from lumos3d_cli.errors import STOP_SIGNALS, InputError, NonFiniteError, RunError
 from lumos3d_cli.losses.appearance import appearance_loss
 from lumos3d_cli.losses.objective import StageBatch, TrainingObjective
 from lumos3d_cli.model.appearance.conversion import with_appearance
@@ -38,6 +38,7 @@ from lumos3d_cli.train.checkpointing import (
 )
 from lumos3d_cli.train.config import TrainConfig, config_to_yaml
 from lumos3d_cli.train.distributed import DistributedContext, all_reduce_mean, any_rank
+from lumos3d_cli.train.run_folder import RunIdentity, check_run_folder, read_run, start_run
 from lumos3d_cli.train.run_logs import RunLogs
 from lumos3d_cli.train.schedule import learning_rate_factor
 from lumos3d_cli.train.selection import SELECTED_FILE, best_earlier_score, drop_stale_selection, is_improvement
@@ -72,10 +73,6 @@ class TrainResult:
     stop_signal: int | None = None
     last_checkpoint: Path | None = None
     selected_checkpoint: Path | None = None
-
-
-# Signals that stop training after a checkpoint (SIGHUP: the terminal of an interactive run closed).
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 def check_max_steps(max_steps: int | None) -> None:
@@ -119,7 +116,8 @@ class Trainer:
         self._stop_signal: int | None = None
         self.nonfinite_in_a_row = 0  # steps skipped in a row for a non-finite loss or gradient
         self.nonfinite_total = 0
-        self._logs = RunLogs(self.output, config.tensorboard) if context.is_main else None
+        self._logs: RunLogs | None = None  # opened by `run` once the folder is the run's
+        self.run_identity: RunIdentity | None = None  # the run the output folder holds (train/run_folder.py)
 
     # -- set-up ---------------------------------------------------------------------------------
 
@@ -308,7 +306,8 @@ class Trainer:
         folder = None
         if self.context.is_main:
             folder = save_training_checkpoint(
-                self.output, step, self.model, self._state(step), config_to_yaml(self.config), self._provenance(step)
+                self.output, step, self.model, self._state(step), config_to_yaml(self.config), self._provenance(step),
+                self.run_identity.run_id if self.run_identity is not None else None,
             )
             logger.info("saved checkpoint %s", folder)
         if self.context.enabled:
@@ -320,7 +319,8 @@ class Trainer:
         damaged or missing one is skipped with a warning for the next older); returns the step to
         continue at."""
         problems = []
-        for folder in resume_candidates(self.output):
+        run_id = self.run_identity.run_id if self.run_identity is not None else None
+        for folder in resume_candidates(self.output, run_id):
             try:
                 state = load_training_checkpoint(folder, self.model)
             except InputError as error:
@@ -379,14 +379,27 @@ class Trainer:
         self._stop_requested = True
         self._stop_signal = self._stop_signal or signum
 
-    def run(self, resume: bool = False, max_steps: int | None = None, stop_after: int | None = None) -> TrainResult:
-        """Train to optim.steps (or `max_steps`, at least 1). `stop_after` behaves like a signal
-        arriving during that step (used to test interruption). A signal (STOP_SIGNALS) ends the
-        run after the current step with a checkpoint; `stop_signal` of the result names it."""
+    def run(self, resume: bool = False, max_steps: int | None = None, stop_after: int | None = None,
+            config_file: Path | str | None = None) -> TrainResult:
+        """Train to optim.steps (or `max_steps`, at least 1): a fresh run into an output folder that
+        holds no other run (its run.json records `config_file`), or with `resume` the run the
+        folder holds, from its newest intact checkpoint (train/run_folder.py). `stop_after`
+        behaves like a signal arriving during that step (used to test interruption). A signal
+        (STOP_SIGNALS) ends the run after the current step with a checkpoint; `stop_signal` of
+        the result names it."""
         check_max_steps(max_steps)
+        # Every rank checks before any writes (a barrier apart), so all see the same folder.
+        check_run_folder(self.output, [], resume)
+        if self.context.enabled:
+            torch.distributed.barrier()
         self.output.mkdir(parents=True, exist_ok=True)
+        if resume:
+            self.run_identity = read_run(self.output)
+        elif self.context.is_main:
+            self.run_identity = start_run(self.output, config_file)
         start = self.resume() if resume else 0
-        if self._logs is not None:
+        if self.context.is_main:
+            self._logs = RunLogs(self.output, self.config.tensorboard)
             self._logs.truncate(start)
         if self.context.is_main:
             drop_stale_selection(self.output, start)

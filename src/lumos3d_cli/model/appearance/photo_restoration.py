@@ -3,14 +3,10 @@ pixels that colour the Gaussians, so every detail of the input survives."""
 
 from __future__ import annotations
 
-import logging
-
 import torch
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.model.appearance.operator import AppearanceOperator
-
-logger = logging.getLogger(__name__)
 
 # A frame whose pixels are all within one 8-bit step of black (or of white in every channel)
 # carries no image to restore: no gain brings back what was never recorded.
@@ -31,8 +27,9 @@ def restore_photos(photos: torch.Tensor, operator: AppearanceOperator) -> torch.
     (B = 1; its local grids, if any, for the same V views, in the same order) -> restored sRGB
     [V, 3, H, W] float32 in [0, 1].
 
-    One view at a time, so full-resolution photo sets fit in memory. Logs a warning for a view
-    that is all black or all saturated (nothing to restore; it stays black or white).
+    One view at a time, so full-resolution photo sets fit in memory. A view that is all black or
+    all saturated holds nothing to restore and stays black or white (the restore job warns of
+    such photos by name, `frames_without_content`).
     """
     if photos.dim() != 4 or photos.shape[1] != 3:
         raise InputError(f"photos to restore must be [V, 3, H, W], got shape {tuple(photos.shape)}")
@@ -41,10 +38,6 @@ def restore_photos(photos: torch.Tensor, operator: AppearanceOperator) -> torch.
     views = photos.shape[0]
     if operator.local_log2_gain is not None and operator.local_log2_gain.shape[1] != views:
         raise InputError(f"operator has local grids for {operator.local_log2_gain.shape[1]} views, but {views} photos were given")
-    black, saturated = frames_without_content(photos)
-    for kind, indices in (("black", black), ("saturated", saturated)):
-        if indices:
-            logger.warning("view(s) %s are entirely %s: nothing to restore there", ", ".join(map(str, indices)), kind)
     restored = torch.empty(photos.shape, dtype=torch.float32, device=photos.device)
     for view in range(views):
         restored[view] = operator.views(slice(view, view + 1)).apply(photos[view][None, None])[0, 0]

@@ -7,7 +7,7 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.video import probe_video
 from lumos3d_cli.render.camera_paths import orbit_from_gaussians
 from lumos3d_cli.render.render import render
-from lumos3d_cli.viewer.orbit_video import orbit_size, write_orbit_video
+from lumos3d_cli.pipeline.orbit_video import orbit_size, write_orbit_video
 
 from factories import random_scene
 

@@ -7,7 +7,6 @@ from pathlib import Path
 
 import torch
 
-from lumos3d_cli.io.atomic import atomic_path
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.io.video import VideoWriter, video_kind
@@ -38,14 +37,15 @@ def write_orbit_video(
     on_frame: Callable[[], None] | None = None,
 ) -> Cameras:
     """Render `frames` views on an orbit through the space `cameras` cover (see
-    `render.camera_paths.orbit_from_cameras`) into `path` (.mp4 H.264 or .gif by suffix; written
-    atomically). on_frame() runs after each frame (progress). Returns the orbit's cameras."""
+    `render.camera_paths.orbit_from_cameras`) into `path` (.mp4 H.264 or .gif by suffix; a command
+    writes it into its staging area, io/output_set.py). on_frame() runs after each frame
+    (progress). Returns the orbit's cameras."""
     kind = video_kind(path)
     if frames < 1:
         raise ValueError(f"an orbit video needs at least one frame, got {frames}")
     orbit = orbit_from_cameras(cameras, frames, *orbit_size(cameras, width), gaussians)
     frame_width, frame_height = orbit.sizes[0]
-    with atomic_path(path) as temporary, VideoWriter(temporary, frame_width, frame_height, fps, kind) as writer:
+    with VideoWriter(path, frame_width, frame_height, fps, kind) as writer:
         for index in range(frames):
             with torch.no_grad():
                 image = render(gaussians, orbit[index], background=background).images[0]  # [3, H, W]

@@ -1,0 +1,84 @@
+"""What lumos3d wrote in a folder, so that a later run touches only that.
+
+`.lumos3d-manifest.json` in a folder lists every file a lumos3d command wrote there: its path
+relative to the folder, size, SHA-256, the command and the output set it belongs to (e.g. one
+restore's scene, or a render's frames). A later run replaces or removes a file only when the
+manifest lists it and the file still holds what was written; anything else — a file the user
+made, or one of ours the user has since edited — is the user's and is never touched.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import stat
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from lumos3d_cli.io.file_digest import file_sha256
+
+logger = logging.getLogger(__name__)
+
+MANIFEST_NAME = ".lumos3d-manifest.json"
+FORMAT = "lumos3d-manifest/1"
+
+
+@dataclass(frozen=True)
+class WrittenFile:
+    """One file lumos3d wrote: its size in bytes, SHA-256 (hex), the command that wrote it and the
+    output set it belongs to (the files that one run writes and a re-run of it replaces)."""
+
+    bytes: int
+    sha256: str
+    command: str
+    output_set: str
+
+
+def describe_file(path: Path, command: str, output_set: str) -> WrittenFile:
+    return WrittenFile(path.stat().st_size, file_sha256(path), command, output_set)
+
+
+class Manifest:
+    """The manifest of `folder`: relative POSIX path -> WrittenFile."""
+
+    def __init__(self, folder: Path, files: dict[str, WrittenFile] | None = None):
+        self.folder = Path(folder)
+        self.files = dict(files or {})
+
+    @classmethod
+    def read(cls, folder: Path | str) -> Manifest:
+        """The folder's manifest; an absent one is empty. An unreadable one is empty too (with a
+        warning): then nothing counts as ours, which refuses rather than deletes."""
+        folder = Path(folder)
+        path = folder / MANIFEST_NAME
+        try:
+            document = json.loads(path.read_text())
+            if document.get("format") != FORMAT:
+                raise ValueError(f"format {document.get('format')!r}")
+            files = {name: WrittenFile(**entry) for name, entry in document["files"].items()}
+        except FileNotFoundError:
+            return cls(folder)
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as error:
+            logger.warning("%s cannot be read (%s): no file in %s counts as written by lumos3d", path, error, folder)
+            return cls(folder)
+        return cls(folder, files)
+
+    def relative(self, path: Path) -> str:
+        return Path(os.path.relpath(Path(path).absolute(), self.folder.absolute())).as_posix()
+
+    def owns(self, path: Path) -> bool:
+        """True when `path` (inside the folder) is a regular file the manifest lists, unchanged
+        since it was written. A symbolic link is never ours: lumos3d writes none."""
+        entry = self.files.get(self.relative(path))
+        if entry is None:
+            return False
+        try:
+            info = os.lstat(path)
+        except FileNotFoundError:
+            return False
+        return stat.S_ISREG(info.st_mode) and info.st_size == entry.bytes and file_sha256(path) == entry.sha256
+
+    def document(self) -> str:
+        files = {name: asdict(entry) for name, entry in sorted(self.files.items())}
+        return json.dumps({"format": FORMAT, "files": files}, indent=1) + "\n"

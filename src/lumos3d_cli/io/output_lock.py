@@ -1,0 +1,86 @@
+"""One lumos3d run at a time per output folder.
+
+A run that writes into a folder holds `.lumos3d.lock` there (an exclusive `flock`, which the
+kernel releases when the process ends however it ends, so a killed run never blocks the next).
+A second run into the same folder is refused at once, naming the run that holds it, instead of
+interleaving its files with the first's. The lock is re-entrant within a process: the CLI takes
+it before the computation and the writing takes it again.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime
+import fcntl
+import json
+import os
+import socket
+from collections.abc import Iterator
+from pathlib import Path
+
+from lumos3d_cli.errors import InputError
+
+LOCK_NAME = ".lumos3d.lock"
+
+# folder (absolute) -> [descriptor, depth] of the locks this process holds
+_held: dict[Path, list[int]] = {}
+
+
+def _describe_holder(descriptor: int) -> str:
+    """What the holding run wrote into the lock file: command, process id, host, start time."""
+    try:
+        holder = json.loads(os.pread(descriptor, 4096, 0).decode())
+        return f"`lumos3d {holder['command']}`, process {holder['pid']} on {holder['host']}, started {holder['started']}"
+    except (OSError, ValueError, KeyError, TypeError):
+        return "another lumos3d process"
+
+
+def _acquire(folder: Path, command: str) -> int:
+    path = folder / LOCK_NAME
+    while True:
+        descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _describe_holder(descriptor)
+            os.close(descriptor)
+            raise InputError(f"{folder}: {holder} is writing its outputs here; wait for it to end or choose another "
+                             "output folder") from None
+        try:
+            same_file = os.fstat(descriptor).st_ino == os.stat(path).st_ino
+        except FileNotFoundError:
+            same_file = False
+        if same_file:
+            break
+        # The holder removed the file between our open and our lock: we hold a lock on a file
+        # that no longer has a name, which excludes no one. Try again on the current file.
+        os.close(descriptor)
+    started = datetime.datetime.now().isoformat(timespec="seconds")
+    record = json.dumps({"command": command, "pid": os.getpid(), "host": socket.gethostname(), "started": started})
+    os.ftruncate(descriptor, 0)
+    os.pwrite(descriptor, record.encode(), 0)
+    return descriptor
+
+
+@contextlib.contextmanager
+def folder_lock(folder: Path | str, command: str) -> Iterator[None]:
+    """Hold the lock of `folder` (which must exist) while inside; InputError naming the other
+    run when one holds it."""
+    folder = Path(folder).absolute()
+    held = _held.get(folder)
+    if held is not None:
+        held[1] += 1
+    else:
+        _held[folder] = [_acquire(folder, command), 1]
+    try:
+        yield
+    finally:
+        entry = _held[folder]
+        entry[1] -= 1
+        if entry[1] == 0:
+            del _held[folder]
+            # Remove the name while still holding the lock: a waiting run that opened the old
+            # file sees it unnamed and starts again (see `_acquire`).
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(folder / LOCK_NAME)
+            os.close(entry[0])

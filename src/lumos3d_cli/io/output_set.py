@@ -1,0 +1,363 @@
+"""Everything one command writes, checked before any work and made visible in one commit.
+
+A command declares its outputs up front — files and whole folders of its own inside one output
+folder (restore: scene.ply, cameras.json, restored/, colmap/ ...), and files elsewhere (a video)
+— together with its inputs. Before any work (`check`), and again right before the commit:
+
+- every output path that exists must be lumos3d's own, unchanged since it was written (the
+  folder's manifest, io/manifest.py); a folder of lumos3d's own (restored/) may hold nothing
+  else. Anything else is the user's: the run is refused with a message naming it, and nothing
+  is deleted or overwritten;
+- no output is, contains or lies inside an input (a photo, a photo folder, a camera file, a
+  checkpoint), and the output folder is not an input folder or inside one.
+
+While the command runs it holds the output folders' locks (io/output_lock.py): a second run into
+the same folder is refused instead of interleaving its files. Everything is written into one
+hidden staging folder inside the output folder (files elsewhere: beside themselves), then
+committed: a journal of the moves is written, and with the stop signals held back the old
+outputs of this output set move into the staging folder and the new ones into place, the
+manifest last, one rename each (a whole folder is one rename). A signal during the commit takes
+effect once it is complete; a run killed outright during it (SIGKILL, power loss) is finished by
+the next lumos3d run writing into that folder (io/atomic.py). Either way the folder holds the
+complete old set or the complete new one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import json
+import logging
+import os
+import shutil
+import signal
+import tempfile
+import threading
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from lumos3d_cli.errors import STOP_SIGNALS, InputError, Interrupted
+from lumos3d_cli.io.atomic import (
+    COMMIT_JOURNAL,
+    current_umask,
+    make_folders,
+    remove_created_folders,
+    remove_leftovers,
+    temporary_prefix,
+)
+from lumos3d_cli.io.manifest import MANIFEST_NAME, Manifest, describe_file
+from lumos3d_cli.io.output_lock import LOCK_NAME, folder_lock
+from lumos3d_cli.io.output_paths import check_output_path
+
+logger = logging.getLogger(__name__)
+
+# Names lumos3d keeps for itself in an output folder: never an output, never the user's.
+RESERVED_NAMES = frozenset({MANIFEST_NAME, LOCK_NAME})
+# Errors of a full or unwritable disk: bad circumstances the user can fix, not internal errors.
+_DISK_ERRORS = {errno.ENOSPC: "no space left on the device", errno.EDQUOT: "the disk quota is exceeded",
+                errno.EROFS: "the file system is read-only", errno.EACCES: "permission denied",
+                errno.EFBIG: "a file grew beyond the system's file size limit"}
+
+
+def _is_within(path: Path, folder: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def _resolved(path: Path) -> Path:
+    return Path(path).expanduser().resolve(strict=False)
+
+
+def check_not_inputs(outputs: Sequence[Path], output_folders: Sequence[Path], inputs: Sequence[Path]) -> None:
+    """InputError when an output file is an input or lies inside an input folder, or an output
+    folder (one that lumos3d fills) is, contains or lies inside an input. Paths are compared after
+    resolving links, so a link to an input is that input."""
+    resolved_inputs = [(_resolved(path), path) for path in inputs if path is not None]
+    for output in [*outputs, *output_folders]:
+        target, is_folder = _resolved(output), output in output_folders
+        for resolved, given in resolved_inputs:
+            if target == resolved:
+                raise InputError(f"{output}: is an input ({given}); lumos3d never writes over its inputs: choose another output")
+            if is_folder and resolved.parent != resolved and _is_within(resolved, target):
+                raise InputError(f"{output}: would hold the outputs, but it holds the input {given}; choose another output")
+            if resolved.is_dir() and _is_within(target, resolved):
+                raise InputError(f"{output}: lies inside the input folder {given}; write the outputs outside the inputs")
+
+
+@contextlib.contextmanager
+def _stop_signals_held() -> Iterator[None]:
+    """Hold back SIGINT, SIGTERM and SIGHUP while inside and deliver the first one afterwards,
+    so that a commit, once started, completes. (Blocking the signals in this thread would not
+    do: the kernel hands a process's signal to any thread that does not block it.)"""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    previous = {signum: signal.getsignal(signum) for signum in STOP_SIGNALS}
+    held = [signum for signum, handler in previous.items() if handler is not signal.SIG_IGN]
+    for signum in held:
+        signal.signal(signum, lambda signum, frame: pending.append(signum))
+    try:
+        yield
+    finally:
+        for signum in held:
+            signal.signal(signum, previous[signum])
+        if pending:
+            os.kill(os.getpid(), pending[0])
+
+
+@dataclass
+class _Item:
+    """One output: its final path, where it is staged, its output set, whether it is a folder."""
+
+    final: Path
+    staged: Path | None
+    output_set: str
+    is_folder: bool = False
+
+
+@dataclass
+class Staging:
+    """Where a command writes before the commit: `root` mirrors the output folder (write
+    `root / name` for each declared file or folder); `files[final]` is the temporary path of a
+    declared file outside it."""
+
+    root: Path
+    files: dict[Path, Path] = field(default_factory=dict)
+
+
+class OutputSet:
+    """The outputs of one command run in `folder` (see the module docstring). `output_set` names
+    the group of files a re-run replaces (default: the command); `inputs` are the paths the
+    outputs must stay clear of."""
+
+    def __init__(self, folder: Path | str, command: str, output_set: str | None = None,
+                 inputs: Sequence[Path | str | None] = ()):
+        self.folder = Path(folder)
+        self.command = command
+        self.output_set = output_set or command
+        self.inputs = [Path(path) for path in inputs if path is not None]
+        self._files: list[str] = []
+        self._folders: list[str] = []
+        self._elsewhere: dict[Path, str] = {}
+
+    def add_file(self, name: str) -> OutputSet:
+        """A file `name` (relative to the folder) this run writes."""
+        self._files.append(name)
+        return self
+
+    def add_folder(self, name: str) -> OutputSet:
+        """A folder that holds only this run's files (restored/): replaced whole; a file in it that
+        lumos3d did not write refuses the run."""
+        self._folders.append(name)
+        return self
+
+    def add_elsewhere(self, path: Path | str, output_set: str) -> OutputSet:
+        """A file outside (or inside) the folder, in an output set of its own (a video)."""
+        self._elsewhere[Path(path)] = output_set
+        return self
+
+    def paths(self) -> list[Path]:
+        """Every output's final path."""
+        return ([self.folder / name for name in [*self._files, *self._folders]] + list(self._elsewhere))
+
+    def _folders_written(self) -> list[Path]:
+        return list(dict.fromkeys([self.folder, *(path.parent for path in self._elsewhere)]))
+
+    # -- checks ---------------------------------------------------------------------------------
+
+    def check(self) -> None:
+        """InputError naming the path when the outputs cannot be written, would write over a file
+        lumos3d did not write, or touch an input. (`reserved` checks under the folders' locks:
+        a command enters it before any work.)"""
+        for folder in self._folders_written():
+            check_output_path(folder, "output" if folder == self.folder else None, folder=True)
+        for path in self.paths():
+            if path.name in RESERVED_NAMES:
+                raise InputError(f"{path}: this name is lumos3d's own bookkeeping file; choose another name")
+        folder = _resolved(self.folder)
+        for given in self.inputs:
+            resolved = _resolved(given)
+            if resolved.is_dir() and _is_within(folder, resolved):
+                where = "is the input folder" if folder == resolved else "lies inside the input folder"
+                raise InputError(f"{self.folder}: {where} {given}; write the outputs to another folder", parameter="output")
+        check_not_inputs([*(self.folder / name for name in self._files), *self._elsewhere],
+                         [self.folder / name for name in self._folders], self.inputs)
+        self._check_ownership()
+
+    def _check_ownership(self) -> None:
+        manifests: dict[Path, Manifest] = {}
+
+        def manifest(folder: Path) -> Manifest:
+            return manifests.setdefault(folder, Manifest.read(folder))
+
+        for path in [*(self.folder / name for name in self._files), *self._elsewhere]:
+            if not (path.exists() or path.is_symlink()):
+                continue
+            if path.is_dir() and not path.is_symlink():
+                raise InputError(f"{path}: is a folder where lumos3d writes a file; move it away or choose another output")
+            _refuse_unless_ours(manifest(path.parent), path)
+        for name in self._folders:
+            path = self.folder / name
+            if not (path.exists() or path.is_symlink()):
+                continue
+            if path.is_symlink() or not path.is_dir():
+                raise InputError(f"{path}: is a file where lumos3d writes its folder {name}/; move it away or choose "
+                                 "another output")
+            for inner in sorted(path.rglob("*")):
+                if inner.is_dir() and not inner.is_symlink():
+                    raise InputError(f"{inner}: a folder lumos3d did not make, inside its output folder {path}; move it "
+                                     "away or choose another output")
+                _refuse_unless_ours(manifest(self.folder), inner)
+
+    # -- writing --------------------------------------------------------------------------------
+
+    @contextlib.contextmanager
+    def reserved(self) -> Iterator[None]:
+        """Create the output folders and hold their locks while inside (a second run into them is
+        refused), then `check` — under the lock, so that another run's commit is not read half
+        done. Folders this made are removed again when the block fails and they are empty."""
+        created: list[Path] = []
+        with contextlib.ExitStack() as stack:
+            try:
+                for folder in self._folders_written():
+                    check_output_path(folder, "output" if folder == self.folder else None, folder=True)
+                    created += make_folders(folder)
+                    stack.enter_context(folder_lock(folder, self.command))
+                self.check()
+                yield
+            except BaseException:
+                stack.close()  # the locks go first: their files would keep the folders from going
+                remove_created_folders(created)
+                raise
+
+    @contextlib.contextmanager
+    def staged(self) -> Iterator[Staging]:
+        """Check, then yield the staging area; when the block succeeds check again and commit.
+        When it raises (an interruption included) the staging area is removed and every output
+        is as it was. A full or read-only disk is an InputError naming the folder."""
+        with self.reserved():
+            for folder in self._folders_written():
+                remove_leftovers(folder)
+            prefix = temporary_prefix("staging")
+            earlier = {item.name for item in self.folder.iterdir() if item.name.startswith(prefix)}
+            staging: Staging | None = None
+            try:
+                root = Path(tempfile.mkdtemp(prefix=prefix, suffix=".tmp", dir=self.folder))
+                staging = Staging(root)
+                for path in self._elsewhere:
+                    handle, name = tempfile.mkstemp(prefix=temporary_prefix(path.stem), suffix=f".tmp{path.suffix}",
+                                                    dir=path.parent)
+                    os.close(handle)
+                    staging.files[path] = Path(name)
+                yield staging
+                self.check()
+                self._commit(staging)
+            except OSError as error:
+                reason = _DISK_ERRORS.get(error.errno)
+                if reason is None:
+                    raise
+                raise InputError(f"{error.filename or self.folder}: {reason} while writing the outputs (nothing was "
+                                 "changed); free space or choose another output") from error
+            finally:
+                # A signal can land after mkdtemp made the folder but before `staging` names it:
+                # then the folder to remove is this process's staging folder that was not there before.
+                roots = [staging.root] if staging is not None else [
+                    item for item in self.folder.iterdir() if item.name.startswith(prefix) and item.name not in earlier]
+                for root in roots:
+                    shutil.rmtree(root, ignore_errors=True)
+                for temporary in (staging.files.values() if staging is not None else ()):
+                    temporary.unlink(missing_ok=True)
+
+    def _items(self, staging: Staging) -> list[_Item]:
+        declared = {*self._files, *self._folders}
+        staged = {entry.name for entry in staging.root.iterdir()}
+        undeclared = staged - declared
+        if undeclared:
+            raise ValueError(f"written but not declared as outputs: {sorted(undeclared)}")
+        items = [_Item(self.folder / name, staging.root / name, self.output_set, name in self._folders)
+                 for name in sorted(staged)]
+        return items + [_Item(final, temporary, output_set, False)
+                        for (final, output_set), temporary in zip(self._elsewhere.items(), staging.files.values())]
+
+    def _commit(self, staging: Staging) -> None:
+        """Move the staged outputs into place (module docstring): each old output out of the way
+        and the new one in, stale files of the same output set out, each folder's manifest last,
+        following a journal written beforehand."""
+        items = self._items(staging)
+        trash = staging.root / ".replaced"
+        moves: list[tuple[Path, Path, str]] = []
+        leftovers: list[Path] = []  # old files moved beside themselves (outside the staging folder)
+
+        def move_away(path: Path) -> None:
+            if _is_within(path.parent.absolute(), self.folder.absolute()):
+                destination = trash / str(len(moves))
+            else:  # another folder (maybe another file system): beside itself, as a temporary of ours
+                destination = path.parent / f"{temporary_prefix(path.name)}replaced.{len(moves)}.tmp"
+                leftovers.append(destination)
+            moves.append((path, destination, "destination-exists"))
+
+        for item in items:
+            if item.final.exists() or item.final.is_symlink():
+                move_away(item.final)
+            if not item.is_folder and item.final.parent != self.folder:
+                os.chmod(item.staged, 0o666 & ~current_umask())  # mkstemp made it private
+            moves.append((item.staged, item.final, "source-gone"))
+        written_sets = {(item.final.parent, item.output_set) for item in items}
+        for folder in dict.fromkeys(item.final.parent for item in items):
+            previous = Manifest.read(folder)
+            ours = [item for item in items if item.final.parent == folder]
+            rewritten = {item.final.name for item in ours}
+            manifest = Manifest(folder)
+            for name, entry in previous.files.items():
+                if name.split("/")[0] in rewritten:
+                    continue  # moved away above with the output it belongs to
+                if (folder, entry.output_set) in written_sets:
+                    # A file of the set this run replaces that it did not write again (a view of an
+                    # earlier run with more photos): stale; removed unless the user changed it.
+                    if previous.owns(folder / name):
+                        move_away(folder / name)
+                    continue
+                if (folder / name).exists():
+                    manifest.files[name] = entry
+            for item in ours:
+                files = sorted(p for p in item.staged.rglob("*") if p.is_file()) if item.is_folder else [item.staged]
+                for file in files:
+                    name = item.final.name + ("/" + file.relative_to(item.staged).as_posix() if item.is_folder else "")
+                    manifest.files[name] = describe_file(file, self.command, item.output_set)
+            staged_manifest = staging.root / f".manifest.{len(moves)}"
+            staged_manifest.write_text(manifest.document())
+            moves.append((staged_manifest, folder / MANIFEST_NAME, "source-gone"))
+        journal = staging.root / COMMIT_JOURNAL
+        with open(journal, "w") as handle:
+            json.dump([[str(a), str(b), when] for a, b, when in moves], handle)
+            handle.flush()
+            os.fsync(handle.fileno())
+        try:
+            with _stop_signals_held():
+                trash.mkdir()
+                for source, destination, _ in moves:
+                    os.replace(source, destination)
+                shutil.rmtree(staging.root, ignore_errors=True)
+                for path in leftovers:
+                    _remove_path(path)
+        except Interrupted as stop:
+            stop.detail = stop.detail or f"after the outputs were written; {self.folder} holds the complete new outputs"
+            raise
+
+
+def _remove_path(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
+
+
+def _refuse_unless_ours(manifest: Manifest, path: Path) -> None:
+    if manifest.owns(path):
+        return
+    if manifest.relative(path) in manifest.files:
+        raise InputError(f"{path}: was changed since lumos3d wrote it, so it is yours now; lumos3d never overwrites or "
+                         "deletes files it did not write: move it away or choose another output")
+    raise InputError(f"{path}: exists and was not written by lumos3d; lumos3d never overwrites or deletes files it did "
+                     "not write: move it away or choose another output")

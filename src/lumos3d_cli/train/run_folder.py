@@ -1,0 +1,96 @@
+"""Which training run a folder holds, so that runs never clobber runs.
+
+A run writes `run.json` into its output folder when it starts: a random id, the config file and
+the start time. Every checkpoint it saves carries the id (`checkpoints/step_*/run_id`), so that
+the retention of the newest checkpoints and `--resume` touch only that run's own. A fresh run
+into a folder that holds another run is refused (or, asked to, starts in the next free numbered
+folder beside it: `runs/x-2`); `--resume` continues the run the folder holds and says which.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import uuid
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.atomic import write_bytes_atomic
+from lumos3d_cli.io.output_paths import check_output_path
+from lumos3d_cli.io.output_set import check_not_inputs
+
+RUN_FILE = "run.json"
+# Everything a run writes in its folder (train/trainer.py, checkpointing, run_logs, validation,
+# selection): any of these in a folder means a run was there.
+RUN_OUTPUTS = ("run.json", "config.yaml", "metrics.jsonl", "validation.jsonl", "checkpoints", "validation",
+               "tensorboard", "final.safetensors", "selected.safetensors")
+
+
+@dataclass(frozen=True)
+class RunIdentity:
+    """run_id: random hex; config: the config file it was started with; started: ISO time."""
+
+    run_id: str
+    config: str
+    started: str
+
+    def describe(self) -> str:
+        return f"run {self.run_id[:8]} (started {self.started} from {self.config})"
+
+
+def read_run(output: Path) -> RunIdentity | None:
+    """The run `output` holds, from its run.json (None: no run.json — no run, or one of an older
+    lumos3d that wrote none)."""
+    try:
+        return RunIdentity(**json.loads((Path(output) / RUN_FILE).read_text()))
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError, TypeError) as error:
+        raise InputError(f"{Path(output) / RUN_FILE}: cannot be read ({error}); choose another output") from None
+
+
+def earlier_run(output: Path) -> str | None:
+    """What of an earlier run `output` holds, in words (None: nothing)."""
+    found = [name for name in RUN_OUTPUTS if (Path(output) / name).exists()]
+    if not found:
+        return None
+    run = read_run(output)
+    steps = sorted((Path(output) / "checkpoints").glob("step_*"))
+    what = run.describe() if run is not None else "an earlier training run"
+    return what + (f", checkpoints up to {steps[-1].name}" if steps else f" ({', '.join(found)})")
+
+
+def numbered_folder(output: Path) -> Path:
+    """The first of `output`-2, `output`-3 ... that holds no run."""
+    number = 2
+    while earlier_run(output.with_name(f"{output.name}-{number}")) is not None:
+        number += 1
+    return output.with_name(f"{output.name}-{number}")
+
+
+def check_run_folder(output: Path, inputs: list[Path | None], resume: bool) -> None:
+    """Before the run: InputError when `output` cannot be a run folder (a file, unwritable, an
+    input or holding one), when a fresh run would write into another run's folder, or when
+    `resume` finds no run there."""
+    output = Path(output)
+    check_output_path(output, None, folder=True)
+    for given in inputs:
+        if given is not None and Path(given).resolve().is_relative_to(output.resolve()):
+            raise InputError(f"{given}: lies inside the run folder {output}, which the run writes; use a copy from outside "
+                             "it, or choose another output")
+    check_not_inputs([], [output], [Path(path) for path in inputs if path is not None])
+    earlier = earlier_run(output)
+    if resume and earlier is None:
+        raise InputError(f"output {output}: holds no training run to resume; start without --resume")
+    if not resume and earlier is not None:
+        raise InputError(f"output {output}: holds {earlier}; continue it with --resume, start a new numbered run "
+                         "folder beside it with --new-run, or choose another output")
+
+
+def start_run(output: Path, config_file: Path | str | None) -> RunIdentity:
+    """Write run.json for a fresh run into `output` (created if needed) and return its identity."""
+    run = RunIdentity(uuid.uuid4().hex, str(config_file) if config_file is not None else "(in memory)",
+                      datetime.datetime.now().isoformat(timespec="seconds"))
+    write_bytes_atomic(Path(output) / RUN_FILE, (json.dumps(asdict(run), indent=2) + "\n").encode())
+    return run

@@ -1,0 +1,254 @@
+"""io/output_set.py (with io/manifest.py and io/output_lock.py): a command writes only over files
+lumos3d wrote, never over or into its inputs; one run per folder at a time; the new outputs
+appear in one commit that a signal does not cut short; a failure leaves everything as it was."""
+
+import errno
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import textwrap
+
+import pytest
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io import atomic
+from lumos3d_cli.io.manifest import MANIFEST_NAME, Manifest
+from lumos3d_cli.io.output_lock import LOCK_NAME, folder_lock
+from lumos3d_cli.io.output_set import OutputSet
+
+
+def _tree(folder):
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+def _restore_like(out, views, inputs=(), text="new", video=None):
+    """Write scene.ply, summary.json and views/<name> through an OutputSet, like a restore."""
+    outputs = OutputSet(out, "restore", "restore scene.ply", inputs).add_file("scene.ply").add_file("summary.json")
+    outputs.add_folder("views")
+    if video is not None:
+        outputs.add_elsewhere(video, "video")
+    with outputs.staged() as staging:
+        (staging.root / "scene.ply").write_text(text)
+        (staging.root / "summary.json").write_text(text)
+        (staging.root / "views").mkdir()
+        for name in views:
+            (staging.root / "views" / name).write_text(text)
+        if video is not None:
+            staging.files[video].write_text(text)
+    return outputs
+
+
+def test_a_rerun_replaces_its_own_files_removes_its_stale_ones_and_keeps_everything_else(tmp_path):
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png", "2.png", "3.png"], text="first")
+    manifest = Manifest.read(out)
+    assert sorted(manifest.files) == ["scene.ply", "summary.json", "views/1.png", "views/2.png", "views/3.png"]
+    assert all(entry.command == "restore" for entry in manifest.files.values())
+    (out / "notes.txt").write_text("the user's")
+    other = OutputSet(out, "render", "render").add_file("00000.png")
+    with other.staged() as staging:
+        (staging.root / "00000.png").write_text("a render")
+    _restore_like(out, ["2.png"], text="second")
+    assert _tree(out) == [MANIFEST_NAME, "00000.png", "notes.txt", "scene.ply", "summary.json", "views", "views/2.png"]
+    assert [(out / name).read_text() for name in ("scene.ply", "views/2.png", "notes.txt", "00000.png")] == [
+        "second", "second", "the user's", "a render"]
+    assert sorted(Manifest.read(out).files) == ["00000.png", "scene.ply", "summary.json", "views/2.png"]
+
+
+@pytest.mark.parametrize("place", ["scene.ply", "views/notes.txt", "views/1.png"])
+def test_a_file_lumos3d_did_not_write_is_refused_before_any_work_and_survives(tmp_path, place):
+    out = tmp_path / "out"
+    (out / "views").mkdir(parents=True)
+    (out / place).write_text("the user's")
+    outputs = OutputSet(out, "restore", "restore scene.ply").add_file("scene.ply").add_file("summary.json").add_folder("views")
+    with pytest.raises(InputError, match=rf"out/{place}: exists and was not written by lumos3d"):
+        outputs.check()
+    with pytest.raises(InputError, match=rf"out/{place}: exists and was not written by lumos3d"):
+        _restore_like(out, ["1.png"])
+    assert (out / place).read_text() == "the user's"
+    assert _tree(out) == sorted(["views", place])
+
+
+def test_a_file_of_ours_the_user_changed_is_theirs_now(tmp_path):
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], text="first")
+    (out / "views" / "1.png").write_text("edited by hand")
+    with pytest.raises(InputError, match=r"views/1.png: was changed since lumos3d wrote it"):
+        _restore_like(out, ["1.png"])
+    assert (out / "views" / "1.png").read_text() == "edited by hand" and (out / "scene.ply").read_text() == "first"
+
+
+def test_a_folder_the_user_made_inside_a_folder_of_ours_is_refused(tmp_path):
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"])
+    (out / "views" / "mine").mkdir()
+    with pytest.raises(InputError, match=r"views/mine: a folder lumos3d did not make"):
+        _restore_like(out, ["1.png"])
+
+
+def test_a_name_taken_by_the_other_kind_is_refused_before_anything_moves(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "views").write_text("a file where the output folder goes")
+    (out / "summary.json").mkdir()
+    with pytest.raises(InputError, match=r"out/summary.json: is a folder where lumos3d writes a file"):
+        _restore_like(out, ["1.png"])
+    (out / "summary.json").rmdir()
+    with pytest.raises(InputError, match=r"out/views: is a file where lumos3d writes its folder views/"):
+        _restore_like(out, ["1.png"])
+    assert _tree(out) == ["views"]
+
+
+def test_a_failed_block_leaves_nothing_and_removes_the_folders_it_created(tmp_path):
+    outputs = OutputSet(tmp_path / "a" / "b", "degrade").add_file("x.png")
+    with pytest.raises(RuntimeError):
+        with outputs.staged() as staging:
+            (staging.root / "x.png").write_text("half")
+            raise RuntimeError("failed while writing")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_is_an_input_error_naming_the_file_and_changes_nothing(tmp_path):
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], text="first")
+    before = {name: (out / name).read_bytes() for name in _tree(out) if (out / name).is_file()}
+    outputs = OutputSet(out, "restore", "restore scene.ply").add_file("scene.ply")
+    with pytest.raises(InputError, match=r"scene.ply: no space left on the device while writing the outputs"):
+        with outputs.staged() as staging:
+            raise OSError(errno.ENOSPC, "No space left on device", str(staging.root / "scene.ply"))
+    assert {name: (out / name).read_bytes() for name in _tree(out) if (out / name).is_file()} == before
+
+
+def test_an_interrupt_right_after_the_staging_folder_is_made_leaves_nothing(tmp_path, monkeypatch):
+    """A signal between mkdtemp making the staging folder and the code naming it."""
+    made = tempfile.mkdtemp
+
+    def interrupted_mkdtemp(*args, **kwargs):
+        made(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "kept.txt").write_text("the user's")
+    monkeypatch.setattr(tempfile, "mkdtemp", interrupted_mkdtemp)
+    with pytest.raises(KeyboardInterrupt):
+        with OutputSet(out, "degrade").add_file("x.png").staged():
+            pass
+    assert _tree(out) == ["kept.txt"]
+
+
+def test_a_signal_during_the_commit_takes_effect_once_the_new_set_is_complete(tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png", "2.png"], text="first")
+    original, calls = os.replace, []
+
+    def replace_then_signal(source, destination):
+        calls.append(destination)
+        if len(calls) == 2:  # between two renames of the commit: the old scene is gone, the new one not yet in
+            os.kill(os.getpid(), signal.SIGINT)
+        original(source, destination)
+
+    monkeypatch.setattr(os, "replace", replace_then_signal)
+    with pytest.raises(KeyboardInterrupt):
+        _restore_like(out, ["1.png"], text="second")
+    monkeypatch.setattr(os, "replace", original)
+    assert len(calls) > 2
+    assert _tree(out) == [MANIFEST_NAME, "scene.ply", "summary.json", "views", "views/1.png"]
+    assert {(out / name).read_text() for name in ("scene.ply", "summary.json", "views/1.png")} == {"second"}
+
+
+def test_a_file_elsewhere_commits_with_the_set_and_is_owned_through_its_folders_manifest(tmp_path):
+    out, videos = tmp_path / "out", tmp_path / "videos"
+    _restore_like(out, ["1.png"], video=videos / "orbit.mp4", text="first")
+    assert (videos / "orbit.mp4").read_text() == "first" and sorted(Manifest.read(videos).files) == ["orbit.mp4"]
+    _restore_like(out, ["1.png"], video=videos / "orbit.mp4", text="second")
+    assert (videos / "orbit.mp4").read_text() == "second"
+    assert _tree(videos) == [MANIFEST_NAME, "orbit.mp4"]
+    (videos / "mine.mp4").write_text("the user's")
+    with pytest.raises(InputError, match=r"videos/mine.mp4: exists and was not written by lumos3d"):
+        _restore_like(out, ["1.png"], video=videos / "mine.mp4")
+
+
+def test_outputs_stay_clear_of_the_inputs(tmp_path):
+    photos = tmp_path / "d" / "images"
+    photos.mkdir(parents=True)
+    (photos / "1.jpg").write_text("photo")
+    poses = tmp_path / "d" / "views" / "sparse"
+    poses.mkdir(parents=True)
+    cases = [
+        (tmp_path / "d", [photos / "1.jpg", poses], r"views: would hold the outputs, but it holds the input"),
+        (photos, [photos], r"images: is the input folder"),
+        (photos / "out", [photos], r"lies inside the input folder"),
+        (tmp_path / "d", [tmp_path / "d" / "scene.ply"], r"scene.ply: is an input"),
+    ]
+    for out, inputs, message in cases:
+        with pytest.raises(InputError, match=message):
+            OutputSet(out, "restore", inputs=inputs).add_file("scene.ply").add_folder("views").check()
+    # the nerfstudio layout: photos in d/images, outputs in d/
+    OutputSet(tmp_path / "d", "restore", inputs=[photos, photos / "1.jpg"]).add_file("scene.ply").add_folder("restored").check()
+    link = tmp_path / "link.ply"
+    link.symlink_to(photos / "1.jpg")
+    with pytest.raises(InputError, match=r"link.ply: is an input"):
+        OutputSet(tmp_path, "convert", inputs=[photos / "1.jpg"]).add_file("link.ply").check()
+
+
+def test_a_second_run_into_the_same_folder_is_refused_naming_the_first(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
+        import sys, time
+        from lumos3d_cli.io.output_lock import folder_lock
+        with folder_lock({str(out)!r}, "restore"):
+            print("locked", flush=True)
+            time.sleep(60)
+    """)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        with pytest.raises(InputError, match=rf"out: `lumos3d restore`, process {holder.pid} .* is writing its outputs here"):
+            with OutputSet(out, "render").add_file("00000.png").staged():
+                pass
+    finally:
+        holder.kill()
+        holder.wait()
+    # its lock ends with the process, however it ends
+    _restore_like(out, ["1.png"])
+    assert not (out / LOCK_NAME).exists()
+
+
+def test_the_lock_is_reentrant_within_a_process(tmp_path):
+    with folder_lock(tmp_path, "restore"):
+        with folder_lock(tmp_path, "restore"):
+            assert json.loads((tmp_path / LOCK_NAME).read_text())["pid"] == os.getpid()
+        assert (tmp_path / LOCK_NAME).exists()
+    assert not (tmp_path / LOCK_NAME).exists()
+
+
+def test_leftover_staging_of_a_killed_commit_is_rolled_forward_when_the_next_run_starts(tmp_path, monkeypatch):
+    """The commit's journal as a killed run leaves it: made by a real commit whose process 'died'
+    after its second move (os.replace raising SystemExit stands for the kill)."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], text="first")
+    original, calls = os.replace, []
+
+    def killed_after_two(source, destination):
+        if len(calls) == 2:
+            raise SystemExit("killed")
+        calls.append(destination)
+        original(source, destination)
+
+    monkeypatch.setattr(os, "replace", killed_after_two)
+    monkeypatch.setattr(sys.modules["shutil"], "rmtree", lambda *args, **kwargs: None)  # a killed run cleans nothing
+    with pytest.raises(SystemExit):
+        _restore_like(out, ["1.png"], text="second")
+    monkeypatch.undo()
+    staging = next(p for p in out.iterdir() if p.name.startswith(".staging."))
+    assert (staging / atomic.COMMIT_JOURNAL).is_file() and (out / "scene.ply").read_text() == "second"
+    monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)  # its process has ended
+    monkeypatch.setattr(atomic, "_cleaned", set())
+    atomic.remove_leftovers(out)
+    assert _tree(out) == [MANIFEST_NAME, "scene.ply", "summary.json", "views", "views/1.png"]
+    assert {(out / name).read_text() for name in ("scene.ply", "summary.json", "views/1.png")} == {"second"}
+    _restore_like(out, ["1.png"], text="third")  # and the manifest owns the result

@@ -1,0 +1,135 @@
+"""Bad input exits 2 with one line naming it, before the work where it can be known before (issue
+38, rows 9-12); --debug adds the traceback and keeps the exit code."""
+
+import errno
+import json
+import shutil
+
+import numpy as np
+import pycolmap
+import pytest
+import torch
+
+from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.colmap import write_colmap_model
+from lumos3d_cli.io.gaussians import Gaussians
+from lumos3d_cli.io.image_write import write_image
+from lumos3d_cli.io.ply import write_ply
+from lumos3d_cli.pipeline import restore_outputs
+
+from assertions import expect_input_error
+from output_files import copy_photos, restore_args, snapshot
+from processes import run_lumos3d
+
+SIX = ["1.JPG", "2.JPG", "3.JPG", "4.JPG", "5.JPG", "6.JPG"]
+
+
+def _transforms(path, names, change):
+    frames = [{"file_path": name, "transform_matrix": [[1, 0, 0, 0.1 * i], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}
+              for i, name in enumerate(names)]
+    document = {"fl_x": 400.0, "fl_y": 400.0, "cx": 250.0, "cy": 187.5, "w": 500, "h": 375, "frames": frames}
+    change(document)
+    path.write_text(json.dumps(document))
+    return path
+
+
+_POSE_FAULTS = {
+    "singular": (lambda d: d["frames"][2].update(transform_matrix=[[1, 0, 0, 0], [0, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]),
+                 "the pose of view 2 (3.JPG) holds a matrix that is not a rotation"),
+    "scaled": (lambda d: d["frames"][0].update(transform_matrix=[[2, 0, 0, 0], [0, 2, 0, 0], [0, 0, 2, 0], [0, 0, 0, 1]]),
+               "the pose of view 0 (1.JPG) holds a matrix that is not a rotation"),
+    "zero-focal": (lambda d: d.update(fl_x=0.0), "the focal length of view 0 (1.JPG) is not positive"),
+}
+
+
+@pytest.mark.parametrize("fault", list(_POSE_FAULTS))
+def test_row9_poses_that_are_not_cameras_are_refused_before_the_work(tmp_path, buu, garbage_checkpoint, fault):
+    change, message = _POSE_FAULTS[fault]
+    photos = copy_photos(buu, tmp_path / "photos")
+    poses = _transforms(tmp_path / "poses.json", SIX, change)
+    expect_input_error(run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", garbage_checkpoint, "--poses", poses)),
+                       f"{poses}: {message}")
+    assert not (tmp_path / "out").exists()
+
+
+def test_row9_an_output_through_a_dangling_link_is_refused_before_the_work(tmp_path, buu, garbage_checkpoint):
+    photos = copy_photos(buu, tmp_path / "photos")
+    (tmp_path / "link").symlink_to(tmp_path / "nowhere")
+    expect_input_error(run_lumos3d(*restore_args(photos, tmp_path / "link" / "scene.ply", garbage_checkpoint)),
+                       f"{tmp_path / 'link'} is a link to {tmp_path / 'nowhere'}, which does not exist")
+
+
+def test_row9_a_full_disk_names_the_output_and_changes_nothing(tmp_path, buu, run_cli, random_checkpoint, earlier_restore, monkeypatch):
+    out = shutil.copytree(earlier_restore, tmp_path / "out")
+    before = snapshot(out)
+
+    def full_disk(path, gaussians):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(restore_outputs, "write_ply", full_disk)
+    result = run_cli(*restore_args(copy_photos(buu, tmp_path / "photos", SIX[:3]), out / "scene.ply", random_checkpoint))
+    expect_input_error(result, f"{out}: no space left on the device while writing the outputs (nothing was changed)")
+    assert snapshot(out) == before
+
+
+def test_row9_render_info_and_train_refuse_what_they_cannot_use(tmp_path, tiny_config):
+    empty = tmp_path / "empty.ply"
+    write_ply(empty, Gaussians(torch.zeros(0, 3), torch.zeros(0, 4), torch.zeros(0, 3), torch.zeros(0), torch.zeros(0, 1, 3)))
+    expect_input_error(run_lumos3d("render", empty, "--orbit", 3, "-o", tmp_path / "frames"),
+                       f"{empty}: holds no Gaussians; there is nothing to render")
+    expect_input_error(run_lumos3d("info", "/dev/null"), "/dev/null: is neither a file nor a folder")
+    for value in ("-1e-4", ".nan", ".inf"):
+        expect_input_error(run_lumos3d("train", tiny_config(name="lr"), f"optim.lr={value}"), "lr: ", "must be a number of at least 0")
+    assert not (tmp_path / "frames").exists() and not (tmp_path / "lr").exists()
+
+
+def test_row9_debug_keeps_exit_2_and_adds_the_traceback(tmp_path):
+    result = run_lumos3d("--debug", "info", tmp_path / "missing.ply")
+    assert result.code == 2 and "Traceback" in result.err
+    assert result.err.strip().splitlines()[-1] == f"error: {tmp_path / 'missing.ply'}: no such file or folder"
+
+
+def test_row10_a_photo_too_small_for_one_network_patch_is_refused_by_name(tmp_path, buu, random_checkpoint):
+    photos = copy_photos(buu, tmp_path / "photos", SIX[:2])
+    write_image(photos / "tiny.png", np.full((1, 1, 3), 0.5, np.float32))
+    expect_input_error(run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", random_checkpoint)),
+                       "tiny.png: is 1x1 pixels, too small for the network (at least 14 pixels a side)")
+    assert not (tmp_path / "out").exists()
+
+
+def test_row11_references_that_do_not_match_are_refused_before_the_work(tmp_path, buu, garbage_checkpoint):
+    photos = copy_photos(buu, tmp_path / "photos", SIX[:3])
+    references = tmp_path / "references"
+    references.mkdir()
+    for name in SIX[:2]:
+        shutil.copy(buu / "high" / name, references / name)
+    expect_input_error(run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", garbage_checkpoint,
+                                                 "--reference", references)),
+                       f"--reference {references}: no image named 3.* for input 3.JPG")
+
+
+def test_row12_black_and_white_photos_are_named_once(tmp_path, buu, random_checkpoint):
+    photos = copy_photos(buu, tmp_path / "photos", SIX[:3])
+    write_image(photos / "black.png", np.zeros((375, 500, 3), np.float32))
+    write_image(photos / "white.png", np.ones((375, 500, 3), np.float32))
+    result = run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", random_checkpoint))
+    assert result.code == 0, result.err
+    assert result.err.count("entirely black") == 1 and "black.png is entirely black" in result.err
+    assert result.err.count("entirely saturated") == 1 and "white.png is entirely saturated" in result.err
+
+
+def test_row12_photo_names_with_spaces_stay_whole_for_pycolmap(tmp_path):
+    extrinsics = torch.eye(3, 4, dtype=torch.float64)[None].repeat(2, 1, 1)
+    extrinsics[1, 0, 3] = 1.0
+    intrinsics = torch.tensor([[100.0, 0, 50], [0, 100, 40], [0, 0, 1]], dtype=torch.float64)[None].repeat(2, 1, 1)
+    names = ["my photo 1.jpg", "my photo 2.jpg"]
+    write_colmap_model(tmp_path, Cameras(extrinsics, intrinsics, [(100, 80)] * 2, names))
+    assert sorted(image.name for image in pycolmap.Reconstruction(str(tmp_path)).images.values()) == names
+
+
+def test_row12_a_garbage_torch_file_is_one_line(tmp_path):
+    garbage = tmp_path / "garbage.pt"
+    garbage.write_bytes(bytes(range(256)) * 4)
+    result = run_lumos3d("info", garbage)
+    expect_input_error(result, f"{garbage}: damaged, or holds objects other than tensors")
+    assert len(result.err.strip().splitlines()) == 1
