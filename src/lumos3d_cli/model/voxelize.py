@@ -22,6 +22,7 @@ import torch
 
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.io.gaussians import Gaussians
+from lumos3d_cli.model.symmetric_eigen import symmetric_eigen_3x3
 from lumos3d_cli.rotations import matrix_to_quaternion, quaternion_to_matrix
 
 _KEY_LIMIT = 1 << 62  # voxel keys must stay below this to fit int64 with room for the arithmetic
@@ -132,9 +133,9 @@ def covering_shapes(voxels: Gaussians, members: Gaussians, fusion: VoxelFusion, 
         covariance = torch.zeros(len(fusion), 3, 3, dtype=torch.float64, device=spread.device).index_add(
             0, index, spread * fusion.weights[in_shared].double()[:, None, None]
         )[shared]
-        variances, vectors = torch.linalg.eigh(covariance)
-        # Eigenvectors come with either sign; negating a reflection (det -1) makes it a rotation.
-        vectors = vectors * torch.linalg.det(vectors).sign()[:, None, None]
+        # Not torch.linalg.eigh: cuSOLVER fails on CUDA batches this large (see symmetric_eigen);
+        # the eigenvectors come back as rotations (det +1), ready for a quaternion.
+        variances, vectors = symmetric_eigen_3x3(covariance)
         quats, scales = voxels.quats.detach().clone(), voxels.scales.detach().clone()
         quats[shared] = matrix_to_quaternion(vectors).to(quats.dtype)
         scales[shared] = variances.clamp_min(0).sqrt().clamp_min(min_scale).to(scales.dtype)
