@@ -81,8 +81,32 @@ def test_a_commit_a_killed_run_left_half_done_is_finished_by_the_next(tmp_path):
              [tmp_path / "cameras.json", staging / ".replaced" / "2", "destination-exists"],
              [staging / "cameras.json", tmp_path / "cameras.json", "source-gone"],
              [staging / ".manifest.4", tmp_path / ".lumos3d-manifest.json", "source-gone"]]
-    (staging / COMMIT_JOURNAL).write_text(json.dumps([[str(a), str(b), c] for a, b, c in moves]))
+    (staging / COMMIT_JOURNAL).write_text(json.dumps({"folder": str(tmp_path), "other_folders": [],
+                                                      "moves": [[str(a), str(b), c] for a, b, c in moves]}))
     assert remove_leftovers(tmp_path) == [staging]
     assert _tree(tmp_path) == [".lumos3d-manifest.json", "cameras.json", "scene.ply"]
     assert [(tmp_path / name).read_text() for name in ("scene.ply", "cameras.json", ".lumos3d-manifest.json")] == [
         "new scene", "new cameras", "new manifest"]
+
+
+def test_a_journal_that_does_not_belong_to_its_folder_is_never_carried_out(tmp_path):
+    """A copy of an output folder carries a killed run's journal along (its paths name the
+    original folder); a relative, unreadable or outside path is not trusted either. Nothing moves,
+    nothing is deleted, the staging folder stays (with a warning)."""
+    host, dead = atomic._HOST, _dead_pid()
+    victim = tmp_path / "elsewhere" / "cameras.json"
+    victim.parent.mkdir()
+    victim.write_text("the user's")
+    for index, document in enumerate([
+        {"folder": str(tmp_path / "original"), "other_folders": [], "moves": [[str(victim), "x", "destination-exists"]]},
+        {"folder": str(tmp_path / f"copy{2}"), "other_folders": [], "moves": [["cameras.json", ".replaced/0", "destination-exists"]]},
+        {"folder": str(tmp_path / f"copy{3}"), "other_folders": [],
+         "moves": [[str(tmp_path / "copy3" / ".." / "elsewhere" / "cameras.json"), str(tmp_path / "copy3" / "t"), "destination-exists"]]},
+        "{not json",
+    ]):
+        folder = tmp_path / f"copy{index}"
+        staging = folder / f".staging.{dead}-{host}.k2j3h4g{index}.tmp"
+        staging.mkdir(parents=True)
+        (staging / COMMIT_JOURNAL).write_text(document if isinstance(document, str) else json.dumps(document))
+        assert remove_leftovers(folder) == [] and staging.is_dir()
+    assert victim.read_text() == "the user's"

@@ -5,6 +5,7 @@ appear in one commit that a signal does not cut short; a failure leaves everythi
 import errno
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -15,9 +16,13 @@ import pytest
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io import atomic
+from lumos3d_cli.io.file_digest import file_sha256
 from lumos3d_cli.io.manifest import MANIFEST_NAME, Manifest
 from lumos3d_cli.io.output_lock import LOCK_NAME, folder_lock
 from lumos3d_cli.io.output_set import OutputSet
+
+from output_files import snapshot
+from processes import hidden_entries
 
 
 def _tree(folder):
@@ -234,9 +239,10 @@ def test_leftover_staging_of_a_killed_commit_is_rolled_forward_when_the_next_run
     original, calls = os.replace, []
 
     def killed_after_two(source, destination):
-        if len(calls) == 2:
-            raise SystemExit("killed")
-        calls.append(destination)
+        if (".staging." in str(source)) != (".staging." in str(destination)):  # a move of the commit
+            if len(calls) == 2:
+                raise SystemExit("killed")
+            calls.append(destination)
         original(source, destination)
 
     monkeypatch.setattr(os, "replace", killed_after_two)
@@ -252,3 +258,97 @@ def test_leftover_staging_of_a_killed_commit_is_rolled_forward_when_the_next_run
     assert _tree(out) == [MANIFEST_NAME, "scene.ply", "summary.json", "views", "views/1.png"]
     assert {(out / name).read_text() for name in ("scene.ply", "summary.json", "views/1.png")} == {"second"}
     _restore_like(out, ["1.png"], text="third")  # and the manifest owns the result
+
+
+def _kill_mid_commit(out, monkeypatch, after=2):
+    """A restore-like commit into `out` whose process 'dies' after `after` of its moves (os.replace
+    raising SystemExit stands for SIGKILL; a killed run cleans nothing up)."""
+    original, calls = os.replace, []
+
+    def killed(source, destination):
+        if (".staging." in str(source)) != (".staging." in str(destination)):
+            if len(calls) == after:
+                raise SystemExit("killed")
+            calls.append(destination)
+        original(source, destination)
+
+    with monkeypatch.context() as patch:
+        patch.setattr(os, "replace", killed)
+        patch.setattr(sys.modules["shutil"], "rmtree", lambda *args, **kwargs: None)
+        with pytest.raises(SystemExit):
+            _restore_like(out, ["1.png"], text="killed")
+
+
+def test_the_next_run_of_the_same_command_finishes_a_killed_commit_then_runs(tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png", "2.png"], text="first")
+    _kill_mid_commit(out, monkeypatch)
+    monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)
+    monkeypatch.setattr(atomic, "_cleaned", set())
+    _restore_like(out, ["1.png"], text="third")  # no "was changed since lumos3d wrote it"
+    assert _tree(out) == [MANIFEST_NAME, "scene.ply", "summary.json", "views", "views/1.png"]
+
+
+def test_a_copied_folder_never_replays_the_journal_it_carries(tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], text="first")
+    _kill_mid_commit(out, monkeypatch)
+    copy = shutil.copytree(out, tmp_path / "copy", symlinks=True)
+    before = snapshot(out)
+    monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)
+    monkeypatch.setattr(atomic, "_cleaned", set())
+    atomic.remove_leftovers(copy)
+    assert snapshot(out) == before and any(p.name.startswith(".staging.") for p in copy.iterdir())
+
+
+def test_a_move_that_fails_during_the_commit_puts_the_old_set_back(tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png", "2.png"], text="first")
+    before = snapshot(out)
+    original = os.replace
+
+    def refused(source, destination):
+        if str(source).endswith("/views") and ".staging." not in str(source):  # the old views/ cannot move
+            raise PermissionError(errno.EPERM, "Operation not permitted", str(source))
+        original(source, destination)
+
+    monkeypatch.setattr(os, "replace", refused)
+    with pytest.raises(InputError, match=r"out/views: cannot be replaced \(Operation not permitted\); nothing was changed"):
+        _restore_like(out, ["1.png"], text="second")
+    monkeypatch.setattr(os, "replace", original)
+    assert snapshot(out) == before and hidden_entries(out) == []
+
+
+def test_a_lock_file_that_is_not_lumos3ds_is_never_written_or_removed(tmp_path):
+    precious = tmp_path / "precious.txt"
+    precious.write_text("the user's")
+    for out, make in ((tmp_path / "linked", lambda lock: lock.symlink_to(precious)),
+                      (tmp_path / "own", lambda lock: lock.write_text("the user's own .lumos3d.lock")),
+                      (tmp_path / "folder", lambda lock: lock.mkdir())):
+        out.mkdir()
+        make(out / LOCK_NAME)
+        with pytest.raises(InputError, match=r"\.lumos3d\.lock: is not lumos3d's lock file"):
+            _restore_like(out, ["1.png"])
+        assert os.path.lexists(out / LOCK_NAME) and not (out / "scene.ply").exists()
+    assert precious.read_text() == "the user's" and (tmp_path / "own" / LOCK_NAME).read_text() == "the user's own .lumos3d.lock"
+
+
+def test_a_manifest_naming_a_file_outside_its_folder_never_removes_it(tmp_path):
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], text="first")
+    victim = tmp_path / "victim.txt"
+    victim.write_text("the user's")
+    document = json.loads((out / MANIFEST_NAME).read_text())
+    entry = dict(document["files"]["scene.ply"], bytes=victim.stat().st_size, sha256=file_sha256(victim))
+    document["files"]["../victim.txt"] = entry
+    (out / MANIFEST_NAME).write_text(json.dumps(document))
+    _restore_like(out, ["1.png"], text="second")
+    assert victim.read_text() == "the user's"
+
+
+def test_a_file_elsewhere_gets_the_umask_and_never_goes_inside_a_folder_of_lumos3ds_own(tmp_path):
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], video=out / "orbit.mp4")
+    assert (out / "orbit.mp4").stat().st_mode & 0o777 == 0o666 & ~atomic.current_umask()
+    with pytest.raises(InputError, match=r"orbit.mp4: lies inside .*out/views, which holds only the outputs"):
+        _restore_like(out, ["1.png"], video=out / "views" / "orbit.mp4")

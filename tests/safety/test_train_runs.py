@@ -4,6 +4,10 @@ checkpoints; --resume continues the run the folder holds and says which."""
 
 import json
 import re
+import shutil
+import subprocess
+import sys
+import textwrap
 
 import torch
 
@@ -60,9 +64,15 @@ def test_retention_and_resume_see_only_the_runs_own_checkpoints(tmp_path):
         save_training_checkpoint(tmp_path, step, model, state, "", {}, "earlier", keep=3)
     for step in (1, 2, 3, 4):
         save_training_checkpoint(tmp_path, step, model, state, "", {}, "current", keep=3)
-    names = sorted(p.name for p in (tmp_path / "checkpoints").glob("step_*"))
-    assert names == [f"step_{s:08d}" for s in (2, 3, 4, 30, 40, 50)]
-    assert [p.name for p in resume_candidates(tmp_path, "current")] == [f"step_{s:08d}" for s in (4, 3, 2)]
+    checkpoints = tmp_path / "checkpoints"
+    shutil.copytree(checkpoints / "step_00000004", checkpoints / "step_00000004_keep")  # the user's copy
+    (checkpoints / "step_00000000_mine").mkdir()  # the user's notes
+    (checkpoints / "step_00000000_mine" / "notes.txt").write_text("the user's")
+    save_training_checkpoint(tmp_path, 5, model, state, "", {}, "current", keep=3)
+    names = sorted(p.name for p in checkpoints.glob("step_*"))
+    assert names == ["step_00000000_mine", *(f"step_{s:08d}" for s in (3, 4)), "step_00000004_keep",
+                     *(f"step_{s:08d}" for s in (5, 30, 40, 50))]
+    assert [p.name for p in resume_candidates(tmp_path, "current")] == [f"step_{s:08d}" for s in (5, 4, 3)]
     assert [p.name for p in resume_candidates(tmp_path, "earlier")][0] == "step_00000050"
 
 
@@ -78,3 +88,22 @@ def test_run_outputs_that_cannot_be_or_would_touch_inputs_are_refused_before_tra
     moved = run_folder / "config.yaml"
     moved.write_text(inside.read_text().replace(str(tmp_path / "inside"), str(run_folder)))
     expect_input_error(run_lumos3d("train", moved), f"{moved}: lies inside the run folder {run_folder}")
+
+
+def test_a_second_train_into_a_run_folder_in_use_is_refused(tiny_config):
+    config = tiny_config(name="busy", optim__steps=1)
+    assert run_lumos3d("train", config).code == 0
+    holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
+        import time
+        from lumos3d_cli.io.output_lock import folder_lock
+        with folder_lock({str(_output(config))!r}, "train"):
+            print("locked", flush=True)
+            time.sleep(120)
+    """)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        expect_input_error(run_lumos3d("train", config, "optim.steps=2", "--resume"),
+                           f"`lumos3d train`, process {holder.pid}", "is writing its outputs here")
+    finally:
+        holder.kill()
+        holder.wait()

@@ -3,6 +3,7 @@ rows 1-4, 8, 11): the real commands in child processes, and every user file chec
 afterwards. Refusals come before any work: a garbage checkpoint, which would be the first thing
 to fail once the work starts, is not what they complain about."""
 
+import json
 import shutil
 
 import numpy as np
@@ -148,3 +149,14 @@ def test_render_eval_and_convert_never_write_over_the_users_files(tmp_path, buu)
     expect_input_error(run_lumos3d("convert", scene, "-o", tmp_path / "mine.splat"), "mine.splat: exists and was not written by lumos3d")
     assert (frames / "00001.png").read_text() == (tmp_path / "report" / "metrics.json").read_text() == "the user's"
     assert (tmp_path / "mine.splat").read_text() == "the user's"
+
+
+def test_row8_an_earlier_restores_contact_sheet_among_the_photos_is_no_photo(tmp_path, buu, random_checkpoint):
+    photos = copy_photos(buu, tmp_path / "P", ["1.JPG", "2.JPG", "3.JPG"])
+    first = run_lumos3d(*restore_args(photos / "1.JPG", photos / "scene.ply", random_checkpoint, photos / "2.JPG",
+                                      photos / "3.JPG"))
+    assert first.code == 0, first.err  # the photos named one by one: the folder is no input folder
+    assert (photos / "contact_sheet.png").is_file()
+    again = run_lumos3d(*restore_args(photos, tmp_path / "R" / "scene.ply", random_checkpoint, "--json"))
+    assert again.code == 0, again.err
+    assert json.loads(again.out)["views"] == ["1.JPG", "2.JPG", "3.JPG"]

@@ -80,24 +80,67 @@ def _remove(path: Path) -> None:
 COMMIT_JOURNAL = ".commit.json"
 
 
-def finish_commit(staging: Path) -> None:
-    """Carry out the moves that `staging`'s commit journal lists and that have not happened.
+def write_commit_journal(staging: Path, folder: Path, moves: list[tuple[Path, Path, str]]) -> None:
+    """Write the journal of a commit into `staging` (inside the output `folder`) before its first
+    move: absolute paths, the folder they belong to, and the other folders they may touch (a video
+    elsewhere). Written to a temporary name and renamed, so a journal is whole or absent."""
+    others = sorted({str(path.parent) for move in moves for path in move[:2] if not _is_inside(path, folder)})
+    document = {"folder": str(folder), "other_folders": others,
+                "moves": [[str(source), str(destination), done_when] for source, destination, done_when in moves]}
+    temporary = staging / f"{COMMIT_JOURNAL}.tmp"
+    with open(temporary, "w") as handle:
+        json.dump(document, handle)
+        handle.flush()
+        os.fsync(handle.fileno())
+    os.replace(temporary, staging / COMMIT_JOURNAL)
 
-    The journal is a list of [source, destination, done_when] written before the first move.
+
+def _is_inside(path: Path, folder: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def _journal_moves(staging: Path) -> list[tuple[Path, Path, str]] | None:
+    """The moves of `staging`'s journal, or None when they cannot be trusted: an unreadable
+    journal, one written for another folder (a copy of the output folder carries its journal
+    along), or a path outside the journal's folders."""
+    try:
+        document = json.loads((staging / COMMIT_JOURNAL).read_text())
+        folder, others = Path(document["folder"]), [Path(p) for p in document["other_folders"]]
+        moves = [(Path(source), Path(destination), str(done_when)) for source, destination, done_when in document["moves"]]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if not folder.is_absolute() or staging.absolute().parent.resolve() != folder.resolve():
+        return None
+    for move in moves:
+        for path in move[:2]:
+            inside = _is_inside(path, folder) or (path.parent in others and path.name != ".")
+            if not path.is_absolute() or ".." in path.parts or not inside:
+                return None
+    return moves
+
+
+def finish_commit(staging: Path) -> bool:
+    """Carry out the moves that `staging`'s commit journal lists and that have not happened;
+    False (nothing moved) when the journal cannot be trusted (`_journal_moves`).
+
     A move of a new file into place is done when its source (in staging) is gone; a move of an
     old file out of the way is done when its destination (in staging's `.replaced`) exists —
     its source path is taken again by the new file, so "source gone" would not tell."""
-    for source, destination, done_when in json.loads((staging / COMMIT_JOURNAL).read_text()):
-        source, destination = Path(source), Path(destination)
+    moves = _journal_moves(staging)
+    if moves is None:
+        return False
+    for source, destination, done_when in moves:
         done = destination.exists() if done_when == "destination-exists" else not (source.exists() or source.is_symlink())
         if not done:
             destination.parent.mkdir(parents=True, exist_ok=True)
             os.replace(source, destination)
+    return True
 
 
 def remove_leftovers(folder: Path | str) -> list[Path]:
     """Remove the temporaries in `folder` left by killed runs on this host (once per folder and
-    process); returns what was removed."""
+    process), after finishing a commit one of them had begun; returns what was removed. A
+    staging folder whose journal cannot be trusted is left where it is, with a warning."""
     folder = Path(folder).absolute()
     if folder in _cleaned:
         return []
@@ -106,12 +149,16 @@ def remove_leftovers(folder: Path | str) -> list[Path]:
     except (FileNotFoundError, NotADirectoryError):
         return []
     _cleaned.add(folder)
-    removed = [entry for entry in entries if _is_leftover(entry.name)]
-    for entry in removed:
+    removed = []
+    for entry in (entry for entry in entries if _is_leftover(entry.name)):
         if (entry / COMMIT_JOURNAL).is_file():
-            finish_commit(entry)
+            if not finish_commit(entry):
+                logger.warning("%s: a commit journal of a killed run that does not belong here (a copied folder?) or "
+                               "cannot be read; left as it is", entry)
+                continue
             logger.warning("finished moving the outputs of an earlier run into %s: it was killed while it did", folder)
         _remove(entry)
+        removed.append(entry)
         logger.info("removed %s, left behind by an earlier run that was killed", entry)
     return removed
 

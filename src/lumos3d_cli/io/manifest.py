@@ -62,7 +62,19 @@ class Manifest:
         except (OSError, ValueError, KeyError, TypeError, AttributeError) as error:
             logger.warning("%s cannot be read (%s): no file in %s counts as written by lumos3d", path, error, folder)
             return cls(folder)
-        return cls(folder, files)
+        outside = [name for name in files if not _inside_name(name)]
+        if outside:
+            # lumos3d lists only files inside the folder: such a name was edited in, and is not trusted
+            logger.warning("%s lists %s, outside its folder: not counted as written by lumos3d", path, ", ".join(outside))
+        return cls(folder, {name: entry for name, entry in files.items() if _inside_name(name)})
+
+    @staticmethod
+    def is_manifest(path: Path) -> bool:
+        """Whether `path` is a regular file holding a manifest of lumos3d's format."""
+        try:
+            return not path.is_symlink() and json.loads(path.read_text()).get("format") == FORMAT
+        except (OSError, ValueError, AttributeError):
+            return False
 
     def relative(self, path: Path) -> str:
         return Path(os.path.relpath(Path(path).absolute(), self.folder.absolute())).as_posix()
@@ -70,7 +82,8 @@ class Manifest:
     def owns(self, path: Path) -> bool:
         """True when `path` (inside the folder) is a regular file the manifest lists, unchanged
         since it was written. A symbolic link is never ours: lumos3d writes none."""
-        entry = self.files.get(self.relative(path))
+        name = self.relative(path)
+        entry = self.files.get(name) if _inside_name(name) else None
         if entry is None:
             return False
         try:
@@ -82,3 +95,9 @@ class Manifest:
     def document(self) -> str:
         files = {name: asdict(entry) for name, entry in sorted(self.files.items())}
         return json.dumps({"format": FORMAT, "files": files}, indent=1) + "\n"
+
+
+def _inside_name(name: str) -> bool:
+    """A relative POSIX path that stays inside its folder (no '..', not absolute, no empty part)."""
+    parts = name.split("/")
+    return bool(name) and not name.startswith("/") and all(part not in ("", ".", "..") for part in parts)

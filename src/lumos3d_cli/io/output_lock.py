@@ -15,6 +15,7 @@ import fcntl
 import json
 import os
 import socket
+import stat
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -35,10 +36,30 @@ def _describe_holder(descriptor: int) -> str:
         return "another lumos3d process"
 
 
+def _is_our_record(descriptor: int) -> bool:
+    """Whether the lock file holds the record of a lumos3d run (a killed run's is left behind):
+    anything else, an empty file included, is a file of the user's that only shares the name."""
+    try:
+        return {"command", "pid", "host", "started"} <= set(json.loads(os.pread(descriptor, 4096, 0).decode()))
+    except (ValueError, TypeError, UnicodeDecodeError):
+        return False
+
+
+def _not_ours(path: Path) -> InputError:
+    return InputError(f"{path}: is not lumos3d's lock file but takes its name; move it away or choose another output")
+
+
 def _acquire(folder: Path, command: str) -> int:
     path = folder / LOCK_NAME
     while True:
-        descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        existed = os.path.lexists(path)
+        try:  # never through a link, never onto a folder or device
+            descriptor = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+        except OSError as error:
+            raise _not_ours(path) from error
+        if not stat.S_ISREG(os.fstat(descriptor).st_mode):
+            os.close(descriptor)
+            raise _not_ours(path)
         try:
             fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
@@ -50,11 +71,15 @@ def _acquire(folder: Path, command: str) -> int:
             same_file = os.fstat(descriptor).st_ino == os.stat(path).st_ino
         except FileNotFoundError:
             same_file = False
-        if same_file:
-            break
-        # The holder removed the file between our open and our lock: we hold a lock on a file
-        # that no longer has a name, which excludes no one. Try again on the current file.
-        os.close(descriptor)
+        if not same_file:
+            # The holder removed the file between our open and our lock: we hold a lock on a file
+            # that no longer has a name, which excludes no one. Try again on the current file.
+            os.close(descriptor)
+            continue
+        if existed and not _is_our_record(descriptor):
+            os.close(descriptor)
+            raise _not_ours(path)
+        break
     started = datetime.datetime.now().isoformat(timespec="seconds")
     record = json.dumps({"command": command, "pid": os.getpid(), "host": socket.gethostname(), "started": started})
     os.ftruncate(descriptor, 0)
@@ -66,7 +91,7 @@ def _acquire(folder: Path, command: str) -> int:
 def folder_lock(folder: Path | str, command: str) -> Iterator[None]:
     """Hold the lock of `folder` (which must exist) while inside; InputError naming the other
     run when one holds it."""
-    folder = Path(folder).absolute()
+    folder = Path(folder).resolve()  # one lock per folder, whatever link it is reached through
     held = _held.get(folder)
     if held is not None:
         held[1] += 1

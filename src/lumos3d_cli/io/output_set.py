@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import contextlib
 import errno
-import json
 import logging
 import os
 import shutil
@@ -39,12 +38,12 @@ from pathlib import Path
 
 from lumos3d_cli.errors import STOP_SIGNALS, InputError, Interrupted
 from lumos3d_cli.io.atomic import (
-    COMMIT_JOURNAL,
     current_umask,
     make_folders,
     remove_created_folders,
     remove_leftovers,
     temporary_prefix,
+    write_commit_journal,
 )
 from lumos3d_cli.io.manifest import MANIFEST_NAME, Manifest, describe_file
 from lumos3d_cli.io.output_lock import LOCK_NAME, folder_lock
@@ -129,14 +128,15 @@ class Staging:
 class OutputSet:
     """The outputs of one command run in `folder` (see the module docstring). `output_set` names
     the group of files a re-run replaces (default: the command); `inputs` are the paths the
-    outputs must stay clear of."""
+    outputs must stay clear of; `parameter` names the option of `folder` in messages."""
 
     def __init__(self, folder: Path | str, command: str, output_set: str | None = None,
-                 inputs: Sequence[Path | str | None] = ()):
+                 inputs: Sequence[Path | str | None] = (), parameter: str = "output"):
         self.folder = Path(folder)
         self.command = command
         self.output_set = output_set or command
         self.inputs = [Path(path) for path in inputs if path is not None]
+        self.parameter = parameter
         self._files: list[str] = []
         self._folders: list[str] = []
         self._elsewhere: dict[Path, str] = {}
@@ -162,28 +162,48 @@ class OutputSet:
         return ([self.folder / name for name in [*self._files, *self._folders]] + list(self._elsewhere))
 
     def _folders_written(self) -> list[Path]:
-        return list(dict.fromkeys([self.folder, *(path.parent for path in self._elsewhere)]))
+        """The folders written into, once each (two names of one folder, through a link, count once)."""
+        folders: dict[Path, Path] = {}
+        for folder in [self.folder, *(path.parent for path in self._elsewhere)]:
+            folders.setdefault(_resolved(folder), folder)
+        return list(folders.values())
 
     # -- checks ---------------------------------------------------------------------------------
 
     def check(self) -> None:
         """InputError naming the path when the outputs cannot be written, would write over a file
-        lumos3d did not write, or touch an input. (`reserved` checks under the folders' locks:
-        a command enters it before any work.)"""
+        lumos3d did not write, or touch an input. (`reserved` checks the same under the folders'
+        locks: a command enters it before any work.)"""
+        self.check_paths()
+        self._check_ownership()
+
+    def check_paths(self) -> None:
+        """The checks that read no file: the outputs can be created, use no name lumos3d keeps for
+        itself, and stay clear of the inputs."""
         for folder in self._folders_written():
-            check_output_path(folder, "output" if folder == self.folder else None, folder=True)
+            check_output_path(folder, self.parameter if folder == self.folder else None, folder=True)
+            for name in RESERVED_NAMES:
+                own = folder / name
+                if own.is_symlink() or (own.exists() and not own.is_file()):
+                    raise InputError(f"{own}: is not lumos3d's {'lock' if name == LOCK_NAME else 'manifest'} file but "
+                                     "takes its name; move it away or choose another output")
         for path in self.paths():
             if path.name in RESERVED_NAMES:
                 raise InputError(f"{path}: this name is lumos3d's own bookkeeping file; choose another name")
+        for path in self._elsewhere:
+            for name in self._folders:
+                if _is_within(_resolved(path), _resolved(self.folder / name)):
+                    raise InputError(f"{path}: lies inside {self.folder / name}, which holds only the outputs lumos3d "
+                                     "puts there; choose another path")
         folder = _resolved(self.folder)
         for given in self.inputs:
             resolved = _resolved(given)
             if resolved.is_dir() and _is_within(folder, resolved):
                 where = "is the input folder" if folder == resolved else "lies inside the input folder"
-                raise InputError(f"{self.folder}: {where} {given}; write the outputs to another folder", parameter="output")
+                raise InputError(f"{self.folder}: {where} {given}; write the outputs to another folder",
+                                 parameter=self.parameter)
         check_not_inputs([*(self.folder / name for name in self._files), *self._elsewhere],
                          [self.folder / name for name in self._folders], self.inputs)
-        self._check_ownership()
 
     def _check_ownership(self) -> None:
         manifests: dict[Path, Manifest] = {}
@@ -208,23 +228,32 @@ class OutputSet:
                 if inner.is_dir() and not inner.is_symlink():
                     raise InputError(f"{inner}: a folder lumos3d did not make, inside its output folder {path}; move it "
                                      "away or choose another output")
+                # lumos3d's own file there: the output folder's manifest lists it, or (another
+                # command's output put there) the manifest beside it, which is then lumos3d's too
+                if inner.name == MANIFEST_NAME and Manifest.is_manifest(inner):
+                    continue
+                if inner.parent != self.folder and manifest(inner.parent).owns(inner):
+                    continue
                 _refuse_unless_ours(manifest(self.folder), inner)
 
     # -- writing --------------------------------------------------------------------------------
 
     @contextlib.contextmanager
     def reserved(self) -> Iterator[None]:
-        """Create the output folders and hold their locks while inside (a second run into them is
-        refused), then `check` — under the lock, so that another run's commit is not read half
+        """Check the paths, create the output folders and hold their locks while inside (a second
+        run into them is refused), finish a commit a killed run left there (io/atomic.py), then
+        check what is in the way — under the lock, so that another run's commit is never read half
         done. Folders this made are removed again when the block fails and they are empty."""
+        self.check_paths()
         created: list[Path] = []
         with contextlib.ExitStack() as stack:
             try:
                 for folder in self._folders_written():
-                    check_output_path(folder, "output" if folder == self.folder else None, folder=True)
                     created += make_folders(folder)
                     stack.enter_context(folder_lock(folder, self.command))
-                self.check()
+                for folder in self._folders_written():
+                    remove_leftovers(folder)
+                self._check_ownership()
                 yield
             except BaseException:
                 stack.close()  # the locks go first: their files would keep the folders from going
@@ -235,10 +264,9 @@ class OutputSet:
     def staged(self) -> Iterator[Staging]:
         """Check, then yield the staging area; when the block succeeds check again and commit.
         When it raises (an interruption included) the staging area is removed and every output
-        is as it was. A full or read-only disk is an InputError naming the folder."""
+        is as it was. A full or read-only disk, or an output that cannot be replaced, is an
+        InputError naming the file."""
         with self.reserved():
-            for folder in self._folders_written():
-                remove_leftovers(folder)
             prefix = temporary_prefix("staging")
             earlier = {item.name for item in self.folder.iterdir() if item.name.startswith(prefix)}
             staging: Staging | None = None
@@ -258,7 +286,7 @@ class OutputSet:
                 if reason is None:
                     raise
                 raise InputError(f"{error.filename or self.folder}: {reason} while writing the outputs (nothing was "
-                                 "changed); free space or choose another output") from error
+                                 "changed); free space, fix the permissions or choose another output") from error
             finally:
                 # A signal can land after mkdtemp made the folder but before `staging` names it:
                 # then the folder to remove is this process's staging folder that was not there before.
@@ -275,22 +303,23 @@ class OutputSet:
         undeclared = staged - declared
         if undeclared:
             raise ValueError(f"written but not declared as outputs: {sorted(undeclared)}")
-        items = [_Item(self.folder / name, staging.root / name, self.output_set, name in self._folders)
+        items = [_Item(self.folder.absolute() / name, staging.root.absolute() / name, self.output_set, name in self._folders)
                  for name in sorted(staged)]
-        return items + [_Item(final, temporary, output_set, False)
+        return items + [_Item(final.absolute(), temporary.absolute(), output_set, False)
                         for (final, output_set), temporary in zip(self._elsewhere.items(), staging.files.values())]
 
     def _commit(self, staging: Staging) -> None:
         """Move the staged outputs into place (module docstring): each old output out of the way
         and the new one in, stale files of the same output set out, each folder's manifest last,
-        following a journal written beforehand."""
+        following a journal written beforehand. A move that fails undoes the ones before it."""
         items = self._items(staging)
-        trash = staging.root / ".replaced"
+        root = staging.root.absolute()
+        trash = root / ".replaced"
         moves: list[tuple[Path, Path, str]] = []
         leftovers: list[Path] = []  # old files moved beside themselves (outside the staging folder)
 
         def move_away(path: Path) -> None:
-            if _is_within(path.parent.absolute(), self.folder.absolute()):
+            if _is_within(path.parent, self.folder.absolute()):
                 destination = trash / str(len(moves))
             else:  # another folder (maybe another file system): beside itself, as a temporary of ours
                 destination = path.parent / f"{temporary_prefix(path.name)}replaced.{len(moves)}.tmp"
@@ -300,7 +329,7 @@ class OutputSet:
         for item in items:
             if item.final.exists() or item.final.is_symlink():
                 move_away(item.final)
-            if not item.is_folder and item.final.parent != self.folder:
+            if not item.is_folder and not _is_within(item.staged, root):
                 os.chmod(item.staged, 0o666 & ~current_umask())  # mkstemp made it private
             moves.append((item.staged, item.final, "source-gone"))
         written_sets = {(item.final.parent, item.output_set) for item in items}
@@ -325,25 +354,38 @@ class OutputSet:
                 for file in files:
                     name = item.final.name + ("/" + file.relative_to(item.staged).as_posix() if item.is_folder else "")
                     manifest.files[name] = describe_file(file, self.command, item.output_set)
-            staged_manifest = staging.root / f".manifest.{len(moves)}"
+            staged_manifest = root / f".manifest.{len(moves)}"
             staged_manifest.write_text(manifest.document())
             moves.append((staged_manifest, folder / MANIFEST_NAME, "source-gone"))
-        journal = staging.root / COMMIT_JOURNAL
-        with open(journal, "w") as handle:
-            json.dump([[str(a), str(b), when] for a, b, when in moves], handle)
-            handle.flush()
-            os.fsync(handle.fileno())
+        write_commit_journal(root, self.folder.absolute(), moves)
+        done: list[tuple[Path, Path]] = []
         try:
             with _stop_signals_held():
                 trash.mkdir()
-                for source, destination, _ in moves:
-                    os.replace(source, destination)
-                shutil.rmtree(staging.root, ignore_errors=True)
+                try:
+                    for source, destination, _ in moves:
+                        os.replace(source, destination)
+                        done.append((source, destination))
+                except OSError as error:
+                    _undo(done)
+                    reason = _DISK_ERRORS.get(error.errno) or error.strerror or type(error).__name__
+                    raise InputError(f"{error.filename}: cannot be replaced ({reason}); nothing was changed: fix its "
+                                     "permissions or choose another output") from error
+                shutil.rmtree(root, ignore_errors=True)
                 for path in leftovers:
                     _remove_path(path)
         except Interrupted as stop:
             stop.detail = stop.detail or f"after the outputs were written; {self.folder} holds the complete new outputs"
             raise
+
+
+def _undo(done: list[tuple[Path, Path]]) -> None:
+    """Move back, last first, what a failed commit moved: the old outputs return to their places."""
+    for source, destination in reversed(done):
+        try:
+            os.replace(destination, source)
+        except OSError:
+            logger.error("could not move %s back to %s while undoing a failed commit", destination, source)
 
 
 def _remove_path(path: Path) -> None:

@@ -124,7 +124,7 @@ def eval_contact_sheet(result: SceneEvaluation, mode: str, with_baseline: bool) 
 def eval_outputs(out: Path | str, scenes: Sequence[str], inputs: Sequence[Path | str | None] = ()) -> OutputSet:
     """The report's files in `out` (metrics.json, metrics.csv, a contact sheet per scene; the
     sheets of scenes an earlier report had and this one has not go), kept clear of `inputs`."""
-    outputs = OutputSet(Path(out), "eval", "eval", inputs).add_file("metrics.json").add_file("metrics.csv")
+    outputs = OutputSet(Path(out), "eval", "eval", inputs, parameter="out").add_file("metrics.json").add_file("metrics.csv")
     for scene in scenes:
         outputs.add_file(f"contact_sheet_{scene}.png")
     return outputs

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import shutil
 import tempfile
 from dataclasses import dataclass
@@ -24,6 +25,7 @@ STATE_FILE = "training_state.pt"
 CONFIG_FILE = "config.yaml"
 LATEST_FILE = "latest"
 RUN_ID_FILE = "run_id"
+STEP_FOLDER = re.compile(r"step_\d{8}")  # checkpoint_folder's names
 
 logger = logging.getLogger(__name__)
 
@@ -87,8 +89,10 @@ def _run_of(folder: Path) -> str | None:
 
 
 def _step_folders(parent: Path, run_id: str | None) -> list[Path]:
-    """The checkpoint folders of the run `run_id` in `parent`, newest step first."""
-    folders = (p for p in parent.glob("step_*") if p.is_dir() and _run_of(p) == run_id)
+    """The checkpoint folders of the run `run_id` in `parent`, newest step first: named exactly
+    as a save names them (a copy such as step_00000078_keep is the user's) and holding weights."""
+    folders = (p for p in parent.glob("step_*") if STEP_FOLDER.fullmatch(p.name) and p.is_dir() and not p.is_symlink()
+               and (p / MODEL_FILE).is_file() and _run_of(p) == run_id)
     return sorted(folders, key=lambda p: p.name, reverse=True)
 
 

@@ -7,6 +7,7 @@ resumed run reproduces the losses of an uninterrupted one.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import signal
 import time
@@ -38,6 +39,7 @@ from lumos3d_cli.train.checkpointing import (
 )
 from lumos3d_cli.train.config import TrainConfig, config_to_yaml
 from lumos3d_cli.train.distributed import DistributedContext, all_reduce_mean, any_rank
+from lumos3d_cli.io.output_lock import folder_lock
 from lumos3d_cli.train.run_folder import RunIdentity, check_run_folder, read_run, start_run
 from lumos3d_cli.train.run_logs import RunLogs
 from lumos3d_cli.train.schedule import learning_rate_factor
@@ -393,6 +395,15 @@ class Trainer:
         if self.context.enabled:
             torch.distributed.barrier()
         self.output.mkdir(parents=True, exist_ok=True)
+        with folder_lock(self.output, "train") if self.context.is_main else contextlib.nullcontext():
+            # Rank 0 holds the run folder (another `train` into it is refused) and checks again
+            # under the lock: a run that started since the first check is seen now.
+            if self.context.is_main:
+                check_run_folder(self.output, [], resume)
+            return self._run_locked(resume, max_steps, stop_after, config_file)
+
+    def _run_locked(self, resume: bool, max_steps: int | None, stop_after: int | None,
+                    config_file: Path | str | None) -> TrainResult:
         if resume:
             self.run_identity = read_run(self.output)
         elif self.context.is_main:
