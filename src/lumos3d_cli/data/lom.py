@@ -1,5 +1,8 @@
 """The LOM layout (Aleth-NeRF authors): `<scene>/{high,low,over_exp}/` photos of the same views
-and `transforms_{train,val,test}.json`. For evaluation only; never for training."""
+and `transforms_{train,val,test}.json`. For evaluation only; never for training.
+
+A view is its file stem, matched case-insensitively between the folders and the transforms files
+(LOM's shrub has `low/1.JPG` beside `over_exp/1.jpg`); its id is the spelling in `high/`."""
 
 from __future__ import annotations
 
@@ -32,7 +35,16 @@ class LomScene:
 
 
 def _by_stem(folder: Path) -> dict[str, Path]:
-    return {p.stem: p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and not p.name.startswith(".")}
+    """The photos of `folder` by case-folded stem; InputError when two photos share one."""
+    photos: dict[str, Path] = {}
+    for path in sorted(folder.iterdir()):
+        if not (path.is_file() and path.suffix.lower() in IMAGE_SUFFIXES and not path.name.startswith(".")):
+            continue
+        key = path.stem.casefold()
+        if key in photos:
+            raise InputError(f"{folder}: {photos[key].name} and {path.name} are the same view; keep one of them")
+        photos[key] = path
+    return photos
 
 
 def is_lom_scene(folder: Path) -> bool:
@@ -54,14 +66,16 @@ def read_lom_scene(folder: Path, mode: str) -> LomScene:
         frames = json.loads((folder / "transforms_test.json").read_text())["frames"]
     except (OSError, json.JSONDecodeError, KeyError, TypeError) as error:
         raise InputError(f"{folder / 'transforms_test.json'}: cannot read its frames ({error})") from error
-    test = [Path(frame["file_path"]).stem for frame in frames]
-    for frame in test:
-        if frame not in reference:
+    test_keys = [Path(frame["file_path"]).stem for frame in frames]
+    for frame in test_keys:
+        if frame.casefold() not in reference:
             raise InputError(f"{folder}: test frame {frame!r} has no normal-light photo in high/")
-        if frame not in degraded:
+        if frame.casefold() not in degraded:
             raise InputError(f"{folder}: test frame {frame!r} has no photo in {DEGRADED_FOLDERS[mode]}/")
-    shared = sorted(set(reference) & set(degraded), key=natural_sort_key)
-    return LomScene(folder.name, folder, mode, shared, test, {k: degraded[k] for k in shared}, {k: reference[k] for k in shared})
+    ids = {key: reference[key].stem for key in reference}  # case-folded stem -> the view's id
+    shared = sorted(set(reference) & set(degraded), key=lambda key: natural_sort_key(ids[key]))
+    return LomScene(folder.name, folder, mode, [ids[k] for k in shared], [ids[f.casefold()] for f in test_keys],
+                    {ids[k]: degraded[k] for k in shared}, {ids[k]: reference[k] for k in shared})
 
 
 def find_lom_scenes(root: Path | str, mode: str, names: list[str] | None = None) -> list[LomScene]:
@@ -83,12 +97,15 @@ def find_lom_scenes(root: Path | str, mode: str, names: list[str] | None = None)
 
 def lom_reference_extrinsics(scene: LomScene) -> dict[str, torch.Tensor]:
     """The dataset's cameras of the scene's frames: id -> world->camera extrinsics [3, 4]
-    (float64, OpenCV axes), from whichever transforms_{train,val,test}.json exist."""
+    (float64, OpenCV axes), from whichever transforms_{train,val,test}.json exist (their file
+    stems matched to the frames' ids case-insensitively)."""
+    ids = {frame.casefold(): frame for frame in scene.frames}
     extrinsics = {}
     for name in CAMERA_FILES:
         path = scene.root / name
         if path.is_file():
             cameras = read_transforms_json(path, warn_on_distortion=False)
             for index, file_path in enumerate(cameras.names):
-                extrinsics[Path(file_path).stem] = cameras.extrinsics[index]
+                stem = Path(file_path).stem
+                extrinsics[ids.get(stem.casefold(), stem)] = cameras.extrinsics[index]
     return extrinsics

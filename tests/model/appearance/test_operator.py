@@ -41,7 +41,7 @@ def test_the_matrix_acts_before_the_curve_in_linear_light():
     # A pure channel mix (no gain): output linear = M @ input linear, clipped at 0.
     matrix = torch.tensor([[1.2, 0.1, -0.1], [0.0, 0.9, 0.05], [-0.2, 0.0, 1.1]])
     operator = AppearanceOperator(torch.ones(1, 3, CURVE_KNOTS - 1), matrix[None])
-    images = _images(1, 1)
+    images = 0.75 * _images(1, 1)  # below the bright range, where the photo's hue is kept (clipped_highlights)
     linear = srgb_to_linear(images.double())
     expected = linear_to_srgb(torch.einsum("ij,bvjhw->bvihw", matrix.double(), linear).clamp(0, 1))
     torch.testing.assert_close(operator.apply(images).double(), expected, atol=1e-5, rtol=0)

@@ -1,7 +1,8 @@
 """The restoration operator of a scene: a 3x3 colour matrix, an optional per-view local gain
 grid and a per-channel monotone curve, all in linear light.
 
-Order: sRGB -> linear -> matrix -> local gain -> curve -> clip to [0, 1] -> sRGB. It mirrors a
+Order: sRGB -> linear -> matrix -> local gain -> curve -> (near-clipped input: its own
+chromaticity) -> clip to [0, 1] -> sRGB. It mirrors a
 camera's pipeline, where white balance and colour correction act on linear sensor values and
 the tone curve comes last: the matrix removes a colour cast while the values are still
 proportional to light (a cast is a per-channel gain there, not in sRGB); the local gain, a
@@ -19,6 +20,7 @@ import torch
 
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
+from lumos3d_cli.model.appearance.clipped_highlights import keep_input_chromaticity
 from lumos3d_cli.model.appearance.curve import CURVE_KNOTS, MAX_GAIN, apply_curve, bound_slopes, curve_knots
 from lumos3d_cli.model.appearance.local_correction import LOCAL_MAX_STOPS, bound_log_gain, upsample_log_gain
 
@@ -99,7 +101,9 @@ class AppearanceOperator:
     def apply_linear(self, linear: torch.Tensor) -> torch.Tensor:
         """linear [B, V, 3, H, W] -> restored linear light [B, V, 3, H, W] float32 (not clipped).
 
-        The local grid must have V views (or be None); it is upsampled to H x W.
+        The local grid must have V views (or be None); it is upsampled to H x W. Where the input
+        is clipped or nearly so, the result takes the input's chromaticity at its own luminance
+        (`clipped_highlights`): clipped input holds no colour for the operator to restore.
         """
         batch, views, _, height, width = linear.shape
         if batch != self.batch:
@@ -113,7 +117,8 @@ class AppearanceOperator:
                 grid = self.local_log2_gain.flatten(0, 1)  # [B*V, C, g, g]
                 gain = torch.exp2(upsample_log_gain(grid, height, width)).reshape(batch, views, -1, height, width)
                 mixed = mixed * gain
-            return apply_curve(mixed, self.curve_slopes, self.knots)
+            # near-clipped photo pixels keep their own chromaticity (model/appearance/clipped_highlights.py)
+            return keep_input_chromaticity(linear.float(), apply_curve(mixed, self.curve_slopes, self.knots))
 
     def apply(self, images: torch.Tensor) -> torch.Tensor:
         """images [B, V, 3, H, W] sRGB in [0, 1] -> restored sRGB [B, V, 3, H, W] in [0, 1], float32."""
