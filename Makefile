@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: test test-slow test-all demo weights ablations benchmarks clean
+.PHONY: test test-slow test-all test-cuda demo weights ablations benchmarks clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -23,6 +23,10 @@ test-slow: $(STAMP)
 
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -m ''
+
+# The GPU path (gsplat must be installed: docs/performance.md, "GPU"); skipped without CUDA.
+test-cuda: $(STAMP)
+	$(BIN)/python -m pytest -m cuda -rs
 
 demo: $(STAMP)
 	$(BIN)/lumos3d restore examples/lowlight-buu -o out/demo/scene.ply

@@ -15,7 +15,7 @@ score every frame against high/ (the context protocol of `lumos3d eval`, over al
 than the test frames). "fidelity" is the PSNR of each pruned render against the unpruned render
 of the same fusion: what pruning alone changed. "seconds": the fusion (unpruned rows) or the
 weights (pruned rows). SfM and the network run once per scene; every fusion re-assembles the
-same prediction as `pipeline.restore.build_scene` does, and applies its sampling filter.
+same prediction as `pipeline.scene_stages.build_scene` does, and applies its sampling filter.
 Prints markdown tables.
 """
 
@@ -47,7 +47,9 @@ from lumos3d_cli.model.lumos3d import Lumos3D  # noqa: E402
 from lumos3d_cli.model.pixel_footprint import DEFAULT_FOOTPRINT_SCALE  # noqa: E402
 from lumos3d_cli.pipeline.model_loading import load_restoration_model  # noqa: E402
 from lumos3d_cli.pipeline.presets import RESTORE_PRESETS, get_restore_preset  # noqa: E402
-from lumos3d_cli.pipeline.restore import BuiltScene, build_scene, render_views  # noqa: E402
+from lumos3d_cli.pipeline.restore import render_views  # noqa: E402
+from lumos3d_cli.pipeline.scene_job import SceneJob  # noqa: E402
+from lumos3d_cli.pipeline.scene_stages import build_scene  # noqa: E402
 from lumos3d_cli.pipeline.sampling_filter import apply_sampling_filter  # noqa: E402
 from lumos3d_cli.render.contribution import rendered_weights  # noqa: E402
 from lumos3d_cli.render.gaussian_budget import DEFAULT_MIN_WEIGHT, select_budget  # noqa: E402
@@ -118,7 +120,7 @@ class AssembleRecorder:
         return apply_sampling_filter(output.gaussians[0].detach().to(device="cpu"), cameras)
 
 
-def build(case: Case, model: Lumos3D) -> tuple[BuiltScene, AssembleRecorder]:
+def build(case: Case, model: Lumos3D) -> tuple[SceneJob, AssembleRecorder]:
     """`build_scene` with the default preset (unrefined), recording its fusion's arguments."""
     recorder = AssembleRecorder(model)
     model.assemble = recorder
@@ -144,7 +146,7 @@ def ply_mib(gaussians: Gaussians) -> float:
         return path.stat().st_size / 2**20
 
 
-def measure_case(case: Case, built: BuiltScene, recorder: AssembleRecorder, footprints: list[float],
+def measure_case(case: Case, built: SceneJob, recorder: AssembleRecorder, footprints: list[float],
                  min_weights: list[float], resolutions: list[float]) -> list[list[object]]:
     """Rows of the table: each fusion unpruned, then pruned at each threshold and weight resolution."""
     sh_degree = get_restore_preset("balanced").sh_degree

@@ -48,7 +48,7 @@ from lumos3d_cli.model.lumos3d import Lumos3D  # noqa: E402
 from lumos3d_cli.pipeline.model_loading import load_restoration_model  # noqa: E402
 from lumos3d_cli.pipeline.network_pass import run_network  # noqa: E402
 from lumos3d_cli.pipeline.presets import get_restore_preset  # noqa: E402
-from lumos3d_cli.pipeline.restore import build_scene  # noqa: E402
+from lumos3d_cli.pipeline.scene_stages import build_scene  # noqa: E402
 from lumos3d_cli.refine.photometric import photometric_loss  # noqa: E402
 from lumos3d_cli.refine.refinement import refine_gaussians  # noqa: E402
 from lumos3d_cli.refine.settings import RefineSettings  # noqa: E402

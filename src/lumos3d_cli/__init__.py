@@ -9,12 +9,6 @@ first use, so that importing the package (and `lumos3d --help`) stays fast:
 """
 
 from importlib import import_module
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("lumos3d")
-except PackageNotFoundError:  # running from a source tree without installation
-    __version__ = "0.0.0+unknown"
 
 # public name -> module that defines it (the package's one export table)
 _LAZY = {
@@ -52,7 +46,20 @@ _LAZY = {
 __all__ = ["__version__", *_LAZY]
 
 
+def _installed_version() -> str:
+    # Importing importlib.metadata takes about 30 ms, an eighth of `lumos3d --help`: only `--version` needs it.
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("lumos3d")
+    except PackageNotFoundError:  # running from a source tree without installation
+        return "0.0.0+unknown"
+
+
 def __getattr__(name: str):
+    if name == "__version__":
+        globals()[name] = _installed_version()
+        return globals()[name]
     if name in _LAZY:
         value = getattr(import_module(_LAZY[name]), name)
         globals()[name] = value

@@ -12,7 +12,7 @@ from lumos3d_cli.model.appearance.operator import AppearanceOperator
 from lumos3d_cli.model.gaussian_adapter import SH_START
 from lumos3d_cli.pipeline.network_pass import run_network
 from lumos3d_cli.pipeline.presets import get_restore_preset
-from lumos3d_cli.pipeline.restore import with_full_resolution_colours
+from lumos3d_cli.pipeline.scene_stages import with_full_resolution_colours
 
 
 def test_pixel_colours_are_the_photo_averaged_over_each_footprint(buu):
@@ -37,7 +37,7 @@ def test_colour_regression_models_keep_their_colours(buu):
 
 
 def test_structure_from_motion_sees_the_models_restoration(buu):
-    from lumos3d_cli.pipeline.restore import build_scene
+    from lumos3d_cli.pipeline.scene_stages import build_scene
 
     names = ["3.JPG", "4.JPG", "5.JPG", "6.JPG", "7.JPG"]
     photos = load_images([buu / "low" / name for name in names]).images

@@ -67,10 +67,19 @@ def test_two_gaussians_composite_front_to_back(tmp_path):
 
 
 def test_opaque_gaussian_hides_what_is_behind(tmp_path):
-    gaussians = _scene(tmp_path, [[0.0, 0.0, 2.0], [0.0, 0.0, 5.0]], [[0.3] * 3, [0.3] * 3], [1.0, 1.0], [[1, 0, 0], [0, 1, 0]])
+    gaussians = _scene(
+        tmp_path,
+        [[0.0, 0.0, 2.0], [0.0, 0.0, 5.0], [0.0, 0.0, 8.0]],
+        [[0.3] * 3] * 3,
+        [1.0, 0.9, 0.95],
+        [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+    )
     output = render(gaussians, camera_at_origin(SIZE, SIZE, FOCAL))
-    # alpha is capped at MAX_ALPHA; the second one adds (1 - MAX_ALPHA) * MAX_ALPHA of green.
-    expected = torch.tensor([MAX_ALPHA, (1 - MAX_ALPHA) * MAX_ALPHA, 0.0])
+    # alpha is capped at MAX_ALPHA; the second one (alpha 0.9) adds (1 - MAX_ALPHA) * 0.9 of green
+    # and leaves T = 1e-3; the third would take T to 5e-5 <= 1e-4, so compositing stops before it.
+    # (Not two Gaussians at MAX_ALPHA: their T = (1 - 0.99)^2 is the threshold exactly, and which
+    # side of it a float lands on is rounding: float32 stops there, float64 does not.)
+    expected = torch.tensor([MAX_ALPHA, (1 - MAX_ALPHA) * 0.9, 0.0])
     torch.testing.assert_close(output.images[0, :, 15, 15], expected, atol=2e-6, rtol=0)
     assert output.visible.all()
 

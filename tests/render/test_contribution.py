@@ -5,6 +5,7 @@ import pytest
 import torch
 
 from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.gaussians import SH_C0, Gaussians
 from lumos3d_cli.render.contribution import rendered_weights
 from lumos3d_cli.render.render import render
 
@@ -60,9 +61,19 @@ def test_a_hidden_gaussian_weighs_almost_nothing():
     assert weights[0] > 0.95 * 24 * 18 and 0 < weights[1] < 0.01 * weights[0]
 
 
-def test_gsplat_does_not_give_weights():
-    with pytest.raises(ValueError, match="cpu or reference"):
-        render(random_scene(3, 0), camera_at_origin(8, 8), weights=True, backend="gsplat")
+def test_weights_are_the_gradient_of_the_image_sum_by_each_colour():
+    """The identity gsplat's weights rely on (render/gsplat_backend.py): a pixel is
+    sum_i c_i alpha_i T_i, so d(sum of the image)/d(c_i) is Gaussian i's weight. Checked with the
+    CPU kernel's backward against its own forward weights: colours at 0.5 + C0 dc = 1 in every
+    channel (no clamping), so each channel's gradient of dc is C0 x the weight."""
+    gaussians = random_scene(60, 2, degree=0)
+    gaussians.sh[:] = (1.0 - 0.5) / SH_C0
+    camera = camera_at_origin(33, 25)
+    expected = render(gaussians, camera, weights=True).weights[0]
+    dc = gaussians.sh.clone().requires_grad_(True)
+    image = render(Gaussians(gaussians.means, gaussians.quats, gaussians.scales, gaussians.opacities, dc), camera).images
+    (gradient,) = torch.autograd.grad(image.sum(), dc)
+    torch.testing.assert_close(gradient[:, 0, :] / SH_C0, expected[:, None].expand(-1, 3), atol=1e-9, rtol=1e-7)
 
 
 def test_rendered_weights_add_the_views_and_estimate_full_resolution_at_half():

@@ -109,3 +109,18 @@ def test_rasterization_and_gradients_match_gsplat(antialiased):
         cosine = torch.nn.functional.cosine_similarity(a.flatten().double(), b.flatten().double(), dim=0)
         relative = (a - b).norm() / b.norm()
         assert cosine > 0.999 and relative < 2e-2, f"{name}: cosine {cosine:.5f}, relative L2 error {relative:.2e}"
+
+
+@pytest.mark.cuda
+def test_gsplat_weights_equal_the_cpu_kernels():
+    """render(weights=True) on CUDA takes each Gaussian's weight from gsplat's backward
+    (render/gsplat_backend.py); the CPU kernel counts the same sums in its forward pass."""
+    from lumos3d_cli.io.cameras import Cameras
+    from lumos3d_cli.render.render import render
+
+    gaussians, viewmat = _scene(3)
+    cameras = Cameras(viewmat[None], make_intrinsics(*INTRINSICS)[None], [(WIDTH, HEIGHT)])
+    cpu = render(gaussians, cameras, weights=True, eps2d=EPS2D).weights
+    gpu = render(gaussians.to(device="cuda"), cameras, weights=True, eps2d=EPS2D, backend="gsplat").weights
+    # float32 sums over a few hundred pixels of one view: 1e-3 px absolute, 1e-3 relative
+    torch.testing.assert_close(gpu.cpu().to(cpu.dtype), cpu, atol=1e-3, rtol=1e-3)

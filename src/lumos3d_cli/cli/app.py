@@ -10,7 +10,7 @@ from collections.abc import Callable
 import typer
 from rich.text import Text
 
-from lumos3d_cli import __version__
+import lumos3d_cli
 from lumos3d_cli.cli.console import configure_logging, state, stderr_console
 from lumos3d_cli.cli.interrupts import interruption_behind, signals_raise_interrupted
 from lumos3d_cli.errors import InputError, Interrupted, RunError
@@ -40,7 +40,7 @@ app = typer.Typer(
 
 def _version(value: bool) -> None:
     if value:
-        typer.echo(f"lumos3d {__version__}")
+        typer.echo(f"lumos3d {lumos3d_cli.__version__}")
         raise typer.Exit()
 
 
@@ -62,12 +62,16 @@ _COMMAND_PANELS = {
 
 
 def add_commands(args: list[str] | None = None) -> typer.Typer:
-    """Import subcommands and add them to `app`; returns `app`. Their modules import torch,
-    pycolmap, trimesh, viser and the rest (seconds), so `main` calls this only once its signal
-    handlers are in place (Ctrl-C during start-up then ends in the same one line as later), and
-    a command line that names a subcommand imports only that one's module (`restore` does not
-    wait for the viewer's or the evaluation's imports); any other (`--help`) imports them all."""
+    """Import subcommands and add them to `app`; returns `app`. A command line that names a
+    subcommand imports only that one's module, `--version` (without `--help`) none, any other
+    (`--help`) them all. Their modules import only what their options need (`--help` takes a
+    fraction of a second); each command imports the library (torch, pycolmap, trimesh, viser:
+    seconds) when it runs, inside `interrupts.library_imports`, which claims the signals back
+    from a library that took them (Ctrl-C during those imports ends in the same one line as later:
+    `main`'s signal handlers are in place before any of this runs)."""
     named = next((arg for arg in args or () if not arg.startswith("-")), None)
+    if named is None and "--version" in (args or ()) and not any(arg in ("-h", "--help") for arg in args):
+        return app  # the eager --version prints and exits before any command is looked up
     wanted = [named] if named in _COMMAND_PANELS else list(_COMMAND_PANELS)
     registered = {info.name for info in app.registered_commands}
     for name in wanted:
@@ -117,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(args: list[str], debug: bool, claim_signals: Callable[[], None]) -> int:
     """Run the app; map its errors to messages and exit codes (interruptions pass through).
-    `claim_signals` re-installs the CLI's signal handlers over those the imports installed."""
+    `claim_signals` re-installs the CLI's signal handlers over any the imports installed."""
     try:
         command_line = add_commands(args)
         claim_signals()

@@ -9,15 +9,12 @@ from pathlib import Path
 import typer
 
 from lumos3d_cli.cli.console import print_json, say
+from lumos3d_cli.cli.interrupts import library_imports
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.io.output_set import OutputSet
-from lumos3d_cli.io.ply import read_ply
-from lumos3d_cli.io.splat import write_splat
-from lumos3d_cli.io.weight_files import STORAGE_DTYPES, storage_dtype
+from lumos3d_cli.io.weight_dtypes import STORAGE_DTYPE_NAMES
 from lumos3d_cli.model.architectures import get_architecture
-from lumos3d_cli.model.checkpoints import save_checkpoint, summarize_checkpoint
-from lumos3d_cli.model.loading import load_model
 
 EXAMPLES = """
   lumos3d convert runs/low-light/final.safetensors -o lumos3d-low-light.safetensors --dtype float16
@@ -44,6 +41,9 @@ def _written_once(source: Path, output: Path) -> OutputSet:
 
 
 def _scene_to_splat(source: Path, output: Path, as_json: bool) -> None:
+    with library_imports():
+        from lumos3d_cli.io.ply import read_ply
+        from lumos3d_cli.io.splat import write_splat
     outputs = _written_once(source, output)
     with outputs.reserved():
         gaussians = read_ply(source)
@@ -62,11 +62,17 @@ def _scene_to_splat(source: Path, output: Path, as_json: bool) -> None:
 def convert_command(
     source: Path = typer.Argument(..., help="Checkpoint file or folder (ours, VGGT model.pt/.safetensors, AnySplat), or a scene .ply."),
     output: Path = typer.Option(..., "--output", "-o", help="The .safetensors file to write (.splat for a scene)."),
-    dtype: str = typer.Option("float32", "--dtype", help=f"Storage precision: {', '.join(STORAGE_DTYPES)}."),
+    dtype: str = typer.Option("float32", "--dtype", help=f"Storage precision: {', '.join(STORAGE_DTYPE_NAMES)}."),
     architecture: str | None = typer.Option(None, "--architecture", help="Model size of a foreign (VGGT/AnySplat) checkpoint: tiny, small, base or vggt-1b (default)."),
     as_json: bool = typer.Option(False, "--json", help="Print the written file's summary as JSON."),
 ) -> None:
     """Rewrite a checkpoint in lumos3d's format (e.g. float16 to halve it), or a scene .ply as .splat."""
+    # Checkpoints and scenes are read and written with torch and safetensors (seconds to import):
+    # imported here and in `_scene_to_splat`, when the command runs, so that `--help` stays fast.
+    with library_imports():
+        from lumos3d_cli.io.weight_files import storage_dtype
+        from lumos3d_cli.model.checkpoints import save_checkpoint, summarize_checkpoint
+        from lumos3d_cli.model.loading import load_model
     if _converts_a_scene(source, output, dtype, architecture):
         check_output_path(output, "output")
         _scene_to_splat(source, output, as_json)

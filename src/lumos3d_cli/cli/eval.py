@@ -5,17 +5,20 @@ transforms files. The job is `pipeline.evaluation`; this module parses, shows an
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 from rich.table import Table
 
 from lumos3d_cli.cli import preset_options
 from lumos3d_cli.cli.console import print_json, progress_bar, stdout_console
-from lumos3d_cli.data.degradations import MODES
+from lumos3d_cli.cli.interrupts import library_imports
+from lumos3d_cli.data.modes import MODES
 from lumos3d_cli.io.output_paths import check_output_path
-from lumos3d_cli.pipeline.evaluation import EvalReport, eval_outputs, evaluate_lom, write_eval_report
-from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET
-from lumos3d_cli.pipeline.scene_geometry import GEOMETRY_SOURCES
+from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, GEOMETRY_SOURCES
+
+if TYPE_CHECKING:
+    from lumos3d_cli.pipeline.evaluation import EvalReport
 
 EXAMPLES = """
   lumos3d eval ../shared/data/lom --scenes buu
@@ -74,6 +77,10 @@ def eval_command(
     json_output: bool = typer.Option(False, "--json", help="Print metrics.json on stdout."),
 ) -> None:
     """Evaluate restoration on LOM scenes (PSNR on [0,1], SSIM 11x11 sigma 1.5, LPIPS)."""
+    # The evaluation imports torch, pycolmap and the whole restore job (seconds): imported here,
+    # when the command runs, so that `--help` (which needs only the choices above) stays fast.
+    with library_imports():
+        from lumos3d_cli.pipeline.evaluation import eval_outputs, evaluate_lom, write_eval_report
     check_output_path(out, "out", folder=True)
     names = [n.strip() for n in scenes.split(",") if n.strip()] if scenes else None
     inputs = [root, checkpoint, lpips_weights]

@@ -8,12 +8,9 @@ import typer
 from rich.table import Table
 
 from lumos3d_cli.cli.console import print_json, progress_bar, stdout_console
+from lumos3d_cli.cli.interrupts import library_imports
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.camera_files import find_camera_source
 from lumos3d_cli.io.image_files import IMAGE_SUFFIXES, list_images
-from lumos3d_cli.io.images import read_image
-from lumos3d_cli.io.summaries import summarize_camera_file, summarize_gaussian_file, summarize_image_files
-from lumos3d_cli.model.checkpoints import summarize_checkpoint
 
 EXAMPLES = """
   lumos3d info out/scene.ply
@@ -31,6 +28,9 @@ def _image_summary(paths: list[Path], deep: bool) -> dict:
     """summarize_image_files, plus with `deep` the files that will not load and why (every image
     decoded, as restore would). Without it only the headers are read: decoding takes about 17 ms
     per 0.2-megapixel photo of LOM buu here, seconds per 24-megapixel photo or RAW file."""
+    with library_imports():
+        from lumos3d_cli.io.images import read_image
+        from lumos3d_cli.io.summaries import summarize_image_files
     summary = summarize_image_files(paths)
     if not deep:
         summary["pixels"] = "not decoded; --deep decodes every image to find those that will not load"
@@ -60,6 +60,12 @@ def _refuse_unreadable(summaries: list[dict]) -> None:
 
 def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
     """Every summary that applies to `path`; `deep` decodes images (see `_image_summary`)."""
+    # The readers import torch, pycolmap, OpenCV and the image libraries (seconds): imported here
+    # and in `_image_summary`, when the command runs, so that `--help` stays fast.
+    with library_imports():
+        from lumos3d_cli.io.camera_files import find_camera_source
+        from lumos3d_cli.io.summaries import summarize_camera_file, summarize_gaussian_file
+        from lumos3d_cli.model.checkpoints import summarize_checkpoint
     if not path.exists():
         raise InputError(f"{path}: no such file or folder")
     if not (path.is_file() or path.is_dir()):

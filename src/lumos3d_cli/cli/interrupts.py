@@ -12,6 +12,8 @@ from collections.abc import Callable, Iterator
 
 from lumos3d_cli.errors import STOP_SIGNALS, Interrupted
 
+# While `signals_raise_interrupted` is active: the function that installs its handlers again.
+_claim: Callable[[], None] | None = None
 
 
 def interruption_behind(error: BaseException) -> Interrupted | None:
@@ -58,9 +60,24 @@ def signals_raise_interrupted() -> Iterator[Callable[[], None]]:
         for signum in handled:
             signal.signal(signum, handler)
 
+    global _claim
+    outer, _claim = _claim, claim
     claim()
     try:
         yield claim
     finally:
+        _claim = outer
         for signum in handled:
             signal.signal(signum, previous[signum])
+
+
+@contextlib.contextmanager
+def library_imports() -> Iterator[None]:
+    """Around a command's imports of the library, inside the command: they take seconds (torch,
+    pycolmap, trimesh, viser...), so they happen when a command runs, not when the command line
+    is parsed or `--help` shown. A library may install its own signal handlers on import
+    (pycolmap's logging library takes SIGTERM to print a stack dump and abort), so the handlers of
+    an active `signals_raise_interrupted` are installed again after them."""
+    yield
+    if _claim is not None:
+        _claim()

@@ -9,11 +9,9 @@ from pathlib import Path
 import typer
 
 from lumos3d_cli.cli.console import ProgressBars, print_json, progress_bar, say
+from lumos3d_cli.cli.interrupts import library_imports
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.output_paths import check_output_path
-from lumos3d_cli.io.ply import read_ply
-from lumos3d_cli.io.video import video_kind
-from lumos3d_cli.pipeline.render_job import render_cameras, render_frames, render_outputs
 
 EXAMPLES = """
   lumos3d render out/scene.ply --orbit 60 -o frames/ --video orbit.mp4
@@ -46,6 +44,12 @@ def render_command(
     json_output: bool = typer.Option(False, "--json", help="Print a JSON summary on stdout."),
 ) -> None:
     """Render a Gaussian scene from cameras or along an orbit."""
+    # The job imports torch, numba's kernels, pycolmap and imageio-ffmpeg (seconds): imported
+    # here, when the command runs, so that `--help` stays fast.
+    with library_imports():
+        from lumos3d_cli.io.ply import read_ply
+        from lumos3d_cli.io.video import video_kind
+        from lumos3d_cli.pipeline.render_job import render_cameras, render_frames, render_outputs
     if (poses is None) == (orbit is None):
         raise InputError("give exactly one of --poses CAMERAS or --orbit N")
     if orbit is not None and not 1 <= orbit <= 100000:

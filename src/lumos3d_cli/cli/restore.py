@@ -5,23 +5,22 @@ its cameras, the restored views, a contact sheet, a preview and a summary. The j
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from lumos3d_cli.cli import preset_options
 from lumos3d_cli.cli.console import ProgressBars, print_json, progress_bar, say
+from lumos3d_cli.cli.interrupts import library_imports
 from lumos3d_cli.cli.view import EXIT_INTERRUPTED, announce
-from lumos3d_cli.data.degradations import MODES
+from lumos3d_cli.data.modes import MODES
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.image_files import list_images
 from lumos3d_cli.io.output_paths import check_output_path
-from lumos3d_cli.io.video import video_kind
-from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET
-from lumos3d_cli.pipeline.restore import RestoredScene, restore
-from lumos3d_cli.pipeline.orbit_video import DEFAULT_ORBIT_FRAMES
-from lumos3d_cli.pipeline.restore_outputs import check_view_format, restore_outputs, write_restored_scene
-from lumos3d_cli.pipeline.scene_geometry import GEOMETRY_SOURCES
-from lumos3d_cli.viewer.server import DEFAULT_HOST, DEFAULT_PORT, serve_scene
+from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, GEOMETRY_SOURCES
+from lumos3d_cli.viewer.defaults import DEFAULT_HOST, DEFAULT_PORT
+
+if TYPE_CHECKING:
+    from lumos3d_cli.pipeline.restore import RestoredScene
 
 EXAMPLES = """
   lumos3d restore photos/ -o out/scene.ply
@@ -56,6 +55,14 @@ def restore_command(
     json_output: bool = typer.Option(False, "--json", help="Print the summary as JSON on stdout."),
 ) -> None:
     """Restore a 3D scene from unposed low-light or over-exposed photos."""
+    # The job's modules import torch, pycolmap, trimesh, viser and imageio-ffmpeg (seconds): imported
+    # here, when the command runs, so that `--help` (which needs only the choices above) stays fast.
+    with library_imports():
+        from lumos3d_cli.io.video import video_kind
+        from lumos3d_cli.pipeline.orbit_video import DEFAULT_ORBIT_FRAMES
+        from lumos3d_cli.pipeline.restore import list_photos, restore
+        from lumos3d_cli.pipeline.restore_outputs import check_view_format, restore_outputs, write_restored_scene
+        from lumos3d_cli.viewer.server import serve_scene
     if output.suffix.lower() != ".ply":
         raise InputError(f"{output}: the scene file must end in .ply", parameter="output")
     check_output_path(output, "output")
@@ -65,7 +72,7 @@ def restore_command(
         video_kind(video)
     # Everything the outputs must stay clear of; checked, with what is already in the way, before any
     # work, while the output folder is held against other runs (io/output_set.py).
-    inputs = [*list_images(photos), *photos, poses, reference, checkpoint, lpips_weights]
+    inputs = [*list_photos(photos), *photos, poses, reference, checkpoint, lpips_weights]
     outputs = restore_outputs(output, inputs, video)
     with outputs.reserved(), progress_bar() as bars:
         scene = restore(

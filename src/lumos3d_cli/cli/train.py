@@ -7,15 +7,17 @@ import logging
 import signal
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from lumos3d_cli.cli.console import print_json, progress_bar, say, state
+from lumos3d_cli.cli.interrupts import library_imports
 from lumos3d_cli.errors import InputError, Interrupted
-from lumos3d_cli.train.config import load_config, training_inputs
 from lumos3d_cli.train.run_folder import check_run_folder, earlier_run, numbered_folder, read_run
-from lumos3d_cli.train.distributed import setup_distributed, shutdown_distributed
-from lumos3d_cli.train.trainer import StepReport, Trainer, TrainResult, check_max_steps
+
+if TYPE_CHECKING:
+    from lumos3d_cli.train.trainer import StepReport, TrainResult
 
 EXAMPLES = """
   lumos3d train configs/tiny-cpu.yaml
@@ -45,6 +47,12 @@ def train_command(
 
     Stopped by SIGINT, SIGTERM or SIGHUP, it saves a checkpoint after the current step and exits
     with 128 + the signal number (130, 143, 129), so that a scheduler sees an unfinished run."""
+    # Training imports torch, the network, the losses and the data (seconds): imported here, when
+    # the command runs, so that `--help` stays fast.
+    with library_imports():
+        from lumos3d_cli.train.config import load_config, training_inputs
+        from lumos3d_cli.train.distributed import setup_distributed, shutdown_distributed
+        from lumos3d_cli.train.trainer import Trainer, check_max_steps
     check_max_steps(max_steps)
     if resume and new_run:
         raise InputError("--resume continues the run in the output folder and --new-run starts another: give one")

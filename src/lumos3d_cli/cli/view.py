@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 
 from lumos3d_cli.cli.console import say
-from lumos3d_cli.viewer.server import DEFAULT_HOST, DEFAULT_PORT, RunningViewer, serve_scene
-from lumos3d_cli.viewer.splats import DEFAULT_MAX_SPLATS
+from lumos3d_cli.cli.interrupts import library_imports
+from lumos3d_cli.viewer.defaults import DEFAULT_HOST, DEFAULT_MAX_SPLATS, DEFAULT_PORT
+
+if TYPE_CHECKING:
+    from lumos3d_cli.viewer.server import RunningViewer
 
 EXAMPLES = """
   lumos3d view out/                       [dim]# a restore output folder: splats, cameras, photos, summary[/dim]
@@ -34,5 +38,9 @@ def view_command(
     max_splats: int = typer.Option(DEFAULT_MAX_SPLATS, "--max-splats", help="Send at most this many Gaussians to the browser."),
 ) -> None:
     """Open a restored scene in an interactive 3D viewer in the browser (Ctrl-C stops it)."""
+    # The viewer imports viser, torch and the scene readers (seconds): imported here, when the
+    # command runs, so that `--help` (which needs only the defaults above) stays fast.
+    with library_imports():
+        from lumos3d_cli.viewer.server import serve_scene
     serve_scene(path, host, port, max_splats, on_ready=announce)
     raise typer.Exit(EXIT_INTERRUPTED)

@@ -31,9 +31,8 @@ import numpy as np
 import torch
 
 from lumos3d_cli.checks import require_finite
+from lumos3d_cli.data.modes import MODES
 from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
-
-MODES: tuple[str, ...] = ("low-light", "over-exposure")
 
 
 @dataclass(frozen=True)

@@ -17,11 +17,12 @@ from safetensors.torch import load_file, save_file
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import atomic_path
 from lumos3d_cli.io.state_dicts import load_torch_state_dict
+from lumos3d_cli.io.weight_dtypes import STORAGE_DTYPE_NAMES
 
 TORCH_SUFFIXES = (".pt", ".pth", ".bin")
 # Files looked for, in order, when a folder (e.g. a Hugging Face snapshot) is given.
 FOLDER_FILES = ("model.safetensors", "model.pt", "pytorch_model.bin")
-STORAGE_DTYPES = {"float32": torch.float32, "float16": torch.float16, "bfloat16": torch.bfloat16}
+STORAGE_DTYPES = {name: getattr(torch, name) for name in STORAGE_DTYPE_NAMES}
 
 
 def storage_dtype(name: str) -> torch.dtype:

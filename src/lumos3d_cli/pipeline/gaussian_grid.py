@@ -61,7 +61,7 @@ def densify_grid(
     """The prediction (one scene) and its geometry on a grid of `size` (width, height) instead of
     the network's: depth, raw parameters, confidence, fusion mask and network-pixel intrinsics
     follow, scales shrink with the pixels. The colours are left to the caller (they come from
-    the photos, `pipeline.restore.with_full_resolution_colours`)."""
+    the photos, `pipeline.scene_stages.with_full_resolution_colours`)."""
     views, height, width = geometry.depth.shape
     new_width, new_height = size
     if (new_width, new_height) == (width, height):

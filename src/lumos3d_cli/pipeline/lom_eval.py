@@ -28,7 +28,8 @@ from lumos3d_cli.io.images import load_images
 from lumos3d_cli.model.lumos3d import Lumos3D
 from lumos3d_cli.pipeline.presets import RestorePreset
 from lumos3d_cli.pipeline.quality import QualityMeter
-from lumos3d_cli.pipeline.restore import build_scene, render_views
+from lumos3d_cli.pipeline.restore import render_views
+from lumos3d_cli.pipeline.scene_stages import build_scene
 
 logger = logging.getLogger(__name__)
 
@@ -83,7 +84,7 @@ def evaluate_lom_scene(
     scene: LomScene, model: Lumos3D, preset: RestorePreset, protocol: str, max_views: int, meter: QualityMeter,
     geometry: str = "auto",
 ) -> SceneEvaluation:
-    """One scene under `protocol` with cameras from `geometry` (see pipeline.restore.build_scene);
+    """One scene under `protocol` with cameras from `geometry` (see pipeline.scene_stages.build_scene);
     every frame of the scene takes part in the registration, `max_views` of them (always the test
     frames) go through the network."""
     if protocol not in PROTOCOLS:

@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.sfm import SFM_LONG_SIDE
 from lumos3d_cli.model.appearance.exposure_prior import EXPOSURE_PRIOR_STRENGTH
+from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET
 from lumos3d_cli.refine.settings import RefineSettings
 
 
@@ -78,7 +79,6 @@ RESTORE_PRESETS = {
     # against 23.76 / 0.891. See docs/performance.md for the measured trade.
     "best": replace(_BALANCED, name="best", refine_steps=200),
 }
-DEFAULT_RESTORE_PRESET = "balanced"
 
 
 def get_restore_preset(

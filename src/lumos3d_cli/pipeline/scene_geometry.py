@@ -44,12 +44,12 @@ from lumos3d_cli.geometry.similarity import (
 )
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.sparse_points import SparsePoints
+from lumos3d_cli.pipeline.choices import GEOMETRY_SOURCES
 from lumos3d_cli.pipeline.network_pass import NetworkPass
 from lumos3d_cli.pipeline.progress import JobProgress
 
 logger = logging.getLogger(__name__)
 
-GEOMETRY_SOURCES = ("auto", "network", "sfm")
 # "Most views": auto uses structure-from-motion when it registers more than this share.
 AUTO_MIN_REGISTERED_SHARE = 0.5
 BRIGHTENING = "auto-gamma (blind tone curve to a mean of 0.45)"

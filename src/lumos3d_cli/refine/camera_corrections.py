@@ -34,7 +34,7 @@ def axis_angle_to_matrix(omega: torch.Tensor) -> torch.Tensor:
     a = torch.where(small, 1 - theta2 / 6, torch.sin(theta) / theta)
     b = torch.where(small, 0.5 - theta2 / 24, (1 - torch.cos(theta)) / theta**2)
     k = _skew(omega)
-    return torch.eye(3, dtype=omega.dtype) + a * k + b * (k @ k)
+    return torch.eye(3, dtype=omega.dtype, device=omega.device) + a * k + b * (k @ k)
 
 
 def axis_angle_to_quaternion(omega: torch.Tensor) -> torch.Tensor:
@@ -68,8 +68,8 @@ class CameraCorrections:
         self.extrinsics = extrinsics.detach().double()
         views = extrinsics.shape[0]
         self.free = (~pinned).double()[:, None]
-        self.rotations = torch.zeros(views, 3, dtype=torch.float64, requires_grad=True)
-        self.translations = torch.zeros(views, 3, dtype=torch.float64, requires_grad=True)
+        self.rotations = torch.zeros(views, 3, dtype=torch.float64, device=extrinsics.device, requires_grad=True)
+        self.translations = torch.zeros(views, 3, dtype=torch.float64, device=extrinsics.device, requires_grad=True)
 
     def _delta(self, view: int) -> tuple[torch.Tensor, torch.Tensor]:
         return self.rotations[view] * self.free[view], self.translations[view] * self.free[view]

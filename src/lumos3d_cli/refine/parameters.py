@@ -51,7 +51,8 @@ class GaussianParameters:
         self.directions = _nearest_ray_directions(g.means, centres) if positions == "ray" else None
         self.log_scale_bounds = (math.log(MIN_RELATIVE_SCALE * extent), math.log(MAX_RELATIVE_SCALE * extent))
         width = {"free": 3, "ray": 1, "fixed": 0}[positions]
-        self.offsets = torch.zeros(len(g), width, dtype=g.means.dtype, requires_grad=positions != "fixed")
+        self.offsets = torch.zeros(len(g), width, dtype=g.means.dtype, device=g.means.device,
+                                   requires_grad=positions != "fixed")
         self.quats = g.quats.clone().requires_grad_(True)
         # A zero scale or opacity gives an infinite log or logit here; normalise() bounds it.
         self.log_scales = torch.log(g.scales.clamp_min(0)).requires_grad_(True)
@@ -80,7 +81,7 @@ class GaussianParameters:
         """After a step: unit quaternions (a vanished one becomes the identity, as the
         rasterizer reads it), scales and opacities back inside their bounds."""
         norms = self.quats.norm(dim=-1, keepdim=True)
-        identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=self.quats.dtype).expand_as(self.quats)
+        identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=self.quats.dtype, device=self.quats.device).expand_as(self.quats)
         unit = self.quats / norms.clamp_min(DEGENERATE_QUATERNION_NORM)
         self.quats.copy_(torch.where(norms < DEGENERATE_QUATERNION_NORM, identity, unit))
         self.log_scales.clamp_(*self.log_scale_bounds)

@@ -97,23 +97,25 @@ def refine_gaussians(
 ) -> RefinementResult:
     """Fit `gaussians` to `targets` [V, 3, H, W] (sRGB in [0, 1], the restored input views) seen
     by `cameras` [V] (any sizes: they describe the targets' images and are rescaled to them).
-    Runs on the CPU (the CPU rasterizer's backward); the result is on the CPU.
 
     Only the given views are fitted (a held-out view must not be among them). Every step renders
     `settings.views_per_step` views at the working resolution (the longer side at most
     `settings.max_side`), takes (1 - w) L1 + w (1 - SSIM) and one Adam step; it stops after
     `settings.steps` or when the loss stops falling. `on_step(step, loss)` is called after each
     step (step counts from 1). Views whose camera is not finite are skipped with a warning.
+    Runs on the Gaussians' device (the render backend follows it: gsplat on CUDA); the targets
+    move there.
     """
     settings = settings or RefineSettings()
     started = time.perf_counter()
     if targets.dim() != 4 or targets.shape[1] != 3 or targets.shape[0] != len(cameras):
         raise ValueError(f"targets {tuple(targets.shape)} must be [V, 3, H, W] for the {len(cameras)} cameras")
-    gaussians = gaussians.detach().to(device="cpu")
+    gaussians = gaussians.detach()
     gaussians.require_finite("refinement input")
     require_finite("refinement targets", targets)
     usable = _usable_views(cameras)
-    images, working = working_views(targets[usable].cpu(), cameras[usable].to(device="cpu"), settings.max_side)
+    images, working = working_views(targets[usable].to(gaussians.means.device), cameras[usable].to(device="cpu"),
+                                    settings.max_side)
     centres = working.centers()
     extent = scene_extent(gaussians.means.detach(), centres)
     degree = gaussians.sh_degree
@@ -122,7 +124,8 @@ def refine_gaussians(
     gaussians = _truncated(gaussians, degree)
     parameters = GaussianParameters(gaussians, settings.positions, centres, extent)
     pinned = torch.arange(len(working)) == 0  # the first view holds the world frame
-    corrections = CameraCorrections(working.extrinsics, pinned) if settings.refine_cameras else None
+    corrections = (CameraCorrections(working.extrinsics.to(gaussians.means.device), pinned.to(gaussians.means.device))
+                   if settings.refine_cameras else None)
     optimizer = _optimizer(parameters, corrections, settings, extent)
     stop = EarlyStop(len(working), settings.patience, settings.tolerance)
     batches = _view_batches(len(working), min(settings.views_per_step, len(working)),
@@ -164,7 +167,7 @@ def refine_gaussians(
                     _mean(curve[-len(working):]), min(len(curve), len(working)))
     extrinsics = cameras.extrinsics.clone()
     if corrections is not None:
-        extrinsics[usable] = corrections.corrected_extrinsics().to(extrinsics.dtype)
+        extrinsics[usable] = corrections.corrected_extrinsics().to(extrinsics)
     return RefinementResult(
         refined, Cameras(extrinsics, cameras.intrinsics.clone(), list(cameras.sizes), list(cameras.names)),
         curve, len(curve), stop.should_stop, degree, (images.shape[-1], images.shape[-2]), time.perf_counter() - started,

@@ -19,18 +19,19 @@ from lumos3d_cli.render.render import render
 
 def rendered_weights(gaussians: Gaussians, cameras: Cameras, resolution: float = 1.0) -> torch.Tensor:
     """[N] each Gaussian's rendered weight summed over `cameras`, in pixels of the cameras' own
-    images. `resolution` < 1 renders smaller images (faster) and scales the weights back by the
-    pixel area, so the result estimates the full-resolution weight."""
+    images, on the Gaussians' device. `resolution` < 1 renders smaller images (faster) and scales
+    the weights back by the pixel area, so the result estimates the full-resolution weight."""
     if not 0 < resolution <= 1:
         raise ValueError(f"resolution {resolution} must be in (0, 1]")
-    total = torch.zeros(len(gaussians), dtype=torch.float64)
+    total = torch.zeros(len(gaussians), dtype=torch.float64, device=gaussians.means.device)
     for index in range(len(cameras)):
         camera = cameras[index]
         width, height = camera.sizes[0]
         small = (max(1, round(width * resolution)), max(1, round(height * resolution)))
         if small != (width, height):
             camera = camera.rescaled(*small)
-        # Weights do not depend on colour: degree 0 skips the view-dependent SH terms.
-        output = render(gaussians, camera, sh_degree=0, weights=True, backend="cpu")
-        total += output.weights[0].double().cpu() * (width * height) / (small[0] * small[1])
+        # Weights do not depend on colour: degree 0 skips the view-dependent SH terms. The
+        # backend follows the Gaussians' device (the CPU kernel, or gsplat on CUDA).
+        output = render(gaussians, camera, sh_degree=0, weights=True)
+        total += output.weights[0].double() * (width * height) / (small[0] * small[1])
     return total

@@ -98,8 +98,9 @@ def render(
     backend: "auto" = our CPU kernel for CPU tensors, gsplat for CUDA tensors when it imports
     (else our kernel on the CPU, with a warning); "cpu", "gsplat" or "reference" (the dense twin)
     force one. Differentiable w.r.t. every Gaussian tensor and the background, except with
-    `weights`: then a forward-only pass of the CPU kernel (or the twin) also returns each
-    Gaussian's rendered weight per view (RenderOutput.weights), and nothing carries gradients.
+    `weights`: then the render also returns each Gaussian's rendered weight per view
+    (RenderOutput.weights; the CPU kernel and the twin in a forward-only pass that carries no
+    gradients, gsplat through its backward).
     """
     degree = gaussians.sh_degree if sh_degree is None else sh_degree
     width, height = _check_inputs(gaussians, cameras, degree)
@@ -108,12 +109,8 @@ def render(
     background = torch.zeros(3) if background is None else torch.as_tensor(background)
     background = background.to(device=device, dtype=dtype)
     require_finite("background", background)
-    if weights and backend == "gsplat":
-        raise ValueError("per-Gaussian weights come from the cpu or reference backend, not gsplat")
     if backend == "auto":
-        if weights:
-            backend = "cpu"
-        elif device.type == "cuda":
+        if device.type == "cuda":
             if gsplat_available():
                 backend = "gsplat"
             else:
@@ -122,7 +119,7 @@ def render(
         else:
             backend = "cpu"
     if backend == "gsplat":
-        return RenderOutput(*render_with_gsplat(gaussians, cameras, settings, background))
+        return RenderOutput(*render_with_gsplat(gaussians, cameras, settings, background, weights))
     if backend not in ("cpu", "reference"):
         raise ValueError(f"unknown backend {backend!r}")
     return _render_cpu(gaussians, cameras, settings, background, backend == "reference", weights)

@@ -20,6 +20,7 @@ import numpy as np
 import viser
 
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.viewer.defaults import DEFAULT_HOST, DEFAULT_PORT
 from lumos3d_cli.viewer.framing import VIEWER_RADIUS, ViewerFrame, frame_scene, view_position_showing
 from lumos3d_cli.viewer.panel import panel_markdown
 from lumos3d_cli.viewer.scene_folder import ViewerScene, load_viewer_scene
@@ -27,8 +28,6 @@ from lumos3d_cli.viewer.splats import DEFAULT_MAX_SPLATS, splat_arrays
 
 logger = logging.getLogger(__name__)
 
-DEFAULT_HOST = "127.0.0.1"  # this machine only; --host 0.0.0.0 shares the viewer on the network
-DEFAULT_PORT = 8080
 _PHOTO_CHOICES = ("restored", "input")
 _POINT_SIZE = 0.004 * VIEWER_RADIUS
 _FRUSTUM_COLOUR = (255, 160, 40)

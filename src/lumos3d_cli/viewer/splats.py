@@ -9,11 +9,7 @@ import torch
 
 from lumos3d_cli.io.gaussians import Gaussians, sh_dc_to_rgb
 from lumos3d_cli.rotations import quaternion_to_matrix
-
-# The browser holds 32 bytes per splat on the GPU and sorts all of them by depth on the CPU
-# (a WebAssembly worker) whenever the view turns: a million splats is 32 MB of scene data and
-# keeps the sort well under a second on a laptop, about the size of a 3DGS capture.
-DEFAULT_MAX_SPLATS = 1_000_000
+from lumos3d_cli.viewer.defaults import DEFAULT_MAX_SPLATS
 
 
 @dataclass

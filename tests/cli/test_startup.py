@@ -1,0 +1,75 @@
+"""Start-up (issue 37): `lumos3d --version`, `--help` and every command's `--help` answer without
+importing the libraries that take seconds to import; each command imports them when it runs.
+Checked by what the child process imports (`python -X importtime`), never by the clock, which a
+loaded machine would make flaky; benchmarks/startup.py measures the times."""
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from lumos3d_cli.cli.app import _COMMAND_PANELS
+from lumos3d_cli.io.ply import write_ply
+
+from factories import random_gaussians
+
+# Each takes from a tenth of a second (numpy, imageio-ffmpeg) to seconds (torch, pycolmap) to import.
+HEAVY = ("torch", "numpy", "pycolmap", "trimesh", "viser", "imageio_ffmpeg", "cv2", "numba", "OpenImageIO", "rawpy",
+         "safetensors")
+COMMAND_LINES = [("--version",), ("--help",), *((name, "--help") for name in _COMMAND_PANELS)]
+
+
+def imported_modules(*args: str) -> tuple[subprocess.CompletedProcess, set[str]]:
+    """Run `python -m lumos3d_cli ARGS` (what the `lumos3d` script runs); the modules it imported."""
+    done = subprocess.run([sys.executable, "-X", "importtime", "-m", "lumos3d_cli", *args],
+                          capture_output=True, text=True, timeout=120)
+    modules = {line.rsplit("|", 1)[1].strip() for line in done.stderr.splitlines() if line.startswith("import time:")}
+    modules.discard("package")  # the header line: "import time: self [us] | cumulative | imported package"
+    return done, modules
+
+
+@pytest.mark.parametrize("args", COMMAND_LINES, ids=" ".join)
+def test_help_and_version_import_none_of_the_heavy_libraries(args):
+    done, modules = imported_modules(*args)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "lumos3d" in done.stdout  # the version line or the usage
+    assert "lumos3d_cli.cli.app" in modules  # the probe sees the imports
+    assert sorted({name.split(".")[0] for name in modules} & set(HEAVY)) == []
+
+
+def test_version_imports_no_subcommand():
+    done, modules = imported_modules("--version")
+    assert done.returncode == 0 and done.stdout.startswith("lumos3d ")
+    assert sorted(m for m in modules if m.removeprefix("lumos3d_cli.cli.") in _COMMAND_PANELS) == []
+
+
+def test_a_command_that_runs_imports_the_library(tmp_path):
+    # The other side of the lazy imports: `info` of a scene reads it with torch, inside the command.
+    write_ply(tmp_path / "scene.ply", random_gaussians(10, 0))
+    done, modules = imported_modules("info", str(tmp_path / "scene.ply"), "--json")
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert json.loads(done.stdout)["count"] == 10
+    assert {"torch", "lumos3d_cli.io.summaries"} <= modules
+
+
+# pycolmap's logging library installs its own SIGTERM handler (print a stack dump, abort) when it is
+# first imported, which is now inside a command, after the CLI installed its handlers.
+_SIGNAL_AFTER_IMPORTS = """
+import os, signal
+from lumos3d_cli.cli.interrupts import library_imports, signals_raise_interrupted
+from lumos3d_cli.errors import Interrupted
+try:
+    with signals_raise_interrupted():
+        with library_imports():
+            import pycolmap
+        os.kill(os.getpid(), signal.SIGTERM)
+        signal.pause()
+except Interrupted as stop:
+    print(stop.signal_name)
+"""
+
+
+def test_the_cli_claims_the_signals_back_from_a_library_imported_by_a_command():
+    done = subprocess.run([sys.executable, "-c", _SIGNAL_AFTER_IMPORTS], capture_output=True, text=True, timeout=120)
+    assert (done.returncode, done.stdout.strip()) == (0, "SIGTERM"), done.stderr[-3000:]
