@@ -133,3 +133,13 @@ def test_row12_a_garbage_torch_file_is_one_line(tmp_path):
     result = run_lumos3d("info", garbage)
     expect_input_error(result, f"{garbage}: damaged, or holds objects other than tensors")
     assert len(result.err.strip().splitlines()) == 1
+
+
+def test_row12_an_eval_scene_without_transforms_test_json_names_the_file(tmp_path, buu):
+    scene = tmp_path / "lom" / "sc"
+    for folder in ("high", "low"):
+        shutil.copytree(buu / folder, scene / folder)
+    expect_input_error(run_lumos3d("eval", tmp_path / "lom", "--scenes", "sc", "--out", tmp_path / "report"),
+                       f"{scene}: not a LOM-layout scene: {scene / 'transforms_test.json'} is missing")
+    expect_input_error(run_lumos3d("eval", scene, "--out", tmp_path / "report"), f"{scene / 'transforms_test.json'} is missing")
+    assert not (tmp_path / "report").exists()

@@ -78,6 +78,14 @@ def read_lom_scene(folder: Path, mode: str) -> LomScene:
                     {ids[k]: degraded[k] for k in shared}, {ids[k]: reference[k] for k in shared})
 
 
+def _missing_parts(folder: Path) -> str:
+    """What `folder` lacks of a LOM scene, in words (e.g. "transforms_test.json")."""
+    parts = [name for name in ("high/", "transforms_test.json") if not (folder / name.rstrip("/")).exists()]
+    if not any((folder / f).is_dir() for f in DEGRADED_FOLDERS.values()):
+        parts.append("low/ or over_exp/")
+    return " and ".join(str(folder / part) for part in parts)
+
+
 def find_lom_scenes(root: Path | str, mode: str, names: list[str] | None = None) -> list[LomScene]:
     """Scenes under `root` (or `root` itself when it is one), optionally only `names`."""
     root = Path(root)
@@ -87,11 +95,15 @@ def find_lom_scenes(root: Path | str, mode: str, names: list[str] | None = None)
     if names:
         available = {p.name for p in folders}
         missing = [n for n in names if n not in available]
+        for name in missing:
+            if (root / name).is_dir():
+                raise InputError(f"{root / name}: not a LOM-layout scene: {_missing_parts(root / name)} is missing")
         if missing:
             raise InputError(f"{root}: no LOM scene(s) {', '.join(missing)} (found: {', '.join(sorted(available)) or 'none'})")
         folders = [p for p in folders if p.name in names]
     if not folders:
-        raise InputError(f"{root}: no LOM-layout scenes (high/ + low/ or over_exp/ + transforms_test.json)")
+        detail = f": {_missing_parts(root)} is missing" if any((root / f).is_dir() for f in ("high", *DEGRADED_FOLDERS.values())) else ""
+        raise InputError(f"{root}: no LOM-layout scenes (high/ + low/ or over_exp/ + transforms_test.json){detail}")
     return [read_lom_scene(folder, mode) for folder in folders]
 
 
