@@ -352,3 +352,21 @@ def test_a_file_elsewhere_gets_the_umask_and_never_goes_inside_a_folder_of_lumos
     assert (out / "orbit.mp4").stat().st_mode & 0o777 == 0o666 & ~atomic.current_umask()
     with pytest.raises(InputError, match=r"orbit.mp4: lies inside .*out/views, which holds only the outputs"):
         _restore_like(out, ["1.png"], video=out / "views" / "orbit.mp4")
+
+
+def test_another_commands_outputs_inside_a_folder_of_lumos3ds_own_count_as_lumos3ds(tmp_path):
+    """`render -o out/views` puts frames and their manifest inside restore's own folder: they are
+    lumos3d's, so the next restore replaces the folder instead of refusing it; a user's file
+    beside them still refuses."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"])
+    frames = OutputSet(out / "views", "render", "render").add_file("00000.png")
+    with frames.staged() as staging:
+        (staging.root / "00000.png").write_text("a frame")
+    _restore_like(out, ["2.png"], text="second")
+    assert _tree(out / "views") == ["2.png"]
+    with OutputSet(out / "views", "render", "render").add_file("00000.png").staged() as staging:
+        (staging.root / "00000.png").write_text("a frame")
+    (out / "views" / "notes.txt").write_text("the user's")
+    with pytest.raises(InputError, match=r"views/notes.txt: exists and was not written by lumos3d"):
+        _restore_like(out, ["3.png"])

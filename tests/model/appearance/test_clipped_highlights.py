@@ -72,3 +72,13 @@ def test_black_and_clipped_pixels_give_finite_values_and_gradients():
     kept = keep_input_chromaticity(srgb_to_linear(photo).double(), output)
     (gradient,) = torch.autograd.grad(kept.sum(), output)
     assert bool(torch.isfinite(kept).all()) and bool(torch.isfinite(gradient).all())
+
+
+def test_a_grey_restoration_of_a_clipped_photo_has_a_finite_gradient():
+    """A clipped white photo restored to exact grey has chromaticity offsets of exactly zero,
+    where a bare square root's slope is infinite: training steps on such brackets came out NaN."""
+    photo = torch.ones(1, 1, 3, 4, 4, dtype=torch.float64)
+    output = torch.full((1, 1, 3, 4, 4), 0.7, dtype=torch.float64, requires_grad=True)
+    kept = keep_input_chromaticity(photo, output)
+    (gradient,) = torch.autograd.grad(kept.sum(), output)
+    assert torch.allclose(kept, output) and bool(torch.isfinite(gradient).all())

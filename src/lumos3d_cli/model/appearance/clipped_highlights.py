@@ -53,8 +53,10 @@ def _chromaticity(linear: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
 
 def _length(vectors: torch.Tensor) -> torch.Tensor:
     """[..., 3, H, W] -> [..., 1, H, W] Euclidean length over the channels (a sum of three squares:
-    torch's norm over a strided middle dimension was 20 ms a view)."""
-    return (vectors * vectors).sum(dim=-3, keepdim=True).sqrt()
+    torch's norm over a strided middle dimension was 20 ms a view). The floor keeps the gradient
+    finite at a grey pixel, whose offsets are exactly zero (the square root's slope is infinite
+    there and 0 * inf is NaN): 1e-12 under the root is a length of 1e-6, far below NEUTRAL_SLACK."""
+    return (vectors * vectors).sum(dim=-3, keepdim=True).clamp_min(1e-12).sqrt()
 
 
 def keep_input_chromaticity(linear_input: torch.Tensor, linear_output: torch.Tensor) -> torch.Tensor:
