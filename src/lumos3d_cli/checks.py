@@ -18,11 +18,21 @@ def count_non_finite(values: np.ndarray | torch.Tensor) -> int:
 
 def _sum_is_finite(values: np.ndarray | torch.Tensor) -> bool:
     """Fast check: NaN and Inf propagate through a sum, so a finite sum means finite values
-    (a non-finite sum can also come from overflow; the exact count decides then)."""
+    (a non-finite sum can also come from overflow; the exact count decides then). The sum runs in
+    the values' own precision, at least float32: a float64 sum of float32 values was 6x slower
+    (48 ms for a scene's 10M SH coefficients, checked at every render), and an overflow only
+    sends the check to the exact count."""
     if isinstance(values, torch.Tensor):
-        return not values.is_floating_point() or bool(torch.isfinite(values.detach().sum(dtype=torch.float64)))
+        if not values.is_floating_point():
+            return True
+        wide = torch.promote_types(values.dtype, torch.float32)
+        return bool(torch.isfinite(values.detach().sum(dtype=wide)))
     values = np.asarray(values)
-    return not np.issubdtype(values.dtype, np.floating) or bool(np.isfinite(values.sum(dtype=np.float64)))
+    if not np.issubdtype(values.dtype, np.floating):
+        return True
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is the exact count's to judge
+        total = values.sum(dtype=np.promote_types(values.dtype, np.float32))
+    return bool(np.isfinite(total))
 
 
 def require_finite(name: str, values: np.ndarray | torch.Tensor, hint: str = "") -> None:

@@ -11,6 +11,10 @@ with the cores shared by other jobs):
 - long side 512 px: on fountain-P11 the same rotation accuracy as full resolution (0.36 vs 0.33
   degrees median) in half the time (9.0 vs 19.0 s shared; 2.5 vs 5.2 s alone);
 - all CPU cores: on an idle machine 2 threads took 4.0 s on buu's 25 views, 1 thread 6.7 s;
+  the features are always extracted on every core (`extraction_threads`): the photos enter the
+  database first, in input order, so each keeps its image id whichever thread finishes first
+  (COLMAP's extractor numbers new images in the order they finish, and the mapper's result
+  depends on the numbering: two threaded runs gave focal lengths 735.1 and 736.4 px on buu);
 - exhaustive matching up to EXHAUSTIVE_MATCHING_LIMIT (25) views: there it costs about what
   sequential matching does (buu, 25 views: 4.2 vs 3.0 s) and does not depend on the photos'
   order; above it the quadratic cost shows (castle-P30: 20.5 vs 6.1 s; 48 views: 19.9 vs 5.3 s),
@@ -26,7 +30,8 @@ with the cores shared by other jobs):
   principal point at the image centre hold for one size only.
 
 COLMAP runs multi-threaded and is then not bit-reproducible; with few photos (about 6) its focal
-length can settle in a wrong minimum on some runs. `threads=1` makes a run deterministic.
+length can settle in a wrong minimum on some runs. `threads=1` (matching and mapping: their
+RANSAC draws depend on which thread takes which pair) makes a run deterministic.
 """
 
 from __future__ import annotations
@@ -138,11 +143,11 @@ def sfm_size(width: int, height: int, long_side: int | None) -> tuple[int, int]:
     return max(1, round(width * factor)), max(1, round(height * factor))
 
 
-def _options(threads: int, max_features: int, views: int):
+def _options(threads: int, max_features: int, views: int, extraction_threads: int):
     reader = pycolmap.ImageReaderOptions()
     reader.camera_model = "SIMPLE_PINHOLE"
     extraction = pycolmap.FeatureExtractionOptions()
-    extraction.num_threads = threads
+    extraction.num_threads = extraction_threads
     extraction.sift.max_num_features = max_features
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = threads
@@ -256,7 +261,8 @@ def register_photos(
     exception) when fewer than two views register (blank, textureless or unrelated photos), so
     that a caller can fall back to other cameras. `shared_camera`: the photos come from one camera
     with one focal length (photos of different sizes then share one camera per size; False: one
-    camera per photo). `threads`: CPU threads (None: all cores). InputError for fewer than 2
+    camera per photo). `threads`: CPU threads of matching and mapping (None: all cores; 1: a
+    repeatable result); the features are extracted on every core. InputError for fewer than 2
     photos, a name or size count that does not match, or non-finite pixels.
     """
     if images.dim() != 4 or images.shape[1] != 3:
@@ -271,8 +277,8 @@ def register_photos(
         raise InputError(f"{len(photo_sizes)} photo sizes for {views} photos")
     require_finite("photos for structure-from-motion", images)
     sfm_sizes = [sfm_size(w, h, long_side) for w, h in photo_sizes]
-    threads = threads or os.cpu_count() or 1
-    reader, extraction, matching_options, mapping = _options(threads, max_features, views)
+    cores = os.cpu_count() or 1
+    reader, extraction, matching_options, mapping = _options(threads or cores, max_features, views, cores)
     files, mode = _image_files(photo_sizes, shared_camera)
     matching = "exhaustive" if views <= exhaustive_limit else "sequential"
     stage_seconds = {}
@@ -288,6 +294,10 @@ def register_photos(
                 cv2.imwrite(str(folder / file), _to_uint8(images[index], *sfm_sizes[index]),
                             [cv2.IMWRITE_PNG_COMPRESSION, 1])
             pycolmap.set_random_seed(0)
+            # The images enter the database in input order first: the extractor then fills in
+            # their features under those ids, however its threads finish (module docstring).
+            pycolmap.Database.open(str(database)).close()
+            pycolmap.import_images(database, folder, mode, files, reader)
             pycolmap.extract_features(database, folder, files, camera_mode=mode, reader_options=reader,
                                       extraction_options=extraction, device=pycolmap.Device.cpu)
             stage_seconds["features"] = time.perf_counter() - started

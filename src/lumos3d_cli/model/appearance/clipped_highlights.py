@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import torch
 
-from lumos3d_cli.io.colour import linear_to_srgb
+from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
 
 # sRGB level of the darkest channel where the photo's hue starts to replace the operator's, and
 # where it replaces it fully (the brightest 5 % of the range: only near-white pixels).
@@ -26,6 +26,7 @@ HIGHLIGHT_FULL = 0.95
 # have regardless (a just-visible tint: chromaticity offset 0.02 of the luminance).
 MAX_SATURATION_GAIN = 8.0
 NEUTRAL_SLACK = 0.03
+_START_LINEAR = float(srgb_to_linear(torch.tensor(HIGHLIGHT_START, dtype=torch.float64)))
 # Rec. 709 / sRGB luminance of linear RGB.
 LUMINANCE = (0.2126, 0.7152, 0.0722)
 
@@ -34,7 +35,12 @@ def clipping_weight(linear_input: torch.Tensor) -> torch.Tensor:
     """linear_input [..., 3, H, W] in [0, 1] -> [..., 1, H, W] in [0, 1]: how near the top the
     pixel's darkest channel is (0 below HIGHLIGHT_START, 1 from HIGHLIGHT_FULL, a smoothstep
     between)."""
-    darkest = linear_to_srgb(linear_input.clamp(0.0, 1.0).amin(dim=-3, keepdim=True))
+    darkest = linear_input.clamp(0.0, 1.0).amin(dim=-3, keepdim=True)
+    if not bool((darkest > _START_LINEAR).any()):
+        # a dark photo (the common case): no pixel reaches the ramp, and the sRGB curve of a
+        # whole photo is a power per pixel (a tenth of a low-light restore's operator time)
+        return torch.zeros_like(darkest)
+    darkest = linear_to_srgb(darkest)
     ramp = ((darkest - HIGHLIGHT_START) / (HIGHLIGHT_FULL - HIGHLIGHT_START)).clamp(0.0, 1.0)
     return ramp * ramp * (3.0 - 2.0 * ramp)
 
