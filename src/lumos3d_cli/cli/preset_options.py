@@ -12,6 +12,9 @@ GAUSSIAN_GRID = typer.Option(
     None, "--gaussian-grid", help="Pixel Gaussians per network pixel along each side, 1 to 4 (default: the preset's; at most the photos' resolution).")
 EXPOSURE_PRIOR = typer.Option(
     None, "--exposure-prior", help="How far the scene's overall brightness moves towards a well-exposed key, 0 (the model's own) to 1 (default: 0.75).")
+DENOISE_PHOTO = typer.Option(
+    True, "--denoise/--no-denoise",
+    help="A single photo: remove the sensor noise its restoration amplified, in proportion to its measured level.")
 FILL_UNOBSERVED = typer.Option(
     True, "--fill-unobserved/--black-unobserved",
     help="Fill the restored views' pixels that no Gaussian covers from the render around them, or leave them black.")

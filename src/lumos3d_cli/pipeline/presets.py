@@ -6,8 +6,9 @@ two speed settings: the size structure-from-motion sees the photos at (geometry.
 resolution the budget renders the Gaussians' weights at; the size of the images refinement
 fits (`balanced` and `best` fit LOM's 500x375 photos at their own size, `fast` at most
 256 px); the decay of refinement's learning rates, the strength of the exposure prior
-(model.appearance.exposure_prior) and whether the rendered views' uncovered pixels are filled
-(render.hole_filling), all three the same in every preset."""
+(model.appearance.exposure_prior), whether the rendered views' uncovered pixels are filled
+(render.hole_filling) and whether a one-photo restore's amplified noise is removed
+(model.appearance.amplified_noise), all four the same in every preset."""
 
 from __future__ import annotations
 
@@ -45,6 +46,7 @@ class RestorePreset:
     refine_lr_decay: float = REFINE_LR_DECAY  # the factor refinement's learning rates fall by every 100 steps
     exposure_prior: float = EXPOSURE_PRIOR_STRENGTH  # how far the scene's brightness moves to the key (0: none)
     fill_unobserved: bool = True  # fill the rendered views' pixels no Gaussian covers (render.hole_filling)
+    denoise_photo: bool = True  # a one-photo restore's amplified noise removed (model.appearance.amplified_noise)
 
     def network_image_size(self, model_image_size: int, patch_size: int) -> int:
         """The longer network side: a patch multiple, at least one patch."""
@@ -83,11 +85,11 @@ RESTORE_PRESETS = {
 
 def get_restore_preset(
     name: str, refine_steps: int | None = None, max_gaussians: int | None = None, gaussian_grid: float | None = None,
-    exposure_prior: float | None = None, fill_unobserved: bool | None = None,
+    exposure_prior: float | None = None, fill_unobserved: bool | None = None, denoise_photo: bool | None = None,
 ) -> RestorePreset:
-    """The preset `name`, with its refinement steps, Gaussian cap, Gaussian grid, exposure prior
-    and hole filling replaced by `refine_steps`, `max_gaussians`, `gaussian_grid`,
-    `exposure_prior` and `fill_unobserved` when given."""
+    """The preset `name`, with its refinement steps, Gaussian cap, Gaussian grid, exposure prior,
+    hole filling and one-photo denoising replaced by `refine_steps`, `max_gaussians`,
+    `gaussian_grid`, `exposure_prior`, `fill_unobserved` and `denoise_photo` when given."""
     try:
         preset = RESTORE_PRESETS[name]
     except KeyError:
@@ -110,4 +112,6 @@ def get_restore_preset(
         preset = replace(preset, exposure_prior=exposure_prior)
     if fill_unobserved is not None:
         preset = replace(preset, fill_unobserved=fill_unobserved)
+    if denoise_photo is not None:
+        preset = replace(preset, denoise_photo=denoise_photo)
     return preset

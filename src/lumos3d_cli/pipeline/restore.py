@@ -74,6 +74,7 @@ class RestoredScene:
     exposure: dict | None = None  # the exposure prior's strength and gain (SceneJob.exposure)
     uncovered: dict | None = None  # the views' pixels no Gaussian covered and whether they were filled (None: not rendered)
     view_source: str = "render"  # "render": the scene at each camera; "photo restoration": one photo restored in 2D
+    denoising: dict | None = None  # a one-photo restore's measured noise and whether it was removed (None: not one photo)
 
     def summary(self, scene_path: Path | str | None = None, ply_bytes: int | None = None) -> dict:
         """The JSON summary of the run (summary.json); `ply_bytes`: the size of the written scene."""
@@ -90,7 +91,7 @@ class RestoredScene:
             "seconds": {name: round(value, 3) for name, value in self.timings.items()},
             "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
             "refinement": self.refinement, "exposure_prior": self.exposure, "uncovered": self.uncovered,
-            "restored_views": self.view_source,
+            "restored_views": self.view_source, "photo_denoising": self.denoising,
             "metrics": self.metrics,
         }
 
@@ -167,7 +168,7 @@ def restore_scene(
         built.gaussians.to(device="cpu"), cameras, views, inputs, list(cameras.names), list(batch.paths),
         built.selected, built.counts, built.network_size, built.geometry, preset.name, mode, timings=timings,
         refinement=built.refinement, budget=built.budget, exposure=built.exposure, uncovered=uncovered,
-        view_source=view_source,
+        view_source=view_source, denoising=built.denoising,
     )
 
 
@@ -209,7 +210,7 @@ def restore(
     max_views: int | None = None, device: str = "cpu", reference: Path | str | None = None,
     lpips_weights: Path | str | None = None, progress: JobProgress | None = None, refine_steps: int | None = None,
     max_gaussians: int | None = None, gaussian_grid: float | None = None, exposure_prior: float | None = None,
-    fill_unobserved: bool | None = None,
+    fill_unobserved: bool | None = None, denoise_photo: bool | None = None,
 ) -> RestoredScene:
     """The whole restore job from files: photos (a folder or files: photos, camera RAW, EXR),
     the bundled model of `mode` or `checkpoint`, and optionally reference photos of the same
@@ -217,15 +218,17 @@ def restore(
     test-time refinement (0: none), `max_gaussians` caps the scene's Gaussians and
     `gaussian_grid` sets the density of pixel Gaussians (`pipeline.gaussian_grid`),
     `exposure_prior` the strength of the exposure prior (`model.appearance.exposure_prior`),
-    `fill_unobserved` whether pixels no Gaussian covers are filled (`render.hole_filling`). Write the
-    result with `write_restored_scene`."""
+    `fill_unobserved` whether pixels no Gaussian covers are filled (`render.hole_filling`),
+    `denoise_photo` whether a one-photo restore's amplified noise is removed
+    (`model.appearance.amplified_noise`). Write the result with `write_restored_scene`."""
     progress = progress or SilentProgress()
     started = time.perf_counter()
     if mode not in MODES:
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
     if max_views is not None and max_views < 1:
         raise InputError(f"{max_views}: use at least 1", parameter="max_views")
-    settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior, fill_unobserved)
+    settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior, fill_unobserved,
+                                  denoise_photo)
     check_geometry_source(geometry)
     weights = resolve_checkpoint(checkpoint, mode)
     meter = QualityMeter.create(lpips_weights) if reference is not None else None

@@ -35,7 +35,8 @@ class SceneJob:
     `budget` (what `fit_budget` kept, summary.json's gaussians.budget), `refinement` (its summary;
     None: not refined), `restored_photos` [V, 3, H, W] (the operator applied to every photo, CPU;
     None for a regression model or before it is needed), `photo_restoration` [1, 3, H, W] (a
-    one-photo scene's 2D restoration), `timings` seconds per stage.
+    one-photo scene's 2D restoration) and `denoising` (its measured noise and whether it was
+removed; None: not one photo), `timings` seconds per stage.
     """
 
     photos: torch.Tensor
@@ -62,6 +63,7 @@ class SceneJob:
     refinement: dict | None = None
     restored_photos: torch.Tensor | None = None
     photo_restoration: torch.Tensor | None = None
+    denoising: dict | None = None
     timings: dict[str, float] = field(default_factory=dict)
 
     @property

@@ -18,6 +18,7 @@ import torch
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
+from lumos3d_cli.model.appearance.amplified_noise import denoise_photo
 from lumos3d_cli.model.appearance.footprint import footprint_colours
 from lumos3d_cli.model.appearance.gaussian_colours import with_operator_colours
 from lumos3d_cli.model.appearance.operator import AppearanceOperator
@@ -189,12 +190,18 @@ def photo_restoration(job: SceneJob) -> SceneJob:
     """One photo has nothing to fuse, and the Gaussians' render only approximates the operator
     applied to the photo's own pixels (what refinement fits them to): a one-photo scene of an
     operator model keeps that 2D restoration as its view. On 8 SICE training pairs the render
-    scored 18.80 dB / 0.606 / sharpness 0.55 and the 2D restoration 20.06 / 0.693 / 0.99."""
+    scored 18.80 dB / 0.606 / sharpness 0.55 and the 2D restoration 20.06 / 0.693 / 0.99.
+    Nor has one photo other views to average the noise its restoration amplified: with the
+    preset's `denoise_photo` that noise is measured and removed (`model.appearance.amplified_noise`)."""
     if len(job.names) != 1 or not job.has_operator:
         return job
     if job.restored_photos is None:
         job.restored_photos = operator_restoration(job.network, job.photos, job.selected)
     job.photo_restoration = job.restored_photos
+    if job.preset.denoise_photo:
+        denoised = denoise_photo(job.restored_photos[0])
+        job.photo_restoration = denoised.image[None]
+        job.denoising = denoised.summary()
     return job
 
 
