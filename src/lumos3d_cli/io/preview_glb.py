@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import trimesh
 
 from lumos3d_cli.io.atomic import write_bytes_atomic
 from lumos3d_cli.io.cameras import Cameras
@@ -41,6 +40,10 @@ def frustum_segments(cameras: Cameras, depth: float) -> np.ndarray:
 def write_preview_glb(path: Path | str, gaussians: Gaussians, cameras: Cameras, max_points: int = 300_000) -> None:
     """Write the preview atomically; points below 5 % opacity are left out, at most
     `max_points` (evenly strided) are kept."""
+    # imported here: trimesh (with scipy) is half a second of every command's start-up otherwise;
+    # a restore loads it in the background while structure-from-motion runs (pipeline.module_prefetch)
+    import trimesh
+
     g = gaussians.detach().to(device="cpu", dtype=torch.float32)
     solid = g.opacities >= _MIN_OPACITY
     means = g.means[solid].numpy().astype(np.float64)

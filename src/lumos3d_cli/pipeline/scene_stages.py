@@ -26,6 +26,7 @@ from lumos3d_cli.model.appearance.photo_restoration import restore_photos
 from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DPrediction
 from lumos3d_cli.model.pixel_footprint import DEFAULT_FOOTPRINT_SCALE
 from lumos3d_cli.pipeline.gaussian_grid import dense_grid_size, densify_grid
+from lumos3d_cli.pipeline.module_prefetch import prefetch_modules
 from lumos3d_cli.pipeline.network_pass import NetworkPass, even_subset, run_network
 from lumos3d_cli.pipeline.presets import RestorePreset
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
@@ -101,7 +102,10 @@ def restoration_pass(job: SceneJob) -> SceneJob:
 
 def registration(job: SceneJob) -> SceneJob:
     """The cameras known before (the rest of) the network pass: given poses, structure-from-motion
-    or none (`pipeline.scene_geometry.register_views`)."""
+    or none (`pipeline.scene_geometry.register_views`). Structure-from-motion leaves a core idle:
+    the modules later stages import load meanwhile (`pipeline.module_prefetch`)."""
+    if job.geometry_source != "network" and len(job.names) > 1:
+        prefetch_modules()
     job.registration = register_views(job.photos, job.names, job.geometry_source, job.poses, job.mode, job.progress,
                                       job.brightened, job.sizes, job.preset.sfm_long_side)
     return job

@@ -1,0 +1,36 @@
+"""Import, on a background thread, the modules a restore needs later, while structure-from-motion
+leaves a core idle.
+
+COLMAP matches and maps on one thread (for a repeatable result, geometry/sfm.py) and pycolmap
+releases the GIL meanwhile, so the second core is free for a few seconds. Two imports cost a
+restore that much later on: the first torch optimizer imports torch._dynamo (refinement's Adam:
+1.0-1.7 s on 2 cores) and the preview's writer imports trimesh (0.5 s). Imported here, the main
+thread finds them in sys.modules (Python's import lock makes it wait for a module still being
+imported, never import it twice). A failed import is left for the main thread to meet and report.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import threading
+from collections.abc import Sequence
+
+logger = logging.getLogger(__name__)
+
+LATER_MODULES = ("torch._dynamo", "trimesh")
+
+
+def _import_all(modules: Sequence[str]) -> None:
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except Exception:  # the main thread imports it again and reports what is wrong
+            logger.debug("prefetching %s failed", name, exc_info=True)
+
+
+def prefetch_modules(modules: Sequence[str] = LATER_MODULES) -> threading.Thread:
+    """Start importing `modules` on a daemon thread and return it (joining it is optional)."""
+    thread = threading.Thread(target=_import_all, args=(tuple(modules),), name="lumos3d-prefetch", daemon=True)
+    thread.start()
+    return thread
