@@ -73,3 +73,27 @@ except Interrupted as stop:
 def test_the_cli_claims_the_signals_back_from_a_library_imported_by_a_command():
     done = subprocess.run([sys.executable, "-c", _SIGNAL_AFTER_IMPORTS], capture_output=True, text=True, timeout=120)
     assert (done.returncode, done.stdout.strip()) == (0, "SIGTERM"), done.stderr[-3000:]
+
+
+# A signal that lands while the library is being imported (after pycolmap put in its own handler,
+# before the CLI's are back) waits for the CLI's handler instead of reaching pycolmap's stack dump.
+_SIGNAL_DURING_IMPORTS = """
+import os, signal
+from lumos3d_cli.cli.interrupts import library_imports, signals_raise_interrupted
+from lumos3d_cli.errors import Interrupted
+try:
+    with signals_raise_interrupted():
+        with library_imports():
+            import pycolmap
+            os.kill(os.getpid(), signal.SIGTERM)
+            print("imports went on")
+        signal.pause()
+except Interrupted as stop:
+    print(stop.signal_name)
+"""
+
+
+def test_a_signal_during_the_imports_is_held_for_the_clis_handler():
+    done = subprocess.run([sys.executable, "-c", _SIGNAL_DURING_IMPORTS], capture_output=True, text=True, timeout=120)
+    assert (done.returncode, done.stdout.split()) == (0, ["imports", "went", "on", "SIGTERM"]), done.stderr[-3000:]
+    assert "stack trace" not in done.stderr and "Aborted" not in done.stderr

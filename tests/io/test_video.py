@@ -72,3 +72,26 @@ def test_bad_inputs(tmp_path):
         with pytest.raises(ValueError, match="frame of 8x16 in a 16x16 video"):
             writer.write(np.zeros((16, 8, 3), np.uint8))
         writer.write(np.zeros((16, 16, 3), np.uint8))
+
+
+def test_a_writer_stopped_while_ffmpeg_starts_ends_ffmpeg(monkeypatch, tmp_path):
+    """A signal while ffmpeg starts (before a `with` block could close the writer) must not leave
+    ffmpeg running to write its file again after the cleanup removed it: the writer closes
+    imageio-ffmpeg's generator, whose cleanup ends ffmpeg."""
+    from lumos3d_cli.errors import Interrupted
+    from lumos3d_cli.io import video
+
+    class StoppedWhileStarting:
+        closed = False
+
+        def send(self, value):
+            raise Interrupted(15)
+
+        def close(self):
+            self.closed = True
+
+    started = StoppedWhileStarting()
+    monkeypatch.setattr(video.imageio_ffmpeg, "write_frames", lambda *args, **kwargs: started)
+    with pytest.raises(Interrupted):
+        VideoWriter(tmp_path / "a.mp4", 16, 16, 5)
+    assert started.closed

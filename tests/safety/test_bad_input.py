@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from lumos3d_cli.io.cameras import Cameras
-from lumos3d_cli.io.colmap import write_colmap_model
+from lumos3d_cli.io.colmap import read_colmap_model, write_colmap_model
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.io.image_write import write_image
 from lumos3d_cli.io.ply import write_ply
@@ -22,6 +22,7 @@ from output_files import copy_photos, restore_args, snapshot
 from processes import run_lumos3d
 
 SIX = ["1.JPG", "2.JPG", "3.JPG", "4.JPG", "5.JPG", "6.JPG"]
+
 
 
 def _transforms(path, names, change):
@@ -39,6 +40,12 @@ _POSE_FAULTS = {
     "scaled": (lambda d: d["frames"][0].update(transform_matrix=[[2, 0, 0, 0], [0, 2, 0, 0], [0, 0, 2, 0], [0, 0, 0, 1]]),
                "the pose of view 0 (1.JPG) holds a matrix that is not a rotation"),
     "zero-focal": (lambda d: d.update(fl_x=0.0), "the focal length of view 0 (1.JPG) is not positive"),
+    # NeRF's field of view instead of a focal length: 0 divided by zero, pi gave a focal of 1e-14
+    "zero-angle": (lambda d: [d.pop(k) for k in ("fl_x", "fl_y")] and d.update(camera_angle_x=0.0),
+                   "frame 0 has camera_angle_x 0.0, but a field of view lies between 0 and pi radians"),
+    "straight-angle": (lambda d: [d.pop(k) for k in ("fl_x", "fl_y")] and d.update(camera_angle_x=3.141592653589793),
+                       "frame 0 has camera_angle_x 3.141592653589793, but a field of view lies between 0 and pi"),
+    "text-focal": (lambda d: d.update(fl_x="wide"), "frame 0 has fl_x 'wide', which is not a number"),
 }
 
 
@@ -50,6 +57,24 @@ def test_row9_poses_that_are_not_cameras_are_refused_before_the_work(tmp_path, b
     expect_input_error(run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", garbage_checkpoint, "--poses", poses)),
                        f"{poses}: {message}")
     assert not (tmp_path / "out").exists()
+
+
+def test_row9_a_colmap_image_with_a_zero_quaternion_is_named(tmp_path, buu, garbage_checkpoint):
+    photos = copy_photos(buu, tmp_path / "photos", SIX[:2])
+    model = tmp_path / "sparse"
+    extrinsics = torch.eye(3, 4, dtype=torch.float64)[None].repeat(2, 1, 1)
+    extrinsics[1, 0, 3] = 1.0
+    intrinsics = torch.tensor([[400.0, 0, 250], [0, 400, 187.5], [0, 0, 1]], dtype=torch.float64)[None].repeat(2, 1, 1)
+    write_colmap_model(model, Cameras(extrinsics, intrinsics, [(500, 375)] * 2, SIX[:2]))
+    for binary in model.glob("*.bin"):
+        binary.unlink()
+    images = model / "images.txt"
+    images.write_text(images.read_text().replace("2 1.0 0.0 0.0 0.0", "2 0 0 0 0", 1).replace(
+        "2 1 0 0 0", "2 0 0 0 0", 1))
+    assert "2 0 0 0 0" in images.read_text()
+    expect_input_error(run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", garbage_checkpoint,
+                                                 "--poses", model)),
+                       f"{model}: image 2.JPG has the rotation quaternion [0.0, 0.0, 0.0, 0.0]", "not a pose")
 
 
 def test_row9_an_output_through_a_dangling_link_is_refused_before_the_work(tmp_path, buu, garbage_checkpoint):
@@ -78,6 +103,16 @@ def test_row9_render_info_and_train_refuse_what_they_cannot_use(tmp_path, tiny_c
     expect_input_error(run_lumos3d("render", empty, "--orbit", 3, "-o", tmp_path / "frames"),
                        f"{empty}: holds no Gaussians; there is nothing to render")
     expect_input_error(run_lumos3d("info", "/dev/null"), "/dev/null: is neither a file nor a folder")
+    ascii_empty = tmp_path / "ascii.ply"
+    ascii_empty.write_text("ply\nformat ascii 1.0\nelement vertex 0\n" + "".join(
+        f"property float {name}\n" for name in ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1",
+                                                "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")) + "end_header\n")
+    result = run_lumos3d("render", ascii_empty, "--orbit", 3, "-o", tmp_path / "frames")
+    expect_input_error(result, f"{ascii_empty}: holds no Gaussians; there is nothing to render")
+    assert len(result.err.strip().splitlines()) == 1
+    # an empty scene's statistics are null, not NaN: the JSON stays JSON
+    info = run_lumos3d("info", empty, "--json")
+    assert info.code == 0 and json.loads(info.out)["opacity"] == {"min": None, "median": None, "mean": None, "max": None}
     for value in ("-1e-4", ".nan", ".inf"):
         expect_input_error(run_lumos3d("train", tiny_config(name="lr"), f"optim.lr={value}"), "lr: ", "must be a number of at least 0")
     assert not (tmp_path / "frames").exists() and not (tmp_path / "lr").exists()
@@ -122,17 +157,28 @@ def test_row12_photo_names_with_spaces_stay_whole_for_pycolmap(tmp_path):
     extrinsics = torch.eye(3, 4, dtype=torch.float64)[None].repeat(2, 1, 1)
     extrinsics[1, 0, 3] = 1.0
     intrinsics = torch.tensor([[100.0, 0, 50], [0, 100, 40], [0, 0, 1]], dtype=torch.float64)[None].repeat(2, 1, 1)
-    names = ["my photo 1.jpg", "my photo 2.jpg"]
+    names = ["my photo 1.jpg", "my  photo  2.jpg"]  # two spaces in a row, too
     write_colmap_model(tmp_path, Cameras(extrinsics, intrinsics, [(100, 80)] * 2, names))
-    assert sorted(image.name for image in pycolmap.Reconstruction(str(tmp_path)).images.values()) == names
+    assert sorted(image.name for image in pycolmap.Reconstruction(str(tmp_path)).images.values()) == sorted(names)
+    assert sorted(read_colmap_model(tmp_path).names) == sorted(names)  # the text model, as lumos3d reads it back
+    for binary in tmp_path.glob("*.bin"):
+        binary.unlink()
+    assert sorted(read_colmap_model(tmp_path).names) == sorted(names)
 
 
-def test_row12_a_garbage_torch_file_is_one_line(tmp_path):
+def test_row12_a_garbage_torch_file_is_one_line(tmp_path, run_cli):
     garbage = tmp_path / "garbage.pt"
     garbage.write_bytes(bytes(range(256)) * 4)
     result = run_lumos3d("info", garbage)
     expect_input_error(result, f"{garbage}: damaged, or holds objects other than tensors")
     assert len(result.err.strip().splitlines()) == 1
+    # a byte or a word: the unpickler fails with IndexError or KeyError, not UnpicklingError
+    for content in (b"R", b"hello", b"q"):
+        short = tmp_path / f"short-{content.decode()}.pt"
+        short.write_bytes(content)
+        result = run_cli("info", short)
+        expect_input_error(result, f"{short}: cannot read as a torch checkpoint")
+        assert len(result.err.strip().splitlines()) == 1
 
 
 def test_row12_an_eval_scene_without_transforms_test_json_names_the_file(tmp_path, buu):

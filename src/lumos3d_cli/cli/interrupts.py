@@ -77,7 +77,15 @@ def library_imports() -> Iterator[None]:
     pycolmap, trimesh, viser...), so they happen when a command runs, not when the command line
     is parsed or `--help` shown. A library may install its own signal handlers on import
     (pycolmap's logging library takes SIGTERM to print a stack dump and abort), so the handlers of
-    an active `signals_raise_interrupted` are installed again after them."""
-    yield
-    if _claim is not None:
+    an active `signals_raise_interrupted` are installed again after them. Until then the stop
+    signals are held back (blocked, not lost): one that arrives during the imports is delivered to
+    our handler once it is back, instead of to the library's dump."""
+    if _claim is None or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+    try:
+        yield
         _claim()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)

@@ -11,6 +11,7 @@ is used; distortion parameters are ignored with a warning.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -109,13 +110,14 @@ def read_colmap_images(path: Path) -> list[ColmapImage]:
     images = []
     index = 0
     while index < len(lines):
-        words = lines[index].split()
+        # The name is the rest of the line after nine fields, spaces inside it kept as written.
+        words = lines[index].split(maxsplit=9)
         if len(words) < 10:
             index += 1
             continue
         try:
             images.append(ColmapImage(
-                int(words[0]), " ".join(words[9:]), tuple(float(v) for v in words[1:5]),
+                int(words[0]), words[9], tuple(float(v) for v in words[1:5]),
                 tuple(float(v) for v in words[5:8]), int(words[8]),
             ))
         except ValueError as error:
@@ -174,6 +176,10 @@ def read_colmap_model(folder: Path | str) -> Cameras:
     for view in views:
         if view.camera_id not in cameras:
             raise InputError(f"{folder}: image {view.name} refers to unknown camera {view.camera_id}")
+        length = math.sqrt(sum(q * q for q in view.qvec))
+        if not math.isfinite(length) or length < 1e-9 or not all(math.isfinite(t) for t in view.tvec):
+            raise InputError(f"{folder}: image {view.name} has the rotation quaternion {list(view.qvec)} and translation "
+                             f"{list(view.tvec)}, which are not a pose (zero-length or non-finite); correct the model")
     rotation = quaternion_to_matrix(torch.tensor([v.qvec for v in views], dtype=torch.float64))
     translation = torch.tensor([v.tvec for v in views], dtype=torch.float64)
     extrinsics = torch.cat([rotation, translation[:, :, None]], dim=2)

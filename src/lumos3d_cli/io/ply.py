@@ -161,7 +161,11 @@ def read_ply_fields(path: Path | str) -> tuple[np.ndarray, int]:
             )
         byte_order = _FORMATS[file_format]
         if byte_order is None:
-            table = np.loadtxt(handle, dtype=np.float64, max_rows=count, ndmin=2)
+            try:
+                table = (np.loadtxt(handle, dtype=np.float64, max_rows=count, ndmin=2) if count
+                         else np.zeros((0, len(properties))))
+            except ValueError as error:
+                raise InputError(f"{path}: ASCII PLY data is not numbers ({error})") from None
             if table.shape != (count, len(properties)):
                 raise InputError(f"{path}: ASCII PLY has {table.shape[0]} rows of {table.shape[1]} values, "
                                  f"expected {count} of {len(properties)}")

@@ -70,7 +70,7 @@ def load_torch_state_dict(path: Path) -> dict[str, torch.Tensor]:
         reason = reasons[-1] if reasons else type(error).__name__
         raise InputError(f"{path}: damaged, or holds objects other than tensors, which lumos3d does not unpickle "
                          f"({reason})") from None
-    except (RuntimeError, EOFError, OSError) as error:
+    except Exception as error:  # unpickling arbitrary bytes fails in arbitrary ways (IndexError, KeyError...)
         reason = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
         raise InputError(f"{path}: cannot read as a torch checkpoint ({reason})") from None
     for wrapper in ("model", "state_dict"):  # training checkpoints wrap the state dict

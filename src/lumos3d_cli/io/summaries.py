@@ -15,10 +15,12 @@ from lumos3d_cli.io.images import probe_image
 from lumos3d_cli.io.ply import ply_fields_to_gaussians, read_ply_fields
 
 
-def _stats(values: np.ndarray) -> dict[str, float]:
+def _stats(values: np.ndarray) -> dict[str, float | None]:
+    """min, median, mean and max of the finite values; None for each when there are none (an
+    empty scene: `info --json` must stay valid JSON, which has no NaN)."""
     finite = values[np.isfinite(values)]
     if finite.size == 0:
-        return {"min": float("nan"), "median": float("nan"), "mean": float("nan"), "max": float("nan")}
+        return {"min": None, "median": None, "mean": None, "max": None}
     return {
         "min": float(finite.min()), "median": float(np.median(finite)),
         "mean": float(finite.mean()), "max": float(finite.max()),

@@ -37,6 +37,24 @@ def _image_size(path: Path, frame: dict, merged: dict) -> tuple[int, int]:
     raise InputError(f"{path}: frame {frame.get('file_path')!r} has no 'w'/'h' and its image was not found")
 
 
+def _number(path: Path, index: int, merged: dict, key: str) -> float:
+    """merged[key] as a float; InputError naming the file, the frame and the key otherwise."""
+    try:
+        return float(merged[key])
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: frame {index} has {key} {merged[key]!r}, which is not a number; correct the file") from None
+
+
+def _focal_from_angle(path: Path, index: int, merged: dict, key: str, size: int) -> float:
+    """The focal length in pixels of a field of view merged[key] (radians, across `size` pixels);
+    InputError unless the angle lies strictly between 0 and pi (180 degrees)."""
+    angle = _number(path, index, merged, key)
+    if not 0.0 < angle < math.pi:
+        raise InputError(f"{path}: frame {index} has {key} {angle}, but a field of view lies between 0 and pi "
+                         "radians (180 degrees) exclusive; correct the file")
+    return 0.5 * size / math.tan(0.5 * angle)
+
+
 def read_transforms_json(path: Path | str, warn_on_distortion: bool = True) -> Cameras:
     """Read all frames in file order. `warn_on_distortion=False` for callers that use only the
     poses, which the lens distortion does not affect."""
@@ -64,11 +82,11 @@ def read_transforms_json(path: Path | str, warn_on_distortion: bool = True) -> C
             raise InputError(f"{path}: frame {index} 'transform_matrix' is {tuple(matrix.shape)}, expected 4x4")
         width, height = _image_size(path, frame, merged)
         if "fl_x" in merged:
-            focal_x = float(merged["fl_x"])
-            focal_y = float(merged.get("fl_y", focal_x))
+            focal_x = _number(path, index, merged, "fl_x")
+            focal_y = _number(path, index, merged, "fl_y") if "fl_y" in merged else focal_x
         elif "camera_angle_x" in merged:
-            focal_x = 0.5 * width / math.tan(0.5 * float(merged["camera_angle_x"]))
-            focal_y = 0.5 * height / math.tan(0.5 * float(merged["camera_angle_y"])) if "camera_angle_y" in merged else focal_x
+            focal_x = _focal_from_angle(path, index, merged, "camera_angle_x", width)
+            focal_y = _focal_from_angle(path, index, merged, "camera_angle_y", height) if "camera_angle_y" in merged else focal_x
         else:
             raise InputError(f"{path}: frame {index} has no focal length ('fl_x' or 'camera_angle_x')")
         distorted |= any(abs(float(merged.get(key, 0.0))) > 0 for key in _DISTORTION_KEYS)

@@ -82,7 +82,13 @@ class VideoWriter:
         self._generator = imageio_ffmpeg.write_frames(
             str(self.path), padded, fps=fps, quality=None, macro_block_size=1, ffmpeg_log_level="error", **options
         )
-        self._generator.send(None)  # starts ffmpeg
+        try:
+            self._generator.send(None)  # starts ffmpeg
+        except BaseException:
+            # Stopped (a signal) while ffmpeg starts, before any `with` block can close it: end it
+            # here, or it outlives the cleanup that removes its file and writes that file again.
+            self._generator.close()
+            raise
 
     def write(self, frame: np.ndarray) -> None:
         """Append one [H, W, 3] frame."""
