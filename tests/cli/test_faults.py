@@ -47,7 +47,9 @@ def photos(tmp_path_factory, buu):
 
 
 def _restore(photos, output, weights, *extra):
-    return ("restore", photos, "-o", output, "--checkpoint", weights, "--geometry", "network", *extra)
+    """A quick restore: network cameras, no refinement (the tests are about files and signals)."""
+    return ("restore", photos, "-o", output, "--checkpoint", weights, "--geometry", "network", "--preset", "fast",
+            "--refine-steps", 0, *extra)
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ from assertions import expect_input_error
 
 def test_eval_on_buu_writes_the_report(run_cli, buu, tmp_path, random_checkpoint):
     result = run_cli("eval", buu.parent, "--scenes", "buu", "--checkpoint", random_checkpoint, "--out", tmp_path / "report",
-                     "--max-views", 5, "--geometry", "network")
+                     "--max-views", 5, "--geometry", "network", "--refine-steps", 0)
     assert result.code == 0, result.err
     assert "gamma" in result.out and "18.65" in result.out and "mean" in result.out
     report = json.loads((tmp_path / "report" / "metrics.json").read_text())
@@ -33,7 +33,8 @@ def test_eval_on_buu_writes_the_report(run_cli, buu, tmp_path, random_checkpoint
 
 def test_holdout_over_exposure(run_cli, buu, tmp_path, random_checkpoint):
     result = run_cli("eval", buu, "--mode", "over-exposure", "--protocol", "holdout", "--checkpoint", random_checkpoint,
-                     "--out", tmp_path / "report", "--max-views", 5, "--geometry", "network", "--black-unobserved", "--json")
+                     "--out", tmp_path / "report", "--max-views", 5, "--geometry", "network", "--black-unobserved",
+                     "--refine-steps", 0, "--json")
     assert result.code == 0, result.err
     report = json.loads(result.out)
     assert report["protocol"] == "holdout" and report["mode"] == "over-exposure"
@@ -62,6 +63,6 @@ def test_eval_bad_inputs(run_cli, lom_copy, tmp_path, random_checkpoint):
 def test_cameras_are_not_scored_without_reference_poses(run_cli, lom_copy, tmp_path, random_checkpoint):
     (lom_copy / "transforms_train.json").unlink()  # the test frames keep theirs, the other views lose them
     result = run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", tmp_path / "report",
-                     "--max-views", 4, "--geometry", "network", "--json")
+                     "--max-views", 4, "--geometry", "network", "--refine-steps", 0, "--json")
     assert result.code == 0, result.err
     assert json.loads(result.out)["cameras"] == {}

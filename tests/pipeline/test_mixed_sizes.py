@@ -31,7 +31,8 @@ def _psnr(a: np.ndarray, b: np.ndarray) -> float:
 def test_network_cameras_views_and_metrics_keep_each_photos_size(buu, tmp_path, random_checkpoint):
     photos = _scene_folder(buu, tmp_path / "photos", "low")
     references = _scene_folder(buu, tmp_path / "references", "high")
-    scene = lumos3d_cli.restore(photos, checkpoint=random_checkpoint, geometry="network", reference=references)
+    scene = lumos3d_cli.restore(photos, checkpoint=random_checkpoint, geometry="network", reference=references,
+                                refine_steps=0)
     sizes = [(500, 375), (500, 375), (300, 375)]
     assert scene.names == ["4.png", "5.png", "6.png"] and scene.cameras.sizes == sizes
     assert [tuple(view.shape) for view in scene.restored] == [(3, h, w) for w, h in sizes]

@@ -20,7 +20,8 @@ def test_restore_and_write_without_the_cli(buu, tmp_path, random_checkpoint):
     photos.mkdir()
     for name in ("4.JPG", "5.JPG"):
         shutil.copy(buu / "low" / name, photos / name)
-    scene = lumos3d_cli.restore(photos, checkpoint=random_checkpoint, geometry="network", reference=buu / "high")
+    scene = lumos3d_cli.restore(photos, checkpoint=random_checkpoint, geometry="network", reference=buu / "high",
+                                refine_steps=0)
     assert scene.names == ["4.JPG", "5.JPG"] and [tuple(view.shape) for view in scene.restored] == [(3, 375, 500)] * 2
     assert scene.metrics["mean"]["psnr"] > 0 and scene.geometry.source == "network"
     summary = lumos3d_cli.write_restored_scene(scene, tmp_path / "out" / "scene.ply")

@@ -29,7 +29,7 @@ def test_restore_writes_every_output(run_cli, buu, tmp_path, random_checkpoint):
     photos = _copy(buu, tmp_path, ["1.JPG", "2.JPG", "3.JPG"])
     out = tmp_path / "out" / "scene.ply"
     result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--reference", buu / "high",
-                     "--geometry", "network", "--json")
+                     "--geometry", "network", "--refine-steps", 0, "--json")
     assert result.code == 0, result.err
     summary = json.loads(result.out)
     ply = PlyData.read(str(out))
@@ -61,7 +61,7 @@ def test_max_gaussians_caps_the_scene(run_cli, buu, tmp_path, random_checkpoint)
     photos = _copy(buu, tmp_path, ["1.JPG", "2.JPG"])
     out = tmp_path / "out" / "scene.ply"
     result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "network",
-                     "--max-gaussians", "5000", "--json")
+                     "--max-gaussians", "5000", "--refine-steps", 0, "--json")
     assert result.code == 0, result.err
     summary = json.loads(result.out)
     budget = summary["gaussians"]["budget"]
@@ -79,7 +79,7 @@ def test_one_view_and_high_bit_depth_outputs(run_cli, buu, tmp_path, random_chec
     for output_format, suffix in (("png16", ".png"), ("exr", ".exr")):
         out = tmp_path / output_format / "scene.ply"
         result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--output-format", output_format,
-                         "--quiet")
+                         "--refine-steps", 0, "--quiet")
         assert result.code == 0, result.err
         written = read_image(out.parent / "restored" / f"5{suffix}")
         assert written.pixels.shape == (375, 500, 3) and written.pixels.dtype == np.float32
@@ -145,7 +145,7 @@ def test_restore_writes_an_orbit_video(run_cli, buu, tmp_path, random_checkpoint
                        ".mp4 (H.264) or .gif")
     assert not out.parent.exists()
     result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "network",
-                     "--video", tmp_path / "orbit.mp4", "--quiet")
+                     "--refine-steps", 0, "--video", tmp_path / "orbit.mp4", "--quiet")
     assert result.code == 0, result.err
     stream = probe_video(tmp_path / "orbit.mp4")
     assert stream.codec == "h264" and stream.pixel_format == "yuv420p" and stream.width > 0
@@ -154,7 +154,8 @@ def test_restore_writes_an_orbit_video(run_cli, buu, tmp_path, random_checkpoint
 def test_gaussian_grid_densifies_the_pixel_gaussians(run_cli, buu, tmp_path, random_checkpoint):
     photos = _copy(buu, tmp_path, ["1.JPG"])
     out = tmp_path / "out" / "scene.ply"
-    result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--gaussian-grid", "2", "--json")
+    result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--gaussian-grid", "2",
+                     "--refine-steps", 0, "--json")
     assert result.code == 0, result.err
     summary = json.loads(result.out)
     assert summary["gaussians"]["budget"]["grid"] == [448, 336] and summary["gaussians"]["pixel"] == 448 * 336
@@ -174,7 +175,7 @@ def test_uncovered_pixels_are_filled_unless_asked_to_stay_black(run_cli, buu, tm
     for flag in ("--fill-unobserved", "--black-unobserved"):
         out = tmp_path / flag.strip("-") / "scene.ply"
         result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "network",
-                         "--preset", "fast", flag, "--json")
+                         "--preset", "fast", "--refine-steps", 0, flag, "--json")
         assert result.code == 0, result.err
         views[flag] = (json.loads(result.out)["uncovered"], cv2.imread(str(out.parent / "restored" / "1.png")).astype(int))
     (filled, filled_view), (black, black_view) = views["--fill-unobserved"], views["--black-unobserved"]

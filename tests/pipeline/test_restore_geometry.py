@@ -34,7 +34,7 @@ def test_sfm_registers_the_photos_and_writes_a_colmap_model_with_points(run_cli,
     photos = _photos(buu, tmp_path)
     out = tmp_path / "out" / "scene.ply"
     result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "sfm",
-                     "--max-views", 3, "--preset", preset, "--json")
+                     "--max-views", 3, "--preset", preset, "--refine-steps", 0, "--json")
     assert result.code == 0, result.err
     summary = json.loads(result.out)
     geometry = summary["geometry"]
@@ -70,7 +70,7 @@ def test_given_poses_are_reproduced(run_cli, buu, tmp_path, random_checkpoint):
     write_transforms_json(tmp_path / "poses.json", given)
     out = tmp_path / "out" / "scene.ply"
     result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--poses", tmp_path / "poses.json",
-                     "--max-views", 3, "--json")
+                     "--max-views", 3, "--refine-steps", 0, "--json")
     assert result.code == 0, result.err
     assert json.loads(result.out)["geometry"]["source"] == "poses"
     written = read_cameras(out.parent / "cameras.json")
@@ -93,7 +93,7 @@ def test_photos_sfm_cannot_place(run_cli, buu, shared_data, tmp_path, random_che
     out = tmp_path / "out" / "scene.ply"
     expect_input_error(run_cli("restore", blank, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "sfm"),
                        "--geometry sfm: structure-from-motion registered 0 of 4 photos", "use geometry network")
-    result = run_cli("restore", blank, "-o", out, "--checkpoint", random_checkpoint, "--json")
+    result = run_cli("restore", blank, "-o", out, "--checkpoint", random_checkpoint, "--refine-steps", 0, "--json")
     assert result.code == 0, result.err
     assert json.loads(result.out)["geometry"]["source"] == "network"
     said = " ".join(result.err.split())  # rich wraps long log lines
@@ -101,12 +101,14 @@ def test_photos_sfm_cannot_place(run_cli, buu, shared_data, tmp_path, random_che
     one = _photos(buu, tmp_path / "one", ["5.JPG"])
     expect_input_error(run_cli("restore", one, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "sfm"),
                        "--geometry sfm: structure-from-motion needs at least two photos")
-    result = run_cli("restore", one, "-o", tmp_path / "one-out" / "scene.ply", "--checkpoint", random_checkpoint, "--json")
+    result = run_cli("restore", one, "-o", tmp_path / "one-out" / "scene.ply", "--checkpoint", random_checkpoint,
+                     "--refine-steps", 0, "--json")
     assert result.code == 0 and json.loads(result.out)["geometry"]["source"] == "network", result.err
     unrelated = tmp_path / "unrelated"
     unrelated.mkdir()
     for name in ("000.jpg", "010.jpg", "020.jpg", "030.jpg"):
         shutil.copy(shared_data / "lowlight_single" / name, unrelated / name)
-    result = run_cli("restore", unrelated, "-o", tmp_path / "u" / "scene.ply", "--checkpoint", random_checkpoint, "--json")
+    result = run_cli("restore", unrelated, "-o", tmp_path / "u" / "scene.ply", "--checkpoint", random_checkpoint,
+                     "--refine-steps", 0, "--json")
     assert result.code == 0, result.err
     assert json.loads(result.out)["geometry"]["source"] == "network" and "Traceback" not in result.err

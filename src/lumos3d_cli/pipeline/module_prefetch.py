@@ -18,7 +18,8 @@ from collections.abc import Sequence
 
 logger = logging.getLogger(__name__)
 
-LATER_MODULES = ("torch._dynamo", "trimesh")
+WRITING_MODULES = ("trimesh",)  # what writing the outputs imports
+LATER_MODULES = ("torch._dynamo", *WRITING_MODULES)  # and refinement
 
 
 def _import_all(modules: Sequence[str]) -> None:

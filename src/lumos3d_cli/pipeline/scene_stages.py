@@ -26,7 +26,7 @@ from lumos3d_cli.model.appearance.photo_restoration import restore_photos
 from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DPrediction
 from lumos3d_cli.model.pixel_footprint import DEFAULT_FOOTPRINT_SCALE
 from lumos3d_cli.pipeline.gaussian_grid import dense_grid_size, densify_grid
-from lumos3d_cli.pipeline.module_prefetch import prefetch_modules
+from lumos3d_cli.pipeline.module_prefetch import LATER_MODULES, WRITING_MODULES, prefetch_modules
 from lumos3d_cli.pipeline.network_pass import NetworkPass, even_subset, run_network
 from lumos3d_cli.pipeline.presets import RestorePreset
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
@@ -105,7 +105,7 @@ def registration(job: SceneJob) -> SceneJob:
     or none (`pipeline.scene_geometry.register_views`). Structure-from-motion leaves a core idle:
     the modules later stages import load meanwhile (`pipeline.module_prefetch`)."""
     if job.geometry_source != "network" and len(job.names) > 1:
-        prefetch_modules()
+        prefetch_modules(LATER_MODULES if job.preset.refine_steps > 0 else WRITING_MODULES)
     job.registration = register_views(job.photos, job.names, job.geometry_source, job.poses, job.mode, job.progress,
                                       job.brightened, job.sizes, job.preset.sfm_long_side)
     return job
