@@ -78,7 +78,8 @@ def _expect_interrupted(result, signum):
 # -- row 1, 14: signals -----------------------------------------------------------------------------
 
 
-def _render_args(tmp_path, frames_count=100000):
+def _render_args(tmp_path, frames_count=5000):
+    """A render that runs for seconds (5000 frames of 128 px) until a test stops it."""
     return ("render", tmp_path / "scene.ply", "--orbit", frames_count, "-o", tmp_path / "frames", "--width", 128,
             "--video", tmp_path / "orbit.mp4")
 
@@ -151,11 +152,11 @@ def test_rerun_with_fewer_views_replaces_the_output_set(tmp_path, buu, first_res
 # -- row 3: the same photo twice -----------------------------------------------------------------------
 
 
-def test_the_same_photo_twice_is_refused(tmp_path, photos, buu, random_checkpoint):
-    twice = run_lumos3d(*_restore(photos / "1.JPG", tmp_path / "a" / "scene.ply", random_checkpoint), photos / "1.JPG")
+def test_the_same_photo_twice_is_refused(tmp_path, photos, buu, random_checkpoint, run_cli):
+    twice = run_cli(*_restore(photos / "1.JPG", tmp_path / "a" / "scene.ply", random_checkpoint), photos / "1.JPG")
     expect_input_error(twice, f"{photos / '1.JPG'}: the same photo is given twice")
     other = _photos(buu, tmp_path / "other", ["1.JPG"])
-    same_name = run_lumos3d("degrade", photos, other / "1.JPG", "-o", tmp_path / "b")
+    same_name = run_cli("degrade", photos, other / "1.JPG", "-o", tmp_path / "b")
     expect_input_error(same_name, f"{photos / '1.JPG'} and {other / '1.JPG'}: two photos named '1'")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["other"]
 
@@ -163,7 +164,7 @@ def test_the_same_photo_twice_is_refused(tmp_path, photos, buu, random_checkpoin
 # -- row 4: an output under a regular file -------------------------------------------------------------
 
 
-def test_outputs_under_a_regular_file_are_refused_before_any_work(tmp_path, buu, photos, scene_file, random_checkpoint):
+def test_outputs_under_a_regular_file_are_refused_before_any_work(tmp_path, buu, photos, scene_file, random_checkpoint, run_cli):
     blocker = tmp_path / "file"
     blocker.write_text("a regular file")
     cases = [
@@ -176,7 +177,7 @@ def test_outputs_under_a_regular_file_are_refused_before_any_work(tmp_path, buu,
         (("convert", random_checkpoint, "-o", blocker / "w.safetensors"), "-o", blocker / "w.safetensors"),
     ]
     for args, option, path in cases:
-        result = run_lumos3d(*args)
+        result = run_cli(*args)
         expect_input_error(result, f"{option} {path}: cannot be created because {blocker} is a file")
         assert "render " not in result.err and "load images" not in result.err  # no work started
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]
@@ -194,25 +195,25 @@ def _write_exr_with_nan(path):
     out.close()
 
 
-def test_info_deep_names_the_images_that_will_not_load(tmp_path, buu):
+def test_info_deep_names_the_images_that_will_not_load(tmp_path, buu, run_cli):
     folder = _photos(buu, tmp_path / "photos", ["1.JPG", "2.JPG"])
     data = (folder / "2.JPG").read_bytes()
     (folder / "2.JPG").write_bytes(data[: len(data) // 2])
     _write_exr_with_nan(folder / "3.exr")
-    quick = run_lumos3d("info", folder, "--json")
+    quick = run_cli("info", folder, "--json")
     assert quick.code == 0, quick.err
     assert json.loads(quick.out)["pixels"].startswith("not decoded; --deep")
-    deep = run_lumos3d("info", folder, "--deep", "--json")
+    deep = run_cli("info", folder, "--deep", "--json")
     expect_input_error(deep, "2 of 3 images will not load", "2.JPG (cannot decode as JPG", "3.exr (1 of 48 samples are NaN or Inf")
     unreadable = json.loads(deep.out)["will_not_load"]
     assert sorted(unreadable) == ["2.JPG", "3.exr"]
-    assert run_lumos3d("info", folder / "1.JPG", "--deep").code == 0
+    assert run_cli("info", folder / "1.JPG", "--deep").code == 0
 
 
 # -- rows 7, 8: non-finite checkpoints and scenes ------------------------------------------------------
 
 
-def test_a_checkpoint_with_nan_weights_is_refused_by_info_convert_and_restore(tmp_path, photos):
+def test_a_checkpoint_with_nan_weights_is_refused_by_info_convert_and_restore(tmp_path, photos, run_cli):
     model = build_model("tiny", seed=0)
     name, tensor = next((n, t) for n, t in model.state_dict().items() if t.is_floating_point() and t.numel() > 4)
     with torch.no_grad():
@@ -220,19 +221,19 @@ def test_a_checkpoint_with_nan_weights_is_refused_by_info_convert_and_restore(tm
     weights = tmp_path / "nan.safetensors"
     save_checkpoint(model, weights, {})
     fragment = f"{weights}: tensor {name}: 3 of {tensor.numel()} values are NaN or Inf"
-    expect_input_error(run_lumos3d("info", weights), fragment)
-    expect_input_error(run_lumos3d("convert", weights, "-o", tmp_path / "copy.safetensors"), fragment)
-    expect_input_error(run_lumos3d(*_restore(photos, tmp_path / "out" / "scene.ply", weights)), fragment)
+    expect_input_error(run_cli("info", weights), fragment)
+    expect_input_error(run_cli("convert", weights, "-o", tmp_path / "copy.safetensors"), fragment)
+    expect_input_error(run_cli(*_restore(photos, tmp_path / "out" / "scene.ply", weights)), fragment)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["nan.safetensors"]
 
 
-def test_render_of_a_scene_holding_nan_names_the_file(tmp_path, scene_file):
+def test_render_of_a_scene_holding_nan_names_the_file(tmp_path, scene_file, run_cli):
     scene = tmp_path / "nan.ply"
     data = bytearray(scene_file.read_bytes())
     start = data.index(b"end_header\n") + len(b"end_header\n")
     data[start + 4 : start + 8] = struct.pack("<f", float("nan"))  # y of the first Gaussian
     scene.write_bytes(bytes(data))
-    result = run_lumos3d("render", scene, "--orbit", 2, "-o", tmp_path / "frames")
+    result = run_cli("render", scene, "--orbit", 2, "-o", tmp_path / "frames")
     expect_input_error(result, f"{scene}: gaussians.means: 1 of 6000 values are NaN or Inf")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["nan.ply"]
 
@@ -240,10 +241,10 @@ def test_render_of_a_scene_holding_nan_names_the_file(tmp_path, scene_file):
 # -- row 9: messages name the user's path, not a temporary one ------------------------------------------
 
 
-def test_degrade_output_messages_name_the_users_path(tmp_path, buu):
+def test_degrade_output_messages_name_the_users_path(tmp_path, buu, run_cli):
     photo = buu / "low" / "1.JPG"
     for target, fragment in [("x.jpg", "JPEG holds 8 bits only; use .png"), ("x.tif", "cannot write '.tif' files")]:
-        result = run_lumos3d("degrade", photo, "-o", tmp_path / target, "--bit-depth", 16)
+        result = run_cli("degrade", photo, "-o", tmp_path / target, "--bit-depth", 16)
         expect_input_error(result, f"{tmp_path / target}: {fragment}")
         assert ".tmp" not in result.err
     assert list(tmp_path.iterdir()) == []
@@ -266,7 +267,7 @@ def mixed_sizes_restore(tmp_path_factory, buu):
     cv2.imwrite(str(folder / "8.png"), cv2.resize(cv2.imread(str(buu / "low" / "8.JPG")), (400, 300),
                                                   interpolation=cv2.INTER_AREA))
     out = folder.parent / "out"
-    result = run_lumos3d("restore", folder, "-o", out / "scene.ply", "--geometry", "sfm")
+    result = run_lumos3d("restore", folder, "-o", out / "scene.ply", "--geometry", "sfm", "--refine-steps", 0)
     assert result.code == 0, result.err
     sizes = {path.name: (cv2.imread(str(path)).shape[1], cv2.imread(str(path)).shape[0]) for path in folder.iterdir()}
     return out, sizes, result
@@ -311,20 +312,20 @@ def test_photos_of_different_sizes_are_restored_each_at_its_own_size(mixed_sizes
     assert cv2.imread(str(out / "contact_sheet.png")) is not None
 
 
-def test_a_restore_of_photos_of_different_sizes_renders_and_opens_in_the_viewer(tmp_path, mixed_sizes_restore):
+def test_a_restore_of_photos_of_different_sizes_renders_and_opens_in_the_viewer(tmp_path, mixed_sizes_restore, run_cli):
     out, sizes, _ = mixed_sizes_restore
     scene = shutil.copytree(out, tmp_path / "out")
-    poses = run_lumos3d("render", scene / "scene.ply", "--poses", scene / "cameras.json", "-o", tmp_path / "frames",
+    poses = run_cli("render", scene / "scene.ply", "--poses", scene / "cameras.json", "-o", tmp_path / "frames",
                         "--width", 200)
     assert poses.code == 0, poses.err
     assert len(list((tmp_path / "frames").glob("*.png"))) == len(sizes)
     # without --width/--height every camera renders at its own size, in cameras.json's order
-    own = run_lumos3d("render", scene / "scene.ply", "--poses", scene / "cameras.json", "-o", tmp_path / "own")
+    own = run_cli("render", scene / "scene.ply", "--poses", scene / "cameras.json", "-o", tmp_path / "own")
     assert own.code == 0, own.err
     order = [frame["file_path"] for frame in json.loads((scene / "cameras.json").read_text())["frames"]]
     written = [cv2.imread(str(path)).shape[1::-1] for path in sorted((tmp_path / "own").glob("*.png"))]
     assert written == [sizes[name] for name in order]
-    orbit = run_lumos3d("render", scene / "scene.ply", "--orbit", 2, "-o", tmp_path / "orbit", "--width", 100)
+    orbit = run_cli("render", scene / "scene.ply", "--orbit", 2, "-o", tmp_path / "orbit", "--width", 100)
     assert orbit.code == 0, orbit.err
     viewer = load_viewer_scene(scene)
     assert sorted(viewer.cameras.sizes) == sorted(sizes.values()) and viewer.notes == []

@@ -50,16 +50,16 @@ _POSE_FAULTS = {
 
 
 @pytest.mark.parametrize("fault", list(_POSE_FAULTS))
-def test_row9_poses_that_are_not_cameras_are_refused_before_the_work(tmp_path, buu, garbage_checkpoint, fault):
+def test_row9_poses_that_are_not_cameras_are_refused_before_the_work(tmp_path, buu, garbage_checkpoint, fault, run_cli):
     change, message = _POSE_FAULTS[fault]
     photos = copy_photos(buu, tmp_path / "photos")
     poses = _transforms(tmp_path / "poses.json", SIX, change)
-    expect_input_error(run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", garbage_checkpoint, "--poses", poses)),
+    expect_input_error(run_cli(*restore_args(photos, tmp_path / "out" / "scene.ply", garbage_checkpoint, "--poses", poses)),
                        f"{poses}: {message}")
     assert not (tmp_path / "out").exists()
 
 
-def test_row9_a_colmap_image_with_a_zero_quaternion_is_named(tmp_path, buu, garbage_checkpoint):
+def test_row9_a_colmap_image_with_a_zero_quaternion_is_named(tmp_path, buu, garbage_checkpoint, run_cli):
     photos = copy_photos(buu, tmp_path / "photos", SIX[:2])
     model = tmp_path / "sparse"
     extrinsics = torch.eye(3, 4, dtype=torch.float64)[None].repeat(2, 1, 1)
@@ -72,15 +72,15 @@ def test_row9_a_colmap_image_with_a_zero_quaternion_is_named(tmp_path, buu, garb
     images.write_text(images.read_text().replace("2 1.0 0.0 0.0 0.0", "2 0 0 0 0", 1).replace(
         "2 1 0 0 0", "2 0 0 0 0", 1))
     assert "2 0 0 0 0" in images.read_text()
-    expect_input_error(run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", garbage_checkpoint,
+    expect_input_error(run_cli(*restore_args(photos, tmp_path / "out" / "scene.ply", garbage_checkpoint,
                                                  "--poses", model)),
                        f"{model}: image 2.JPG has the rotation quaternion [0.0, 0.0, 0.0, 0.0]", "not a pose")
 
 
-def test_row9_an_output_through_a_dangling_link_is_refused_before_the_work(tmp_path, buu, garbage_checkpoint):
+def test_row9_an_output_through_a_dangling_link_is_refused_before_the_work(tmp_path, buu, garbage_checkpoint, run_cli):
     photos = copy_photos(buu, tmp_path / "photos")
     (tmp_path / "link").symlink_to(tmp_path / "nowhere")
-    expect_input_error(run_lumos3d(*restore_args(photos, tmp_path / "link" / "scene.ply", garbage_checkpoint)),
+    expect_input_error(run_cli(*restore_args(photos, tmp_path / "link" / "scene.ply", garbage_checkpoint)),
                        f"{tmp_path / 'link'} is a link to {tmp_path / 'nowhere'}, which does not exist")
 
 
@@ -97,24 +97,24 @@ def test_row9_a_full_disk_names_the_output_and_changes_nothing(tmp_path, buu, ru
     assert snapshot(out) == before
 
 
-def test_row9_render_info_and_train_refuse_what_they_cannot_use(tmp_path, tiny_config):
+def test_row9_render_info_and_train_refuse_what_they_cannot_use(tmp_path, tiny_config, run_cli):
     empty = tmp_path / "empty.ply"
     write_ply(empty, Gaussians(torch.zeros(0, 3), torch.zeros(0, 4), torch.zeros(0, 3), torch.zeros(0), torch.zeros(0, 1, 3)))
-    expect_input_error(run_lumos3d("render", empty, "--orbit", 3, "-o", tmp_path / "frames"),
+    expect_input_error(run_cli("render", empty, "--orbit", 3, "-o", tmp_path / "frames"),
                        f"{empty}: holds no Gaussians; there is nothing to render")
-    expect_input_error(run_lumos3d("info", "/dev/null"), "/dev/null: is neither a file nor a folder")
+    expect_input_error(run_cli("info", "/dev/null"), "/dev/null: is neither a file nor a folder")
     ascii_empty = tmp_path / "ascii.ply"
     ascii_empty.write_text("ply\nformat ascii 1.0\nelement vertex 0\n" + "".join(
         f"property float {name}\n" for name in ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1",
                                                 "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")) + "end_header\n")
-    result = run_lumos3d("render", ascii_empty, "--orbit", 3, "-o", tmp_path / "frames")
+    result = run_cli("render", ascii_empty, "--orbit", 3, "-o", tmp_path / "frames")
     expect_input_error(result, f"{ascii_empty}: holds no Gaussians; there is nothing to render")
     assert len(result.err.strip().splitlines()) == 1
     # an empty scene's statistics are null, not NaN: the JSON stays JSON
-    info = run_lumos3d("info", empty, "--json")
+    info = run_cli("info", empty, "--json")
     assert info.code == 0 and json.loads(info.out)["opacity"] == {"min": None, "median": None, "mean": None, "max": None}
     for value in ("-1e-4", ".nan", ".inf"):
-        expect_input_error(run_lumos3d("train", tiny_config(name="lr"), f"optim.lr={value}"), "lr: ", "must be a number of at least 0")
+        expect_input_error(run_cli("train", tiny_config(name="lr"), f"optim.lr={value}"), "lr: ", "must be a number of at least 0")
     assert not (tmp_path / "frames").exists() and not (tmp_path / "lr").exists()
 
 
@@ -124,21 +124,21 @@ def test_row9_debug_keeps_exit_2_and_adds_the_traceback(tmp_path):
     assert result.err.strip().splitlines()[-1] == f"error: {tmp_path / 'missing.ply'}: no such file or folder"
 
 
-def test_row10_a_photo_too_small_for_one_network_patch_is_refused_by_name(tmp_path, buu, random_checkpoint):
+def test_row10_a_photo_too_small_for_one_network_patch_is_refused_by_name(tmp_path, buu, random_checkpoint, run_cli):
     photos = copy_photos(buu, tmp_path / "photos", SIX[:2])
     write_image(photos / "tiny.png", np.full((1, 1, 3), 0.5, np.float32))
-    expect_input_error(run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", random_checkpoint)),
+    expect_input_error(run_cli(*restore_args(photos, tmp_path / "out" / "scene.ply", random_checkpoint)),
                        "tiny.png: is 1x1 pixels, too small for the network (at least 14 pixels a side)")
     assert not (tmp_path / "out").exists()
 
 
-def test_row11_references_that_do_not_match_are_refused_before_the_work(tmp_path, buu, garbage_checkpoint):
+def test_row11_references_that_do_not_match_are_refused_before_the_work(tmp_path, buu, garbage_checkpoint, run_cli):
     photos = copy_photos(buu, tmp_path / "photos", SIX[:3])
     references = tmp_path / "references"
     references.mkdir()
     for name in SIX[:2]:
         shutil.copy(buu / "high" / name, references / name)
-    expect_input_error(run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", garbage_checkpoint,
+    expect_input_error(run_cli(*restore_args(photos, tmp_path / "out" / "scene.ply", garbage_checkpoint,
                                                  "--reference", references)),
                        f"--reference {references}: no image named 3.* for input 3.JPG")
 
@@ -169,7 +169,7 @@ def test_row12_photo_names_with_spaces_stay_whole_for_pycolmap(tmp_path):
 def test_row12_a_garbage_torch_file_is_one_line(tmp_path, run_cli):
     garbage = tmp_path / "garbage.pt"
     garbage.write_bytes(bytes(range(256)) * 4)
-    result = run_lumos3d("info", garbage)
+    result = run_cli("info", garbage)
     expect_input_error(result, f"{garbage}: damaged, or holds objects other than tensors")
     assert len(result.err.strip().splitlines()) == 1
     # a byte or a word: the unpickler fails with IndexError or KeyError, not UnpicklingError
@@ -181,11 +181,11 @@ def test_row12_a_garbage_torch_file_is_one_line(tmp_path, run_cli):
         assert len(result.err.strip().splitlines()) == 1
 
 
-def test_row12_an_eval_scene_without_transforms_test_json_names_the_file(tmp_path, buu):
+def test_row12_an_eval_scene_without_transforms_test_json_names_the_file(tmp_path, buu, run_cli):
     scene = tmp_path / "lom" / "sc"
     for folder in ("high", "low"):
         shutil.copytree(buu / folder, scene / folder)
-    expect_input_error(run_lumos3d("eval", tmp_path / "lom", "--scenes", "sc", "--out", tmp_path / "report"),
+    expect_input_error(run_cli("eval", tmp_path / "lom", "--scenes", "sc", "--out", tmp_path / "report"),
                        f"{scene}: not a LOM-layout scene: {scene / 'transforms_test.json'} is missing")
-    expect_input_error(run_lumos3d("eval", scene, "--out", tmp_path / "report"), f"{scene / 'transforms_test.json'} is missing")
+    expect_input_error(run_cli("eval", scene, "--out", tmp_path / "report"), f"{scene / 'transforms_test.json'} is missing")
     assert not (tmp_path / "report").exists()

@@ -17,23 +17,31 @@ from output_files import copy_photos, restore_args, snapshot
 from processes import hidden_entries, interrupt_when, run_lumos3d
 
 # The child: os.replace slowed down for the moves of a commit (source and destination on
-# different sides of the staging folder), not for the writers' own renames inside it.
+# different sides of the staging folder), not for the writers' own renames inside it; or, with a
+# gate file, each such move waits until the test creates that file (and the child says it waits
+# by creating GATE.waiting).
 _SLOW_COMMIT = """
 import os, sys, time
+from pathlib import Path
 from lumos3d_cli.cli.app import main
-delay, replace = float(sys.argv[1]), os.replace
+delay, gate, replace = float(sys.argv[1]), sys.argv[2], os.replace
 def slow(source, destination, **kwargs):
     if (".staging." in str(source)) != (".staging." in str(destination)) or ".replaced" in str(destination):
         time.sleep(delay)
+        if gate and not Path(gate).exists():
+            Path(gate + ".waiting").touch()  # the test may now act during the commit
+            while not Path(gate).exists():
+                time.sleep(0.02)
     return replace(source, destination, **kwargs)
 os.replace = slow
-sys.exit(main(sys.argv[2:]))
+sys.exit(main(sys.argv[3:]))
 """
 
 
-def _slow_commit(delay, *args):
-    """`lumos3d ARGS` with each rename of its commit `delay` seconds long."""
-    return subprocess.Popen([sys.executable, "-c", _SLOW_COMMIT, str(delay), *(str(a) for a in args)],
+def _slow_commit(delay, *args, gate=""):
+    """`lumos3d ARGS` with each rename of its commit `delay` seconds long and, with `gate`, held
+    until that file exists."""
+    return subprocess.Popen([sys.executable, "-c", _SLOW_COMMIT, str(delay), str(gate), *(str(a) for a in args)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
@@ -58,14 +66,17 @@ def _consistent(out, names):
 def test_row6_a_signal_during_the_renames_leaves_the_complete_new_set(tmp_path, buu, random_checkpoint, earlier_restore):
     out = shutil.copytree(earlier_restore, tmp_path / "out")
     fewer = copy_photos(buu, tmp_path / "fewer", ["2.JPG", "4.JPG", "6.JPG"])
-    process = _slow_commit(0.3, *restore_args(fewer, out / "scene.ply", random_checkpoint))
+    gate = tmp_path / "signal-sent"
+    process = _slow_commit(0.0, *restore_args(fewer, out / "scene.ply", random_checkpoint), gate=gate)
     try:
         deadline = time.monotonic() + 600
-        while not _committing(out):
+        while not (tmp_path / "signal-sent.waiting").exists():  # the commit holds at its first rename
             assert process.poll() is None and time.monotonic() < deadline, process.communicate()[1][-3000:]
             time.sleep(0.02)
-        time.sleep(0.5)  # a rename or two into the commit
+        assert _committing(out)
         process.send_signal(signal.SIGTERM)
+        time.sleep(0.2)
+        gate.touch()
         out_text, err = process.communicate(timeout=120)
     finally:
         if process.poll() is None:
@@ -77,9 +88,10 @@ def test_row6_a_signal_during_the_renames_leaves_the_complete_new_set(tmp_path, 
 
 def test_row6_a_second_run_into_the_same_folder_is_refused_naming_the_first(tmp_path, buu, random_checkpoint, earlier_restore):
     out = shutil.copytree(earlier_restore, tmp_path / "out")
-    # renames slow enough for a second run to start (seconds of imports) while the first commits
-    first = _slow_commit(1.5, *restore_args(copy_photos(buu, tmp_path / "first", ["1.JPG", "2.JPG", "3.JPG"]),
-                                            out / "scene.ply", random_checkpoint))
+    # the first run's commit waits at its first rename until the second run has come and gone
+    gate = tmp_path / "second-run-done"
+    first = _slow_commit(0.0, *restore_args(copy_photos(buu, tmp_path / "first", ["1.JPG", "2.JPG", "3.JPG"]),
+                                            out / "scene.ply", random_checkpoint), gate=gate)
     try:
         deadline = time.monotonic() + 600
         while not _committing(out):
@@ -87,6 +99,7 @@ def test_row6_a_second_run_into_the_same_folder_is_refused_naming_the_first(tmp_
             time.sleep(0.02)
         second = run_lumos3d(*restore_args(copy_photos(buu, tmp_path / "second", ["4.JPG", "5.JPG"]),
                                            out / "scene.ply", random_checkpoint))
+        gate.touch()
         _, err = first.communicate(timeout=300)
     finally:
         if first.poll() is None:
@@ -119,7 +132,7 @@ def test_row7_render_never_pairs_a_new_video_with_old_frames(tmp_path, earlier_r
     args = ("render", scene, "--orbit", 4, "-o", tmp_path / "frames", "--width", 48, "--video", tmp_path / "orbit.mp4")
     assert run_lumos3d(*args).code == 0
     before = snapshot(tmp_path)
-    stopped = interrupt_when(("render", scene, "--orbit", 100000, "-o", tmp_path / "frames", "--width", 48,
+    stopped = interrupt_when(("render", scene, "--orbit", 5000, "-o", tmp_path / "frames", "--width", 48,
                               "--video", tmp_path / "orbit.mp4"), lambda _: _video_started(tmp_path), signal.SIGTERM)
     assert stopped.code == 143, stopped.err[-3000:]
     assert snapshot(tmp_path) == before

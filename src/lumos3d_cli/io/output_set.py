@@ -67,19 +67,39 @@ def _resolved(path: Path) -> Path:
     return Path(path).expanduser().resolve(strict=False)
 
 
+def _resolved_all(paths: Sequence[Path]) -> list[Path]:
+    """`_resolved` of every path, each parent folder resolved once: a path that is not itself a
+    link resolves to its resolved parent / its name (a render of 100,000 frames spent 9 s
+    resolving each frame's path in full)."""
+    parents: dict[Path, Path] = {}
+    resolved = []
+    for path in paths:
+        path = Path(path).expanduser()
+        if path.is_symlink() or path.name in ("", ".", ".."):
+            resolved.append(_resolved(path))
+            continue
+        if path.parent not in parents:
+            parents[path.parent] = _resolved(path.parent)
+        resolved.append(parents[path.parent] / path.name)
+    return resolved
+
+
 def check_not_inputs(outputs: Sequence[Path], output_folders: Sequence[Path], inputs: Sequence[Path]) -> None:
     """InputError when an output file is an input or lies inside an input folder, or an output
     folder (one that lumos3d fills) is, contains or lies inside an input. Paths are compared after
     resolving links, so a link to an input is that input."""
     resolved_inputs = [(_resolved(path), path) for path in inputs if path is not None]
-    for output in [*outputs, *output_folders]:
-        target, is_folder = _resolved(output), output in output_folders
+    input_folders = {resolved for resolved, _ in resolved_inputs if resolved.is_dir()}
+    every_output = [*outputs, *output_folders]
+    folders = set(output_folders)
+    for output, target in zip(every_output, _resolved_all(every_output)):
+        is_folder = output in folders
         for resolved, given in resolved_inputs:
             if target == resolved:
                 raise InputError(f"{output}: is an input ({given}); lumos3d never writes over its inputs: choose another output")
             if is_folder and resolved.parent != resolved and _is_within(resolved, target):
                 raise InputError(f"{output}: would hold the outputs, but it holds the input {given}; choose another output")
-            if resolved.is_dir() and _is_within(target, resolved):
+            if resolved in input_folders and _is_within(target, resolved):
                 raise InputError(f"{output}: lies inside the input folder {given}; write the outputs outside the inputs")
 
 
