@@ -88,7 +88,7 @@ def test_one_view_and_high_bit_depth_outputs(run_cli, buu, tmp_path, random_chec
 
 def test_network_geometry_restores_only_the_views_the_network_saw(run_cli, buu, tmp_path, random_checkpoint):
     result = run_cli("restore", buu / "low", "-o", tmp_path / "o" / "scene.ply", "--checkpoint", random_checkpoint,
-                     "--preset", "fast", "--max-views", 3, "--geometry", "network", "--json")
+                     "--preset", "fast", "--max-views", 3, "--geometry", "network", "--refine-steps", 0, "--json")
     assert result.code == 0, result.err
     summary = json.loads(result.out)
     assert summary["views"] == summary["network_views"] == ["1.JPG", "13.JPG", "25.JPG"]
