@@ -12,6 +12,7 @@ from lumos3d_cli.model.appearance.operator import AppearanceOperator
 from lumos3d_cli.model.gaussian_adapter import SH_START
 from lumos3d_cli.pipeline.network_pass import run_network
 from lumos3d_cli.pipeline.presets import get_restore_preset
+from lumos3d_cli.model.appearance.photo_restoration import restore_photos
 from lumos3d_cli.pipeline.scene_stages import with_full_resolution_colours
 
 
@@ -20,7 +21,7 @@ def test_pixel_colours_are_the_photo_averaged_over_each_footprint(buu):
     model = build_model("tiny-operator", seed=0).eval()
     network = run_network(model, photos, get_restore_preset("fast"))
     identity = replace(network.prediction, appearance=AppearanceOperator.identity(1))
-    coloured = with_full_resolution_colours(identity, photos, model)
+    coloured = with_full_resolution_colours(identity, restore_photos(photos, identity.appearance.scene(0)), model)
     height, width = network.prediction.depth.shape[-2:]
     dc = coloured.params[0, ..., SH_START::(model.architecture.sh_degree + 1) ** 2]  # [V, h, w, 3] the DC of each colour
     expected = F.adaptive_avg_pool2d(photos, (height, width)).permute(0, 2, 3, 1)
@@ -33,7 +34,7 @@ def test_colour_regression_models_keep_their_colours(buu):
     photos = load_images([buu / "low" / "4.JPG"]).images
     model = build_model("tiny", seed=0).eval()
     network = run_network(model, photos, get_restore_preset("fast"))
-    assert with_full_resolution_colours(network.prediction, photos, model) is network.prediction
+    assert with_full_resolution_colours(network.prediction, None, model) is network.prediction
 
 
 def test_structure_from_motion_sees_the_models_restoration(buu):

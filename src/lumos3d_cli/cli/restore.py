@@ -63,7 +63,6 @@ def restore_command(
         from lumos3d_cli.pipeline.orbit_video import DEFAULT_ORBIT_FRAMES
         from lumos3d_cli.pipeline.restore import list_photos, restore
         from lumos3d_cli.pipeline.restore_outputs import check_view_format, restore_outputs, write_restored_scene
-        from lumos3d_cli.viewer.server import serve_scene
     if output.suffix.lower() != ".ply":
         raise InputError(f"{output}: the scene file must end in .ply", parameter="output")
     check_output_path(output, "output")
@@ -89,6 +88,8 @@ def restore_command(
     else:
         _report(scene, summary, output, video)
     if view:
+        with library_imports():  # viser (0.2 s of start-up) only when asked for
+            from lumos3d_cli.viewer.server import serve_scene
         serve_scene(output.parent, DEFAULT_HOST, port, on_ready=announce)
         raise typer.Exit(EXIT_INTERRUPTED)
 

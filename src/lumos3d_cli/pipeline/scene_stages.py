@@ -41,16 +41,17 @@ logger = logging.getLogger(__name__)
 Stage = Callable[[SceneJob], SceneJob]
 
 
-def with_full_resolution_colours(prediction: Lumos3DPrediction, photos: torch.Tensor, model: Lumos3D) -> Lumos3DPrediction:
+def with_full_resolution_colours(prediction: Lumos3DPrediction, restored: torch.Tensor | None,
+                                 model: Lumos3D) -> Lumos3DPrediction:
     """For a model that predicts a restoration operator: each pixel Gaussian's colour becomes the
-    operator applied to the photo [S, 3, H, W] at full resolution, averaged over the Gaussian's
-    footprint (the network image only saw a resized copy, which would blur the colours)."""
+    operator's restoration of its photo at full resolution, `restored` [S, 3, H, W] (the S views
+    the network saw, `operator_restoration`), averaged over the Gaussian's footprint (the network
+    image only saw a resized copy, which would blur the colours)."""
     if prediction.appearance is None:
         return prediction
     height, width = prediction.depth.shape[-2:]
     with torch.no_grad():
-        restored = restore_photos(photos.to(prediction.params.device), prediction.appearance.scene(0))
-        colours = footprint_colours(restored, height, width)
+        colours = footprint_colours(restored.to(prediction.params.device), height, width)
         params = with_operator_colours(prediction.params, colours[None], model.architecture.sh_degree)
     return replace(prediction, params=params)
 
@@ -136,7 +137,10 @@ def fusion(job: SceneJob) -> SceneJob:
     job.grid_size = dense_grid_size(job.network.network_size, (job.photos.shape[-1], job.photos.shape[-2]),
                                     preset.gaussian_grid)
     prediction, grid_geometry = densify_grid(job.network.prediction, job.geometry, job.grid_size)
-    prediction = with_full_resolution_colours(prediction, job.photos[job.selected], job.model)
+    if job.has_operator:  # once: the Gaussians' colours here, refinement's targets later
+        job.restored_photos = operator_restoration(job.network, job.photos, job.selected)
+    restored = None if job.restored_photos is None else job.restored_photos[job.selected]
+    prediction = with_full_resolution_colours(prediction, restored, job.model)
     keep = None if job.fuse_views is None else torch.tensor([bool(job.fuse_views[i]) for i in job.selected])
     if keep is not None and not bool(keep.any()):
         raise InputError("selects none of the network's views", parameter="fuse_views")
@@ -180,7 +184,7 @@ def refinement(job: SceneJob) -> SceneJob:
         # a one-photo scene's view is the photo restored in 2D (`photo_restoration`), which no
         # refinement changes: its steps were 3.6 s of a 3.8 s restore
         return job
-    if job.has_operator:
+    if job.has_operator and job.restored_photos is None:
         job.restored_photos = operator_restoration(job.network, job.photos, job.selected)
     targets, cameras = refinement_targets(job.network, job.model, job.photos, job.restored_photos, job.selected,
                                           job.names, job.geometry.cameras, job.fuse_views)
