@@ -84,7 +84,8 @@ def main() -> None:
     rows = []
     for index, strength in enumerate(STRENGTHS):
         label = f"{strength:g}" + (" (head alone)" if strength == 0 else " (key alone)" if strength == 1 else "")
-        label += " **default**" if strength == EXPOSURE_PRIOR_STRENGTH else ""
+        defaults = [mode for mode, value in EXPOSURE_PRIOR_STRENGTH.items() if value == strength]
+        label += f" **default ({', '.join(defaults)})**" if defaults else ""
         rows.append([label, *(_cell(scores, index) for scores in results)])
     table = markdown_table(["prior strength", *columns], rows)
     print(table)

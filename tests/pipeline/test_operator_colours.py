@@ -76,7 +76,9 @@ def test_the_exposure_prior_moves_the_scene_towards_the_key(buu):
     keyed = run_network(model, photos, get_restore_preset("fast", exposure_prior=1.0))
     # about 2 stops back to the key (buu's reference is a little brighter); the default takes 3/4 of them
     assert 1.0 < keyed.exposure_stops < 3.0
-    assert network.exposure_stops == pytest.approx(EXPOSURE_PRIOR_STRENGTH * keyed.exposure_stops, rel=1e-5)
+    assert network.exposure_stops == pytest.approx(EXPOSURE_PRIOR_STRENGTH["low-light"] * keyed.exposure_stops, rel=1e-5)
+    over = run_network(model, photos, get_restore_preset("fast"), "over-exposure")  # each mode has its own
+    assert over.exposure_stops == pytest.approx(EXPOSURE_PRIOR_STRENGTH["over-exposure"] * keyed.exposure_stops, rel=1e-5)
     assert float(keyed.prediction.appearance.apply(images).mean()) == pytest.approx(EXPOSURE_KEY, abs=2e-3)
     brightness = [float(n.prediction.appearance.apply(images).mean()) for n in (plain, network, keyed)]
     assert brightness[0] == pytest.approx(float(images.mean()), abs=1e-4) and brightness[0] < brightness[1] < brightness[2]

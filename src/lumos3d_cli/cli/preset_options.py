@@ -11,7 +11,7 @@ MAX_GAUSSIANS = typer.Option(
 GAUSSIAN_GRID = typer.Option(
     None, "--gaussian-grid", help="Pixel Gaussians per network pixel along each side, 1 to 4 (default: the preset's; at most the photos' resolution).")
 EXPOSURE_PRIOR = typer.Option(
-    None, "--exposure-prior", help="How far the scene's overall brightness moves towards a well-exposed key, 0 (the model's own) to 1 (default: 0.75).")
+    None, "--exposure-prior", help="How far the scene's overall brightness moves towards a well-exposed key, 0 (the model's own) to 1 (default: 0.75 in low light, 0.5 over-exposed).")
 DENOISE_PHOTO = typer.Option(
     True, "--denoise/--no-denoise",
     help="A single photo: remove the sensor noise its restoration amplified, in proportion to its measured level.")

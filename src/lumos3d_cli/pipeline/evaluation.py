@@ -19,6 +19,7 @@ from lumos3d_cli.eval.contact_sheet import contact_sheet
 from lumos3d_cli.io.file_digest import file_sha256
 from lumos3d_cli.io.image_write import write_image
 from lumos3d_cli.io.output_set import OutputSet
+from lumos3d_cli.model.appearance.exposure_prior import prior_strength
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.pipeline.lom_eval import PROTOCOLS, SceneEvaluation, evaluate_lom_scene
 from lumos3d_cli.pipeline.model_loading import load_restoration_model
@@ -93,7 +94,7 @@ def evaluate_lom(
     document = {
         "root": str(root), "mode": mode, "protocol": protocol, "preset": settings.name, "geometry": geometry,
         "refine_steps": settings.refine_steps, "max_gaussians": settings.max_gaussians,
-        "gaussian_grid": settings.gaussian_grid, "exposure_prior": settings.exposure_prior,
+        "gaussian_grid": settings.gaussian_grid, "exposure_prior": prior_strength(mode, settings.exposure_prior),
         "fill_unobserved": settings.fill_unobserved,
         "max_views": limit, "checkpoint": {"name": weights.name, "sha256": file_sha256(weights)},
         "lpips": meter.lpips_note, "rows": rows,

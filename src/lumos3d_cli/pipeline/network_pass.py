@@ -11,7 +11,7 @@ import torch
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.field_of_view import FALLBACK_FOV_DEGREES, longer_side_fov, plausible_intrinsics
 from lumos3d_cli.io.cameras import Cameras
-from lumos3d_cli.model.appearance.exposure_prior import exposure_prior_stops
+from lumos3d_cli.model.appearance.exposure_prior import exposure_prior_stops, prior_strength
 from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DPrediction
 from lumos3d_cli.model.preprocess import PreparedImages, prepare_images
 from lumos3d_cli.pipeline.presets import RestorePreset
@@ -69,18 +69,19 @@ def network_image_size(model: Lumos3D, preset: RestorePreset) -> int:
     return preset.network_image_size(model.architecture.image_size, model.architecture.patch_size)
 
 
-def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset) -> NetworkPass:
+def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mode: str = "low-light") -> NetworkPass:
     """images [V, 3, H, W] at the photos' size -> the network's predictions for them; a view
     whose predicted field of view no lens has gets a typical one (`geometry.field_of_view`), and
-    a predicted restoration operator is followed by the preset's exposure prior
-    (`model.appearance.exposure_prior`)."""
+    a predicted restoration operator is followed by the exposure prior
+    (`model.appearance.exposure_prior`) at the preset's strength or the `mode`'s own."""
     prepared = prepare_images(images, network_image_size(model, preset), model.architecture.patch_size)
     device = next(model.parameters()).device
     with torch.no_grad():
         prediction = model.predict(prepared.images[None].to(device))
     exposure_stops = None
     if prediction.appearance is not None:
-        stops = exposure_prior_stops(prediction.appearance, prepared.images[None].to(device), preset.exposure_prior)
+        stops = exposure_prior_stops(prediction.appearance, prepared.images[None].to(device),
+                                     prior_strength(mode, preset.exposure_prior))
         prediction, exposure_stops = replace(prediction, appearance=prediction.appearance.with_gain(stops)), float(stops[0])
     intrinsics, replaced = plausible_intrinsics(prediction.intrinsics[0], prepared.network_size)
     if bool(replaced.any()):

@@ -6,8 +6,8 @@ two speed settings: the size structure-from-motion sees the photos at (geometry.
 resolution the budget renders the Gaussians' weights at; the size of the images refinement
 fits (`balanced` and `best` fit LOM's 500x375 photos at their own size, `fast` at most
 256 px); the decay of refinement's learning rates, the strength of the exposure prior
-(model.appearance.exposure_prior), whether the rendered views' uncovered pixels are filled
-(render.hole_filling) and whether a one-photo restore's amplified noise is removed
+(model.appearance.exposure_prior, one per mode), whether the rendered views' uncovered pixels are
+filled (render.hole_filling) and whether a one-photo restore's amplified noise is removed
 (model.appearance.amplified_noise), all four the same in every preset."""
 
 from __future__ import annotations
@@ -16,7 +16,6 @@ from dataclasses import dataclass, replace
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.sfm import SFM_LONG_SIDE
-from lumos3d_cli.model.appearance.exposure_prior import EXPOSURE_PRIOR_STRENGTH
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET
 from lumos3d_cli.refine.settings import RefineSettings
 
@@ -44,7 +43,9 @@ class RestorePreset:
     budget_resolution: float = 1.0  # the scale the Gaussian budget's weights are rendered at
     refine_side: int = RefineSettings.max_side  # the longer side of the images refinement fits (never enlarged)
     refine_lr_decay: float = REFINE_LR_DECAY  # the factor refinement's learning rates fall by every 100 steps
-    exposure_prior: float = EXPOSURE_PRIOR_STRENGTH  # how far the scene's brightness moves to the key (0: none)
+    # how far the scene's brightness moves to the key (0: none; None: the mode's own strength,
+    # model.appearance.exposure_prior.EXPOSURE_PRIOR_STRENGTH)
+    exposure_prior: float | None = None
     fill_unobserved: bool = True  # fill the rendered views' pixels no Gaussian covers (render.hole_filling)
     denoise_photo: bool = True  # a one-photo restore's amplified noise removed (model.appearance.amplified_noise)
 

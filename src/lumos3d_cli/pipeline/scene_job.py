@@ -10,6 +10,7 @@ from pathlib import Path
 import torch
 
 from lumos3d_cli.io.gaussians import Gaussians
+from lumos3d_cli.model.appearance.exposure_prior import prior_strength
 from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D
 from lumos3d_cli.pipeline.network_pass import NetworkPass
 from lumos3d_cli.pipeline.presets import RestorePreset
@@ -90,4 +91,5 @@ removed; None: not one photo), `timings` seconds per stage.
         """summary.json's exposure_prior: its strength and the gain in stops it gave the scene."""
         if self.network is None or self.network.exposure_stops is None:
             return None
-        return {"strength": self.preset.exposure_prior, "stops": round(self.network.exposure_stops, 4)}
+        return {"strength": prior_strength(self.mode, self.preset.exposure_prior),
+                "stops": round(self.network.exposure_stops, 4)}

@@ -58,7 +58,7 @@ def with_full_resolution_colours(prediction: Lumos3DPrediction, restored: torch.
 
 def _network_pass(job: SceneJob, selected: list[int]) -> NetworkPass:
     job.progress.start("network", 1)
-    network = run_network(job.model, job.photos[selected], job.preset)
+    network = run_network(job.model, job.photos[selected], job.preset, job.mode)
     job.progress.advance("network")
     return network
 

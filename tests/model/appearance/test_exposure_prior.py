@@ -98,9 +98,9 @@ def test_strength_interpolates_in_stops_up_to_the_highlight_headroom():
 def test_bf16_images_and_one_view_give_the_float32_gain():
     operator = _operator(batch=1, views=1)
     images = 0.1 * torch.rand(1, 1, 3, 16, 20, generator=torch.Generator().manual_seed(5))
-    expected = exposure_prior_stops(operator, images)
+    expected = exposure_prior_stops(operator, images, 0.75)
     with torch.autocast("cpu", dtype=torch.bfloat16):
-        stops = exposure_prior_stops(operator, images.bfloat16())
+        stops = exposure_prior_stops(operator, images.bfloat16(), 0.75)
     assert stops.dtype == torch.float32 and torch.isfinite(stops).all()
     assert stops.item() == pytest.approx(expected.item(), abs=0.05)  # bf16 rounding of the photo only
 
@@ -133,4 +133,4 @@ def test_a_non_finite_operator_is_named_not_passed_on():
     operator = _operator(batch=1, views=1)
     operator.curve_slopes[0, 0, 3] = float("nan")
     with pytest.raises(NonFiniteError, match="exposure prior"):
-        exposure_prior_stops(operator, torch.full((1, 1, 3, 8, 8), 0.3))
+        exposure_prior_stops(operator, torch.full((1, 1, 3, 8, 8), 0.3), 0.75)
