@@ -21,6 +21,7 @@ from lumos3d_cli.render.kernels.projection import (
     covariances,
     ewa_jacobian,
     project_backward,
+    projected_covariance,
     quaternion_backward,
     rotation,
     sh_colour,
@@ -192,6 +193,38 @@ def _conics(cov2d_entries, opacities, eps2d, antialiased):
         conics[i, 0], conics[i, 1], conics[i, 2] = a, b, c
         opacities_eff[i] = opacities[i] * compensation
     return conics, opacities_eff
+
+
+@njit
+def _forward_projected_covariances(quats, scales, viewmat, jacobians):
+    n = quats.shape[0]
+    out = np.empty((n, 3))
+    q, rq = np.empty(4), np.empty((3, 3))
+    for i in range(n):
+        unit_quaternion(quats, i, q)
+        rotation(q, rq)
+        jacobian = (jacobians[i, 0], jacobians[i, 1], jacobians[i, 2], jacobians[i, 3])
+        out[i, 0], out[i, 1], out[i, 2] = projected_covariance(rq, scales, i, viewmat, jacobian)
+    return out
+
+
+@pytest.mark.parametrize("scale", [1e-6, 1.0, 1e4])
+def test_the_forward_passes_2d_covariance_is_the_twins(scale):
+    """The forward pass's shortcut (projected_covariance: J R_view R_q S as one 2x3 product) against
+    the twin's world covariance -> camera covariance -> EWA chain, at tiny, unit and huge scales."""
+    g = torch.Generator().manual_seed(7)
+    quats = torch.randn(64, 4, generator=g, dtype=torch.float64)
+    quats[0] = 0.0  # degenerate: the identity
+    scales = (torch.rand(64, 3, generator=g, dtype=torch.float64) + 0.05) * scale
+    scales[1] = torch.tensor([1e-3, 1.0, 1e3], dtype=torch.float64) * scale  # needle-like
+    viewmat = _viewmat(8)
+    jacobians = torch.randn(64, 4, generator=g, dtype=torch.float64) * 30
+    _, cov_c = world_to_camera_reference(torch.zeros(64, 3, dtype=torch.float64), covariance_reference(quats, scales), viewmat)
+    j = torch.zeros(64, 2, 3, dtype=torch.float64)
+    j[:, 0, 0], j[:, 0, 2], j[:, 1, 1], j[:, 1, 2] = jacobians.unbind(1)
+    twin = j @ cov_c @ j.transpose(1, 2)
+    ours = _forward_projected_covariances(quats.numpy(), scales.numpy(), viewmat.numpy(), jacobians.numpy())
+    _close(ours, torch.stack([twin[:, 0, 0], twin[:, 0, 1], twin[:, 1, 1]], dim=1), tolerance=1e-12, name="cov2d")
 
 
 @njit

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import importlib
+import logging
+import os
 import sys
 import traceback
 from collections.abc import Callable
@@ -154,4 +156,19 @@ def _run(args: list[str], debug: bool, claim_signals: Callable[[], None]) -> int
 
 
 def run() -> None:
-    sys.exit(main())
+    """The `lumos3d` script: `main`, then the process ends without the interpreter's teardown.
+
+    When `main` returns, every output is committed and closed and every temporary folder removed
+    (each by its own context manager); what Python would still do is unload torch, numba and
+    pycolmap and free the scene, about 1 s after a restore of 25 photos on 2 cores (measured:
+    33.7 s wall for 32.6 s to the last atexit handler). So the streams and log handlers are flushed
+    and the process exits at once. An exception out of `main` (only with --debug) takes the usual
+    way, with its traceback."""
+    code = main()
+    logging.shutdown()
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+    except OSError:  # a closed pipe: what was written is all the reader takes; the code stands
+        pass
+    os._exit(code)

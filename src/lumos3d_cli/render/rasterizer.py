@@ -152,9 +152,9 @@ class RasterizeGaussians(torch.autograd.Function):
             _array(means), _array(quats), _array(scales), _array(opacities), _array(sh), ctx.view,
             fx, fy, cx, cy, float(settings.width), float(settings.height), settings.sh_degree,
             settings.eps2d, settings.antialiased, radii,
-            np.ascontiguousarray(per_gaussian[:, 0:2]), np.ascontiguousarray(per_gaussian[:, 2:5]),
-            np.ascontiguousarray(per_gaussian[:, 9]), np.ascontiguousarray(per_gaussian[:, 5]),
-            np.ascontiguousarray(per_gaussian[:, 6:9]),
+            # Column views of one row-major array: each Gaussian's cotangents share a cache line,
+            # and no [N]-sized copies are made.
+            per_gaussian[:, 0:2], per_gaussian[:, 2:5], per_gaussian[:, 9], per_gaussian[:, 5], per_gaussian[:, 6:9],
             v_means, v_quats, v_scales, v_opacities, v_sh,
         )
         return (

@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numba import njit, prange
 
 from lumos3d_cli.render.constants import TILE_SIZE
+from lumos3d_cli.render.kernels.radix_sort import stable_argsort_uint32
 
 
 @njit(cache=True, inline="always")
@@ -54,23 +56,21 @@ def _fill_per_chunk(order, means2d, radii, tiles_x, tiles_y, chunk, cursor, entr
                     cursor[ci, tile] += 1
 
 
-def front_to_back(radii: np.ndarray, depths: np.ndarray) -> np.ndarray:
+def front_to_back(radii: np.ndarray, depths: np.ndarray, threads: int = 1) -> np.ndarray:
     """Indices [M] int64 of the drawn Gaussians (radii [N,2] not both 0), sorted by (depth,
     index) from depths [N].
 
-    float32 depths are sorted as one uint64 key per Gaussian, (depth's bits in an order-keeping
-    form) << 32 | index: a plain sort of distinct integers, and ties in depth fall to the index
-    without a stable sort. float64 depths (tests, gradcheck) take numpy's stable argsort."""
+    float32 depths are sorted by a stable radix sort (kernels/radix_sort.py, `threads` chunks a
+    pass) of their bits in an order-keeping form, the drawn Gaussians given in index order, so
+    ties in depth fall to the index. float64 depths (tests, gradcheck) take numpy's stable argsort."""
     drawn = np.flatnonzero((radii[:, 0] > 0) | (radii[:, 1] > 0))
-    if depths.dtype != np.float32 or depths.shape[0] >= 2**32:
+    if depths.dtype != np.float32:
         return drawn[np.argsort(depths[drawn], kind="stable")]
-    bits = (depths[drawn] + np.float32(0.0)).view(np.uint32)  # + 0.0 turns -0.0 into 0.0
+    bits = (depths + np.float32(0.0)).view(np.uint32)  # + 0.0 turns -0.0 into 0.0
     # IEEE-754 bits -> unsigned integers in the floats' order: negatives have all bits flipped,
     # the others only the sign bit.
-    bits = np.where(bits >> np.uint32(31), ~bits, bits | np.uint32(0x80000000))
-    keys = (bits.astype(np.uint64) << np.uint64(32)) | drawn.astype(np.uint64)
-    keys.sort()
-    return (keys & np.uint64(0xFFFFFFFF)).astype(np.int64)
+    keys = np.where(bits >> np.uint32(31), ~bits, bits | np.uint32(0x80000000))
+    return stable_argsort_uint32(keys, drawn, threads)
 
 
 def bin_and_sort(
@@ -85,7 +85,7 @@ def bin_and_sort(
     """
     tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
     tiles_y = (height + TILE_SIZE - 1) // TILE_SIZE
-    order = front_to_back(radii, depths)
+    order = front_to_back(radii, depths, numba.get_num_threads())
     n = order.shape[0]
     chunks = max(1, min(chunks, n))
     chunk = (n + chunks - 1) // chunks if n else 1

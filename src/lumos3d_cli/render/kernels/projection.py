@@ -158,6 +158,32 @@ def cov2d(cov_c, jacobian):
     return a, b, c
 
 
+@njit(cache=True, inline="always")
+def projected_covariance(rq, scales, i, viewmat, jacobian):
+    """Entries (a, b, c) of the 2D covariance J R_view R_q S^2 R_q^T R_view^T J^T, the same as
+    cov2d(cov_c, jacobian) after `covariances`, through the 2x3 product M = J R_view R_q S and
+    a, b, c = the entries of M M^T: a third of the multiplications, no [3,3] scratch (the
+    forward pass needs only the 2D covariance; the backward keeps the 3x3 steps it differentiates)."""
+    j00, j02, j11, j12 = jacobian
+    # T = J R_view (2x3): J's zeros leave two rows of three.
+    t00 = j00 * viewmat[0, 0] + j02 * viewmat[2, 0]
+    t01 = j00 * viewmat[0, 1] + j02 * viewmat[2, 1]
+    t02 = j00 * viewmat[0, 2] + j02 * viewmat[2, 2]
+    t10 = j11 * viewmat[1, 0] + j12 * viewmat[2, 0]
+    t11 = j11 * viewmat[1, 1] + j12 * viewmat[2, 1]
+    t12 = j11 * viewmat[1, 2] + j12 * viewmat[2, 2]
+    s0, s1, s2 = float(scales[i, 0]), float(scales[i, 1]), float(scales[i, 2])
+    # M = T R_q S, column by column.
+    m00 = (t00 * rq[0, 0] + t01 * rq[1, 0] + t02 * rq[2, 0]) * s0
+    m01 = (t00 * rq[0, 1] + t01 * rq[1, 1] + t02 * rq[2, 1]) * s1
+    m02 = (t00 * rq[0, 2] + t01 * rq[1, 2] + t02 * rq[2, 2]) * s2
+    m10 = (t10 * rq[0, 0] + t11 * rq[1, 0] + t12 * rq[2, 0]) * s0
+    m11 = (t10 * rq[0, 1] + t11 * rq[1, 1] + t12 * rq[2, 1]) * s1
+    m12 = (t10 * rq[0, 2] + t11 * rq[1, 2] + t12 * rq[2, 2]) * s2
+    return (m00 * m00 + m01 * m01 + m02 * m02, m00 * m10 + m01 * m11 + m02 * m12,
+            m10 * m10 + m11 * m11 + m12 * m12)
+
+
 @njit(cache=True)
 def conic(a0, b, c0, eps2d, antialiased):
     """Dilate the 2D covariance [[a0, b], [b, c0]] by eps2d I and invert it.
@@ -202,13 +228,13 @@ def _project_one(i, gaussians, camera, settings, outputs, work):
     """Project Gaussian i; leaves radii[i] = 0 (and the other outputs untouched) when it is
     culled. Tuples: gaussians (means, quats, scales, opacities, sh); camera (viewmat, campos
     [3], fx, fy, cx, cy, width, height); settings (sh_degree, near, far, eps2d, antialiased);
-    outputs (means2d, conics, depths, opacities_eff, colours, radii); work (q [4], rq, cov,
-    cov_c, scratch [3,3], basis [K])."""
+    outputs (means2d, conics, depths, opacities_eff, colours, radii); work (q [4], rq [3,3],
+    basis [K])."""
     means, quats, scales, opacities, sh = gaussians
     viewmat, campos, fx, fy, cx, cy, width, height = camera
     sh_degree, near, far, eps2d, antialiased = settings
     means2d, conics, depths, opacities_eff, colours, radii = outputs
-    q, rq, cov, cov_c, scratch, basis = work
+    q, rq, basis = work
     radii[i, 0] = 0
     radii[i, 1] = 0
     x, y, z = camera_space(means, i, viewmat)
@@ -216,9 +242,8 @@ def _project_one(i, gaussians, camera, settings, outputs, work):
         return
     unit_quaternion(quats, i, q)
     rotation(q, rq)
-    covariances(rq, scales, i, viewmat, cov, cov_c, scratch)
     tx, ty, _, _ = clamped_xy(x, y, z, fx, fy, cx, cy, width, height)
-    a0, b, c0 = cov2d(cov_c, ewa_jacobian(z, tx, ty, fx, fy))
+    a0, b, c0 = projected_covariance(rq, scales, i, viewmat, ewa_jacobian(z, tx, ty, fx, fy))
     conic_a, conic_b, conic_c, det, compensation = conic(a0, b, c0, eps2d, antialiased)
     if not det > 0.0:
         return
@@ -263,10 +288,7 @@ def project_forward(
     settings = (sh_degree, near, far, eps2d, antialiased)
     outputs = (means2d, conics, depths, opacities_eff, colours, radii)
     for chunk in prange((n + _CHUNK - 1) // _CHUNK):
-        work = (
-            np.empty(4), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)),
-            np.empty((sh_degree + 1) * (sh_degree + 1)),
-        )
+        work = (np.empty(4), np.empty((3, 3)), np.empty((sh_degree + 1) * (sh_degree + 1)))
         for i in range(chunk * _CHUNK, min(n, (chunk + 1) * _CHUNK)):
             _project_one(i, gaussians, camera, settings, outputs, work)
 
