@@ -2,7 +2,8 @@
 
 The photos go in already brightened (SIFT finds few features in a dark photo); each is resized
 so that its long side is at most `long_side` at its own aspect ratio (a photo stretched into a
-common tensor is un-stretched here), written as a PNG into a temporary folder, and registered
+common tensor is un-stretched here), written as an uncompressed BMP into a temporary folder (0.02 s
+for 25 photos of 500x375, where PNG took 0.43 s: the pixels are the same), and registered
 there. Cameras, sparse points and observations come back in pixels of each photo at its own size.
 
 Choices, measured on LOM buu (500x375) and the Strecha scenes (768x512) on 2 CPU cores
@@ -169,7 +170,7 @@ def _image_files(photo_sizes: Sequence[tuple[int, int]], shared_camera: bool
     """Each photo's file in SfM's folder (named by input index) and how COLMAP assigns cameras:
     one for all photos of one camera; one per photo size when the sizes differ, a sub-folder
     each (COLMAP's single camera refuses other image sizes); else one per photo."""
-    files = [f"{index:05d}.png" for index in range(len(photo_sizes))]
+    files = [f"{index:05d}.bmp" for index in range(len(photo_sizes))]
     if not shared_camera:
         return files, pycolmap.CameraMode.PER_IMAGE
     if len(set(photo_sizes)) == 1:
@@ -291,8 +292,7 @@ def register_photos(
             folder.mkdir()
             for index, file in enumerate(files):
                 (folder / file).parent.mkdir(exist_ok=True)
-                cv2.imwrite(str(folder / file), _to_uint8(images[index], *sfm_sizes[index]),
-                            [cv2.IMWRITE_PNG_COMPRESSION, 1])
+                cv2.imwrite(str(folder / file), _to_uint8(images[index], *sfm_sizes[index]))
             pycolmap.set_random_seed(0)
             # The images enter the database in input order first: the extractor then fills in
             # their features under those ids, however its threads finish (module docstring).
