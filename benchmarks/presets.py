@@ -28,13 +28,13 @@ from lumos3d_cli.pipeline.presets import RESTORE_PRESETS  # noqa: E402
 
 STEPS = (0, 25, 50, 100, 200, 400)
 PLOT = REPO / "docs" / "images" / "preset-trade.png"
-# Read off this benchmark's run of 2026-11-25 with refinement's decaying learning rates (the table it writes); rewrite when the numbers move.
+# Read off this benchmark's run of 2026-11-25 (evening, after issue 37's second round of CPU work; the table it
+# writes); rewrite when the numbers move.
 DEFAULTS_REASON = (
-    "How the defaults were picked. Every row above is one run (2026-11-25, this release's low-light head with "
-    "the exposure prior at 0.75, the pixels no Gaussian covers filled from the render around them, and "
-    "refinement's learning rates falling by a tenth over 200 steps in every preset; the `fast` rows of 15 to 100 "
-    "steps shared the cores with a niced test run for a few minutes, so their times may read up to 10 % high; "
-    "`balanced` and `best` at 25 steps, the same work, took 93 and 85 s: times differ by about that much run to run). "
+    "How the defaults were picked. Every row above is one run on the idle machine (2026-11-25, this release's "
+    "low-light head with the exposure prior at 0.75, the pixels no Gaussian covers filled from the render around "
+    "them, and refinement's learning rates falling by a tenth over 200 steps in every preset; `balanced` and "
+    "`best` at 25 steps, the same work, took 29.8 and 29.2 s: times differ by about that much run to run). "
     "Refinement's first steps are what lift every preset: they take the views from sharpness about 0.5 to "
     "0.8 (they are fitted to the operator applied to the full-resolution photos) and add 0.7-1.3 dB on both "
     "protocols. With the decay the later steps no longer lose what the first ones gained (at constant rates "
@@ -44,9 +44,10 @@ DEFAULTS_REASON = (
     "views up to 32, voxels of one pixel footprint, refinement against the photos at their own size) stopped "
     "at 25 steps. `fast` runs the network at 0.75x without view-dependent colour, structure-from-motion on "
     "photos of at most 384 px, the budget's weights at half resolution, and 15 refinement steps at 256 px: "
-    "0.45x `balanced`'s time, 0.55 dB below it on holdout and 0.73 dB on context (issue 16's goal: within "
-    "1 dB at half the time or less). `best` refines 200 steps: +0.11 dB and +0.002 SSIM on holdout, +0.05 dB "
-    "and +0.002 SSIM on context, sharpness 0.85 against 0.83, in 2.4x `balanced`'s time. So the three presets "
+    "0.53x `balanced`'s time, 0.55 dB below it on holdout and 0.73 dB on context (issue 16's goal was within "
+    "1 dB at half the time or less: `balanced` gained more from issue 37's CPU work than `fast`, whose time is "
+    "mostly structure-from-motion and start-up). `best` refines 200 steps: +0.11 dB and +0.002 SSIM on holdout, "
+    "+0.05 dB and +0.002 SSIM on context, sharpness 0.85 against 0.83, in 2.9x `balanced`'s time. So the three presets "
     "are ordered by time and by PSNR and SSIM on both protocols, but `best`'s lead is small: issue 16's goal "
     "for it (+1.5 dB on holdout within 5x) is not met, and at the ground truth's mean grey (`psnr_gt_mean`) "
     "`best` scores 0.09 dB below `balanced` on holdout, so part of its lead is brightness; 50 steps lead "
