@@ -159,19 +159,24 @@ def cov2d(cov_c, jacobian):
 
 
 @njit(cache=True, inline="always")
+def jacobian_product(jacobian, matrix):
+    """The entries (row 0, then row 1) of the 2x3 product J matrix[:, :3], J = [[j00, 0, j02],
+    [0, j11, j12]] given as jacobian (j00, j02, j11, j12): J's zeros leave two terms an entry."""
+    j00, j02, j11, j12 = jacobian
+    return (
+        j00 * matrix[0, 0] + j02 * matrix[2, 0], j00 * matrix[0, 1] + j02 * matrix[2, 1],
+        j00 * matrix[0, 2] + j02 * matrix[2, 2], j11 * matrix[1, 0] + j12 * matrix[2, 0],
+        j11 * matrix[1, 1] + j12 * matrix[2, 1], j11 * matrix[1, 2] + j12 * matrix[2, 2],
+    )
+
+
+@njit(cache=True, inline="always")
 def projected_covariance(rq, scales, i, viewmat, jacobian):
     """Entries (a, b, c) of the 2D covariance J R_view R_q S^2 R_q^T R_view^T J^T, the same as
     cov2d(cov_c, jacobian) after `covariances`, through the 2x3 product M = J R_view R_q S and
     a, b, c = the entries of M M^T: a third of the multiplications, no [3,3] scratch (the
     forward pass needs only the 2D covariance; the backward keeps the 3x3 steps it differentiates)."""
-    j00, j02, j11, j12 = jacobian
-    # T = J R_view (2x3): J's zeros leave two rows of three.
-    t00 = j00 * viewmat[0, 0] + j02 * viewmat[2, 0]
-    t01 = j00 * viewmat[0, 1] + j02 * viewmat[2, 1]
-    t02 = j00 * viewmat[0, 2] + j02 * viewmat[2, 2]
-    t10 = j11 * viewmat[1, 0] + j12 * viewmat[2, 0]
-    t11 = j11 * viewmat[1, 1] + j12 * viewmat[2, 1]
-    t12 = j11 * viewmat[1, 2] + j12 * viewmat[2, 2]
+    t00, t01, t02, t10, t11, t12 = jacobian_product(jacobian, viewmat)  # T = J R_view
     s0, s1, s2 = float(scales[i, 0]), float(scales[i, 1]), float(scales[i, 2])
     # M = T R_q S, column by column.
     m00 = (t00 * rq[0, 0] + t01 * rq[1, 0] + t02 * rq[2, 0]) * s0
@@ -342,12 +347,7 @@ def cov2d_backward(cov_c, jacobian, v_cov2d, v_cov_c, jm):
             v_cov_c[r, col] = (
                 jm[0, r] * (m00 * jm[0, col] + m01 * jm[1, col]) + jm[1, r] * (m01 * jm[0, col] + m11 * jm[1, col])
             )
-    jc00 = j00 * cov_c[0, 0] + j02 * cov_c[2, 0]
-    jc01 = j00 * cov_c[0, 1] + j02 * cov_c[2, 1]
-    jc02 = j00 * cov_c[0, 2] + j02 * cov_c[2, 2]
-    jc10 = j11 * cov_c[1, 0] + j12 * cov_c[2, 0]
-    jc11 = j11 * cov_c[1, 1] + j12 * cov_c[2, 1]
-    jc12 = j11 * cov_c[1, 2] + j12 * cov_c[2, 2]
+    jc00, jc01, jc02, jc10, jc11, jc12 = jacobian_product(jacobian, cov_c)
     v_j00 = 2.0 * (m00 * jc00 + m01 * jc10)
     v_j02 = 2.0 * (m00 * jc02 + m01 * jc12)
     v_j11 = 2.0 * (m01 * jc01 + m11 * jc11)
