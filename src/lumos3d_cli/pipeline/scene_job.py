@@ -35,9 +35,9 @@ class SceneJob:
     `grid_size` (the pixel Gaussians' grid per view, width x height), `gaussians` and `counts`,
     `budget` (what `fit_budget` kept, summary.json's gaussians.budget), `refinement` (its summary;
     None: not refined), `restored_photos` [V, 3, H, W] (the operator applied to every photo, CPU;
-    None for a regression model or before it is needed), `photo_restoration` [1, 3, H, W] (a
+    set by the fusion; None for a regression model), `photo_restoration` [1, 3, H, W] (a
     one-photo scene's 2D restoration) and `denoising` (its measured noise and whether it was
-removed; None: not one photo), `timings` seconds per stage.
+    removed; None: not one photo), `timings` seconds per stage.
     """
 
     photos: torch.Tensor

@@ -184,8 +184,6 @@ def refinement(job: SceneJob) -> SceneJob:
         # a one-photo scene's view is the photo restored in 2D (`photo_restoration`), which no
         # refinement changes: its steps were 3.6 s of a 3.8 s restore
         return job
-    if job.has_operator and job.restored_photos is None:
-        job.restored_photos = operator_restoration(job.network, job.photos, job.selected)
     targets, cameras = refinement_targets(job.network, job.model, job.photos, job.restored_photos, job.selected,
                                           job.names, job.geometry.cameras, job.fuse_views)
     result = refine_scene(job.gaussians, targets, cameras, job.preset.refine_steps, job.progress, job.preset.refine_side,
@@ -203,8 +201,6 @@ def photo_restoration(job: SceneJob) -> SceneJob:
     preset's `denoise_photo` that noise is measured and removed (`model.appearance.amplified_noise`)."""
     if len(job.names) != 1 or not job.has_operator:
         return job
-    if job.restored_photos is None:
-        job.restored_photos = operator_restoration(job.network, job.photos, job.selected)
     job.photo_restoration = job.restored_photos
     if job.preset.denoise_photo:
         denoised = denoise_photo(job.restored_photos[0])
