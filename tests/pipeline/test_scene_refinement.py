@@ -42,6 +42,30 @@ def test_restore_refines_and_reports_the_loss_curve(run_cli, buu, tmp_path, rand
     assert json.loads(plain.out)["refinement"] is None  # 0 steps: the forward pass as it is
 
 
+def test_restore_densifies_within_the_gaussian_cap(run_cli, buu, tmp_path, random_checkpoint):
+    """`--densify` splits and clones during refinement and says so in summary.json; the scene
+    never exceeds `--max-gaussians` (checked in the written .ply with plyfile)."""
+    from plyfile import PlyData
+
+    photos = _photos(buu, tmp_path, ["1.JPG", "2.JPG", "3.JPG"])
+    common = ["--checkpoint", random_checkpoint, "--geometry", "network", "--preset", "fast", "--refine-steps", 20,
+              "--json"]
+    grown = run_cli("restore", photos, "-o", tmp_path / "grown" / "scene.ply", "--densify", *common)
+    assert grown.code == 0, grown.err
+    summary = json.loads(grown.out)
+    steps = summary["refinement"]["densification"]
+    assert [step["step"] for step in steps] == [10, 20]
+    assert summary["gaussians"]["kept"] == steps[-1]["gaussians"] == len(PlyData.read(tmp_path / "grown" / "scene.ply")["vertex"])
+    assert steps[0]["split"] + steps[0]["cloned"] > 0
+    start = steps[0]["gaussians"] - steps[0]["split"] - steps[0]["cloned"] + steps[0]["pruned"]
+    cap = start + 10
+    capped = run_cli("restore", photos, "-o", tmp_path / "capped" / "scene.ply", "--densify", "--max-gaussians", cap, *common)
+    assert capped.code == 0, capped.err
+    assert len(PlyData.read(tmp_path / "capped" / "scene.ply")["vertex"]) <= cap
+    plain = run_cli("restore", photos, "-o", tmp_path / "plain" / "scene.ply", "--no-densify", *common)
+    assert json.loads(plain.out)["refinement"]["densification"] == []
+
+
 def test_refine_steps_are_checked(run_cli, buu, tmp_path, random_checkpoint):
     photos = _photos(buu, tmp_path, ["1.JPG"])
     expect_input_error(run_cli("restore", photos, "-o", tmp_path / "o" / "scene.ply", "--checkpoint", random_checkpoint,
@@ -53,6 +77,8 @@ def test_presets_refine_more_as_they_slow_down_and_the_option_overrides():
     steps = [RESTORE_PRESETS[name].refine_steps for name in ("fast", "balanced", "best")]
     assert 0 < steps[0] < steps[1] < steps[2]
     assert get_restore_preset("best", 0).refine_steps == 0 and get_restore_preset("fast", 7).refine_steps == 7
+    assert get_restore_preset("fast", densify=True).densify is not None
+    assert get_restore_preset("best", densify=False).densify is None
 
 
 def test_targets_leave_out_held_out_views_and_follow_the_cameras(buu):

@@ -15,6 +15,9 @@ EXPOSURE_PRIOR = typer.Option(
 DENOISE_PHOTO = typer.Option(
     True, "--denoise/--no-denoise",
     help="A single photo: remove the sensor noise its restoration amplified, in proportion to its measured level.")
+DENSIFY = typer.Option(
+    None, "--densify/--no-densify",
+    help="Split and clone the Gaussians where the views disagree with the scene during refinement (default: the preset's; best densifies).")
 FILL_UNOBSERVED = typer.Option(
     True, "--fill-unobserved/--black-unobserved",
     help="Fill the restored views' pixels that no Gaussian covers from the render around them, or leave them black.")

@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.sfm import SFM_LONG_SIDE
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET
-from lumos3d_cli.refine.settings import RefineSettings
+from lumos3d_cli.refine.settings import DensifySettings, RefineSettings
 
 
 # Refinement's learning rates fall by a tenth over 200 steps in every preset: at constant rates the
@@ -27,6 +27,11 @@ from lumos3d_cli.refine.settings import RefineSettings
 # steps and 18.57 at 200 decaying). A hundredth over 200 steps lost 0.2 dB on fountain-P11; 25
 # decaying steps scored as 25 constant ones on buu (23.65 / 0.889).
 REFINE_LR_DECAY = 0.1 ** 0.5  # per 100 steps
+
+# Densification during refinement (refine.densification): 5 % of the Gaussians, those with the
+# largest image-space gradients, split or cloned every 10 steps up to step 150 (at most about
+# 2.1x the Gaussians, within --max-gaussians); `--densify` turns it on.
+DENSIFY = DensifySettings(every=10, until=150, fraction=0.05)
 
 
 @dataclass(frozen=True)
@@ -48,6 +53,7 @@ class RestorePreset:
     exposure_prior: float | None = None
     fill_unobserved: bool = True  # fill the rendered views' pixels no Gaussian covers (render.hole_filling)
     denoise_photo: bool = True  # a one-photo restore's amplified noise removed (model.appearance.amplified_noise)
+    densify: DensifySettings | None = None  # refinement's densification schedule (None: the Gaussians it starts from)
 
     def network_image_size(self, model_image_size: int, patch_size: int) -> int:
         """The longer network side: a patch multiple, at least one patch."""
@@ -87,10 +93,12 @@ RESTORE_PRESETS = {
 def get_restore_preset(
     name: str, refine_steps: int | None = None, max_gaussians: int | None = None, gaussian_grid: float | None = None,
     exposure_prior: float | None = None, fill_unobserved: bool | None = None, denoise_photo: bool | None = None,
+    densify: bool | None = None,
 ) -> RestorePreset:
     """The preset `name`, with its refinement steps, Gaussian cap, Gaussian grid, exposure prior,
     hole filling and one-photo denoising replaced by `refine_steps`, `max_gaussians`,
-    `gaussian_grid`, `exposure_prior`, `fill_unobserved` and `denoise_photo` when given."""
+    `gaussian_grid`, `exposure_prior`, `fill_unobserved` and `denoise_photo` when given;
+    `densify` True refines with `DENSIFY`'s schedule (or the preset's own), False without."""
     try:
         preset = RESTORE_PRESETS[name]
     except KeyError:
@@ -115,4 +123,6 @@ def get_restore_preset(
         preset = replace(preset, fill_unobserved=fill_unobserved)
     if denoise_photo is not None:
         preset = replace(preset, denoise_photo=denoise_photo)
+    if densify is not None:
+        preset = replace(preset, densify=(preset.densify or DENSIFY) if densify else None)
     return preset

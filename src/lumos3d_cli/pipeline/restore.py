@@ -210,7 +210,7 @@ def restore(
     max_views: int | None = None, device: str = "cpu", reference: Path | str | None = None,
     lpips_weights: Path | str | None = None, progress: JobProgress | None = None, refine_steps: int | None = None,
     max_gaussians: int | None = None, gaussian_grid: float | None = None, exposure_prior: float | None = None,
-    fill_unobserved: bool | None = None, denoise_photo: bool | None = None,
+    fill_unobserved: bool | None = None, denoise_photo: bool | None = None, densify: bool | None = None,
 ) -> RestoredScene:
     """The whole restore job from files: photos (a folder or files: photos, camera RAW, EXR),
     the bundled model of `mode` or `checkpoint`, and optionally reference photos of the same
@@ -220,7 +220,8 @@ def restore(
     `exposure_prior` the strength of the exposure prior (`model.appearance.exposure_prior`),
     `fill_unobserved` whether pixels no Gaussian covers are filled (`render.hole_filling`),
     `denoise_photo` whether a one-photo restore's amplified noise is removed
-    (`model.appearance.amplified_noise`). Write the result with `write_restored_scene`."""
+    (`model.appearance.amplified_noise`), `densify` whether refinement densifies
+    (`refine.densification`). Write the result with `write_restored_scene`."""
     progress = progress or SilentProgress()
     started = time.perf_counter()
     if mode not in MODES:
@@ -228,7 +229,7 @@ def restore(
     if max_views is not None and max_views < 1:
         raise InputError(f"{max_views}: use at least 1", parameter="max_views")
     settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior, fill_unobserved,
-                                  denoise_photo)
+                                  denoise_photo, densify)
     check_geometry_source(geometry)
     weights = resolve_checkpoint(checkpoint, mode)
     meter = QualityMeter.create(lpips_weights) if reference is not None else None

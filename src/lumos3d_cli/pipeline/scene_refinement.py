@@ -23,7 +23,7 @@ from lumos3d_cli.model.lumos3d import Lumos3D
 from lumos3d_cli.pipeline.network_pass import NetworkPass
 from lumos3d_cli.pipeline.progress import JobProgress
 from lumos3d_cli.refine.refinement import RefinementResult, refine_gaussians
-from lumos3d_cli.refine.settings import RefineSettings
+from lumos3d_cli.refine.settings import DensifySettings, RefineSettings
 
 logger = logging.getLogger(__name__)
 
@@ -58,16 +58,18 @@ def refinement_targets(
 def refine_scene(
     gaussians: Gaussians, targets: torch.Tensor, cameras: Cameras, steps: int, progress: JobProgress,
     max_side: int = RefineSettings.max_side, lr_decay_per_100_steps: float = RefineSettings.lr_decay_per_100_steps,
+    densify: DensifySettings | None = None,
 ) -> RefinementResult:
     """`steps` of refinement (fewer when the loss stops falling) against targets downsampled to a
     longer side of at most `max_side`, the learning rates falling by `lr_decay_per_100_steps`
-    every 100 steps, otherwise with the default settings, shown as a "refine"
-    progress bar."""
+    every 100 steps, densified on `densify`'s schedule (None: never), otherwise with the default
+    settings, shown as a "refine" progress bar."""
     progress.start("refine", steps)
-    settings = RefineSettings(steps=steps, max_side=max_side, lr_decay_per_100_steps=lr_decay_per_100_steps)
+    settings = RefineSettings(steps=steps, max_side=max_side, lr_decay_per_100_steps=lr_decay_per_100_steps,
+                              densify=densify)
     result = refine_gaussians(gaussians, cameras, targets, settings,
                               on_step=lambda step, loss: progress.advance("refine"))
-    logger.info("refinement: %d steps (%s), loss %.4f -> %.4f, SH degree %d", result.steps_run,
+    logger.info("refinement: %d steps (%s), loss %.4f -> %.4f, SH degree %d, %d Gaussians -> %d", result.steps_run,
                 "stopped early" if result.stopped_early else "all asked", result.loss_curve[0] if result.loss_curve else 0.0,
-                result.loss_curve[-1] if result.loss_curve else 0.0, result.sh_degree)
+                result.loss_curve[-1] if result.loss_curve else 0.0, result.sh_degree, len(gaussians), len(result.gaussians))
     return result

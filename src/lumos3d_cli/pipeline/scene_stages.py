@@ -177,7 +177,8 @@ def budget(job: SceneJob) -> SceneJob:
 
 def refinement(job: SceneJob) -> SceneJob:
     """The preset's steps of test-time refinement against the model's own restoration of the
-    fitted views (`pipeline.scene_refinement`); skipped at 0 steps."""
+    fitted views (`pipeline.scene_refinement`), densified on the preset's schedule within its
+    Gaussian cap; skipped at 0 steps."""
     if job.preset.refine_steps <= 0:
         return job
     if len(job.names) == 1 and job.has_operator:
@@ -186,8 +187,11 @@ def refinement(job: SceneJob) -> SceneJob:
         return job
     targets, cameras = refinement_targets(job.network, job.model, job.photos, job.restored_photos, job.selected,
                                           job.names, job.geometry.cameras, job.fuse_views)
+    densify = job.preset.densify
+    if densify is not None:  # the preset's cap holds for the Gaussians densification adds
+        densify = replace(densify, max_gaussians=job.preset.max_gaussians)
     result = refine_scene(job.gaussians, targets, cameras, job.preset.refine_steps, job.progress, job.preset.refine_side,
-                          job.preset.refine_lr_decay)
+                          job.preset.refine_lr_decay, densify)
     job.gaussians, job.refinement = result.gaussians, result.summary()
     return job
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field
 
 import torch
 
@@ -14,6 +14,7 @@ from lumos3d_cli.checks import require_finite
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.refine.camera_corrections import CameraCorrections
+from lumos3d_cli.refine.densification import DensificationStep, GradientStatistics, densify
 from lumos3d_cli.refine.early_stop import EarlyStop
 from lumos3d_cli.refine.parameters import GaussianParameters, scene_extent
 from lumos3d_cli.refine.photometric import photometric_loss, working_views
@@ -34,7 +35,8 @@ class RefinementResult:
     working resolution; steps_run <= the steps asked for; stopped_early: the loss stopped falling
     (settings.patience, settings.tolerance); sh_degree: the degree kept; working_size: (width,
     height) of the images fitted; seconds: wall time; lr_decay_per_100_steps: the factor the
-    learning rates fell by every 100 steps (settings.lr_decay_per_100_steps)."""
+    learning rates fell by every 100 steps (settings.lr_decay_per_100_steps); densification:
+    (step, what it did) for each densification (settings.densify)."""
 
     gaussians: Gaussians
     cameras: Cameras
@@ -45,6 +47,7 @@ class RefinementResult:
     working_size: tuple[int, int]
     seconds: float
     lr_decay_per_100_steps: float = 1.0
+    densification: list[tuple[int, DensificationStep]] = field(default_factory=list)
 
     def summary(self) -> dict:
         """The refinement's entry of summary.json."""
@@ -52,6 +55,7 @@ class RefinementResult:
             "steps": self.steps_run, "stopped_early": self.stopped_early, "sh_degree": self.sh_degree,
             "working_size": list(self.working_size), "lr_decay_per_100_steps": self.lr_decay_per_100_steps,
             "seconds": round(self.seconds, 3), "loss_curve": [round(value, 6) for value in self.loss_curve],
+            "densification": [{"step": step} | asdict(done) for step, done in self.densification],
         }
 
 
@@ -102,7 +106,9 @@ def refine_gaussians(
     `settings.views_per_step` views at the working resolution (the longer side at most
     `settings.max_side`), takes (1 - w) L1 + w (1 - SSIM) and one Adam step; it stops after
     `settings.steps` or when the loss stops falling. `on_step(step, loss)` is called after each
-    step (step counts from 1). Views whose camera is not finite are skipped with a warning.
+    step (step counts from 1). With `settings.densify` the Gaussians are split, cloned and pruned
+    every few steps (`refine.densification`), so the result may hold more or fewer of them.
+    Views whose camera is not finite are skipped with a warning.
     Runs on the Gaussians' device (the render backend follows it: gsplat on CUDA); the targets
     move there.
     """
@@ -131,26 +137,37 @@ def refine_gaussians(
     batches = _view_batches(len(working), min(settings.views_per_step, len(working)),
                             torch.Generator().manual_seed(settings.seed))
     single_views = [working[[v]] for v in range(len(working))]
+    density = settings.densify
+    statistics = GradientStatistics(len(gaussians), gaussians.means.device) if density is not None else None
+    split_generator = torch.Generator().manual_seed(settings.seed)
     curve: list[float] = []
+    densifications: list[tuple[int, DensificationStep]] = []
     # closed form from the first rates: step k's rate depends on k alone, not on the steps asked
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda step: settings.lr_decay_per_100_steps ** (step / 100))
     for step in range(settings.steps):
         batch = next(batches)
         current = parameters.gaussians()
-        losses = []
+        losses, outputs = [], []
         for view in batch:
             if corrections is None:
-                image = render(current, single_views[view], sh_degree=degree).images
+                output = render(current, single_views[view], sh_degree=degree)
             else:
-                image = render(corrections.moved_gaussians(view, current, degree), single_views[view]).images
-            losses.append(photometric_loss(image, images[view : view + 1], settings.ssim_weight))
+                output = render(corrections.moved_gaussians(view, current, degree), single_views[view])
+            outputs.append(output)
+            losses.append(photometric_loss(output.images, images[view : view + 1], settings.ssim_weight))
         loss = torch.stack(losses).mean()
         require_finite(f"refinement loss at step {step + 1}", loss.detach())
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
+        if statistics is not None and parameters.offsets.grad is not None:  # one view per step (RefineSettings): the gradient is that view's
+            statistics.add(parameters.offsets.grad, current.means, outputs[0].radii[0], single_views[batch[0]])
         optimizer.step()
         schedule.step()
         parameters.normalise()
+        if density is not None and density.due(step + 1):
+            densified = densify(parameters, optimizer, statistics, density, split_generator)
+            statistics = GradientStatistics(densified.gaussians, gaussians.means.device)
+            densifications.append((step + 1, densified))
         curve.append(loss.item())
         if on_step is not None:
             on_step(step + 1, curve[-1])
@@ -171,7 +188,7 @@ def refine_gaussians(
     return RefinementResult(
         refined, Cameras(extrinsics, cameras.intrinsics.clone(), list(cameras.sizes), list(cameras.names)),
         curve, len(curve), stop.should_stop, degree, (images.shape[-1], images.shape[-2]), time.perf_counter() - started,
-        settings.lr_decay_per_100_steps,
+        settings.lr_decay_per_100_steps, densifications,
     )
 
 

@@ -11,6 +11,38 @@ Positions = Literal["free", "ray", "fixed"]
 
 
 @dataclass(frozen=True)
+class DensifySettings:
+    """every: steps between densifications (the first after `every` steps); until: no
+    densification after this step; fraction: the share of the Gaussians densified each time (the
+    largest mean image-space gradients among those drawn at least `min_views` times since the
+    last densification); prune_opacity: Gaussians below this opacity go; max_gaussians: the most
+    Gaussians the scene may reach (None: no cap)."""
+
+    every: int = 10
+    until: int = 150
+    fraction: float = 0.05
+    min_views: int = 1
+    prune_opacity: float = 0.005
+    max_gaussians: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.every < 1 or self.until < 0:
+            raise ValueError(f"every={self.every} must be >= 1 and until={self.until} >= 0")
+        if not 0 <= self.fraction <= 1:
+            raise ValueError(f"fraction={self.fraction} must be in [0, 1]")
+        if self.min_views < 1:
+            raise ValueError(f"min_views={self.min_views} must be >= 1")
+        if not 0 <= self.prune_opacity < 1:
+            raise ValueError(f"prune_opacity={self.prune_opacity} must be in [0, 1)")
+        if self.max_gaussians is not None and self.max_gaussians < 1:
+            raise ValueError(f"max_gaussians={self.max_gaussians} must be >= 1")
+
+    def due(self, step: int) -> bool:
+        """Whether to densify after step `step` (counted from 1)."""
+        return step % self.every == 0 and step <= self.until
+
+
+@dataclass(frozen=True)
 class RefineSettings:
     """steps: the most optimiser steps (one step = `views_per_step` views rendered, compared and
     back-propagated); max_side: the longer side, in pixels, of the images optimised against (the
@@ -56,6 +88,7 @@ class RefineSettings:
     sh_tolerance: float = 1e-3
     seed: int = 0
     lr_decay_per_100_steps: float = 1.0
+    densify: DensifySettings | None = None
 
     def __post_init__(self) -> None:
         if self.steps < 0:
@@ -70,5 +103,7 @@ class RefineSettings:
             raise ValueError(f"ssim_weight={self.ssim_weight} must be in [0, 1]")
         if not 0 < self.lr_decay_per_100_steps <= 1:
             raise ValueError(f"lr_decay_per_100_steps={self.lr_decay_per_100_steps} must be in (0, 1]")
+        if self.densify is not None and (self.positions != "free" or self.views_per_step != 1):
+            raise ValueError("densification needs free positions and one view per step (each view's gradient)")
         if self.patience < 1 or self.tolerance < 0:
             raise ValueError(f"patience={self.patience} must be >= 1 and tolerance={self.tolerance} >= 0")
