@@ -62,6 +62,7 @@ DEFAULTS_REASON = (
     "grid 2) sharpens the views but keeps the amplified noise: 0.2 dB lower on holdout in 1.5x the time, so no "
     "preset uses it."
 )
+DEV_REASON = "(Written after the run.)"
 COLOURS = {"fast": (40, 160, 40), "balanced": (200, 120, 20), "best": (40, 40, 200)}  # BGR
 
 

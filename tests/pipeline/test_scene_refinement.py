@@ -54,7 +54,7 @@ def test_restore_densifies_within_the_gaussian_cap(run_cli, buu, tmp_path, rando
     assert grown.code == 0, grown.err
     summary = json.loads(grown.out)
     steps = summary["refinement"]["densification"]
-    assert [step["step"] for step in steps] == [10, 20]
+    assert [step["step"] for step in steps] == [10]  # not at step 20: nothing would fit what it made
     assert summary["gaussians"]["kept"] == steps[-1]["gaussians"] == len(PlyData.read(tmp_path / "grown" / "scene.ply")["vertex"])
     assert steps[0]["split"] + steps[0]["cloned"] > 0
     start = steps[0]["gaussians"] - steps[0]["split"] - steps[0]["cloned"] + steps[0]["pruned"]

@@ -106,6 +106,9 @@ def test_the_largest_gradients_are_split_and_the_transparent_pruned():
     torch.testing.assert_close(state["exp_avg"][:kept], moments[survivors])
     assert (state["exp_avg"][kept:] == 0).all() and (state["exp_avg_sq"][kept:] == 0).all()
     assert any(parameters.colour is p for group in optimizer.param_groups for p in group["params"])
+    leaves = {id(p) for group in optimizer.param_groups for p in group["params"]}
+    assert set(map(id, optimizer.state)) <= leaves and len(optimizer.state) == len(leaves)  # the old leaves are gone
+    assert int(state["step"]) == 1
     parameters.gaussians().sh.sum().backward()
     optimizer.step()
     assert torch.isfinite(parameters.colour).all()
@@ -119,7 +122,18 @@ def test_small_gaussians_are_cloned_and_the_cap_holds():
     assert step.pruned == 1 and step.split == 0 and step.cloned == 8 and step.gaussians == cap == len(parameters.quats)
     torch.testing.assert_close(parameters.means()[-8:], means_before[-8:])  # a clone sits on its parent
     full = _densified(count, DensifySettings(fraction=0.5, max_gaussians=10), radius=1.0)[2]
-    assert full.cloned == 0 and full.split == 0  # more survivors than the cap: nothing added, nothing forced out
+    assert full.cloned == 0 and full.split == 0  # more survivors than the cap: nothing added (the budget caps the scene)
+
+
+def test_a_scene_turned_transparent_is_not_emptied():
+    gaussians = _gaussians(20)
+    gaussians = Gaussians(gaussians.means, gaussians.quats, gaussians.scales, torch.full((20,), 1e-4, dtype=torch.float64),
+                          gaussians.sh)
+    parameters = GaussianParameters(gaussians, "free", torch.zeros(1, 3, dtype=torch.float64), 1.0)
+    optimizer = torch.optim.Adam([parameters.offsets, parameters.colour], lr=1e-3)
+    statistics = GradientStatistics(20, torch.device("cpu"))
+    step = densify(parameters, optimizer, statistics, DensifySettings(), torch.Generator().manual_seed(0))
+    assert step.pruned == 0 and step.gaussians == 20
 
 
 def test_settings_refuse_what_cannot_densify():
@@ -131,7 +145,8 @@ def test_settings_refuse_what_cannot_densify():
         RefineSettings(positions="ray", densify=DensifySettings())
     with pytest.raises(ValueError, match="one view per step"):
         RefineSettings(views_per_step=2, densify=DensifySettings())
-    assert DensifySettings(every=5, until=10).due(10) and not DensifySettings(every=5, until=9).due(10)
+    assert DensifySettings(every=5, until=10).due(10, 15) and not DensifySettings(every=5, until=9).due(10, 15)
+    assert not DensifySettings(every=5, until=100).due(10, 14)  # the last 5 steps fit what the last densification made
 
 
 @pytest.mark.parametrize("scale", [1e-6, 1.0])

@@ -1,7 +1,7 @@
 """Speed/accuracy presets of `lumos3d restore` and `lumos3d eval`: how many views the network
 sees, at which resolution (relative to the model's), the SH degree written and rendered, the
 voxel size (relative to the model's pixel footprint), the steps of test-time refinement
-(pipeline.scene_refinement), the most Gaussians a scene may keep (render.gaussian_budget), and
+(pipeline.scene_refinement) and whether it densifies (refine.densification), the most Gaussians a scene may keep (render.gaussian_budget), and
 two speed settings: the size structure-from-motion sees the photos at (geometry.sfm) and the
 resolution the budget renders the Gaussians' weights at; the size of the images refinement
 fits (`balanced` and `best` fit LOM's 500x375 photos at their own size, `fast` at most
@@ -30,7 +30,9 @@ REFINE_LR_DECAY = 0.1 ** 0.5  # per 100 steps
 
 # Densification during refinement (refine.densification): 5 % of the Gaussians, those with the
 # largest image-space gradients, split or cloned every 10 steps up to step 150 (at most about
-# 2.1x the Gaussians, within --max-gaussians); `--densify` turns it on.
+# 2.1x the Gaussians, within --max-gaussians); `best` densifies, `--densify` turns it on in the
+# others. At 25 steps (`balanced`), densifying every 8 steps lost 0.17 dB and 0.008 SSIM on the
+# development scenes' mean for sharpness 0.77 -> 0.79: the new Gaussians need steps to settle.
 DENSIFY = DensifySettings(every=10, until=150, fraction=0.05)
 
 
@@ -82,11 +84,15 @@ RESTORE_PRESETS = {
     "fast": RestorePreset("fast", max_views=16, resolution=0.75, sh_degree=0, voxel_scale=1.0, refine_steps=15,
                           sfm_long_side=384, budget_resolution=0.5),
     "balanced": _BALANCED,
-    # best: the same scene refined for 200 steps (the early stop may end it sooner), at the
-    # network's trained resolution (1.25x scored 0.3-0.5 dB lower on buu's holdout) and the grid of
-    # 1: the grid of 2 refined for 200 decaying steps scored 23.58 dB / 0.884 on buu's holdout
-    # against 23.76 / 0.891. See docs/performance.md for the measured trade.
-    "best": replace(_BALANCED, name="best", refine_steps=200),
+    # best: the same scene refined for 200 steps (the early stop may end it sooner) and densified
+    # (DENSIFY), at the network's trained resolution (1.25x scored 0.3-0.5 dB lower on buu's
+    # holdout) and the grid of 1: the grid of 2 refined for 200 decaying steps scored 23.58 dB /
+    # 0.884 on buu's holdout against 23.76 / 0.891. On the development scenes (buu and shrub, both
+    # modes, holdout, the mean of the four) 200 steps without densification scored 20.09 dB /
+    # 0.683 / sharpness 0.83 and with it 20.10 / 0.691 / 0.89 (shrub's foliage gains the most:
+    # over-exposed 17.12 / 0.536 -> 17.54 / 0.564; buu in low light loses 0.4 dB). See
+    # docs/performance.md for the measured trade.
+    "best": replace(_BALANCED, name="best", refine_steps=200, densify=DENSIFY),
 }
 
 

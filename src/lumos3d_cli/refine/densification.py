@@ -43,7 +43,8 @@ class GradientStatistics:
         """world_gradient, means [N, 3]: d loss / d mean of one view's loss and the means it was
         rendered with; radii [N, 2] that view's projected radii (0: not drawn); camera: that view.
         A shift of the mean by d along the camera's x axis moves its pixel by fx d / z, so
-        d loss / d u = (d loss / d x) z / fx (and likewise for v)."""
+        d loss / d u = (d loss / d x) z / fx (and likewise for v). With refined cameras the view's
+        correction (a small rigid motion) is left out: an approximation for choosing Gaussians."""
         rotation = camera.extrinsics[0, :, :3].to(means)
         translation = camera.extrinsics[0, :, 3].to(means)
         gradient = world_gradient.detach() @ rotation.T
@@ -85,11 +86,15 @@ def densify(parameters: GaussianParameters, optimizer: torch.optim.Optimizer, st
             settings: DensifySettings, generator: torch.Generator) -> DensificationStep:
     """Prune, split and clone in place: `parameters`' leaves and the `optimizer`'s parameters
     and moments are replaced by the new set (the survivors first, in their order, then the
-    clones, then the split halves). Needs free positions (`parameters.positions == "free"`)."""
+    clones, then the split halves). Nothing is added past `settings.max_gaussians` (a scene
+    already above it is not cut: the Gaussian budget does that); a scene whose every Gaussian
+    turned transparent is not emptied. Needs free positions (`parameters.positions == "free"`)."""
     if parameters.positions != "free":
         raise ValueError(f"densification moves Gaussians freely; positions={parameters.positions!r}")
     with torch.no_grad():
         alive = torch.sigmoid(parameters.opacity_logits) >= settings.prune_opacity
+        if not bool(alive.any()):
+            alive = torch.ones_like(alive)
         pruned = int((~alive).sum())
         room = (settings.max_gaussians - int(alive.sum())) if settings.max_gaussians is not None else len(alive)
         chosen = _chosen(statistics, alive, settings, room)

@@ -164,7 +164,7 @@ def refine_gaussians(
         optimizer.step()
         schedule.step()
         parameters.normalise()
-        if density is not None and density.due(step + 1):
+        if density is not None and density.due(step + 1, settings.steps):
             densified = densify(parameters, optimizer, statistics, density, split_generator)
             statistics = GradientStatistics(densified.gaussians, gaussians.means.device)
             densifications.append((step + 1, densified))

@@ -37,9 +37,10 @@ class DensifySettings:
         if self.max_gaussians is not None and self.max_gaussians < 1:
             raise ValueError(f"max_gaussians={self.max_gaussians} must be >= 1")
 
-    def due(self, step: int) -> bool:
-        """Whether to densify after step `step` (counted from 1)."""
-        return step % self.every == 0 and step <= self.until
+    def due(self, step: int, steps: int) -> bool:
+        """Whether to densify after step `step` (counted from 1) of a run of `steps`: never in
+        the last `every` steps, which would leave new Gaussians that were never fitted."""
+        return step % self.every == 0 and step <= min(self.until, steps - self.every)
 
 
 @dataclass(frozen=True)
