@@ -31,6 +31,7 @@ from lumos3d_cli.pipeline.presets import RESTORE_PRESETS  # noqa: E402
 
 STEPS = (0, 25, 50, 100, 200, 400)
 PLOT = REPO / "docs" / "images" / "preset-trade.png"
+DETAIL_PLOT = REPO / "docs" / "images" / "preset-detail.png"
 # Read off this benchmark's run of 2026-11-25 (late evening, issue 36: `best` densifies; the table it writes);
 # rewrite when the numbers move.
 DEFAULTS_REASON = (
@@ -211,6 +212,54 @@ def plot(results: list[dict], path: Path) -> None:
     cv2.imwrite(str(path), canvas)
 
 
+def plot_detail(results: list[dict], dev_results: list[dict], path: Path) -> None:
+    """Each preset at its own steps: restore time on buu (x, log scale) against the development
+    scenes' holdout mean sharpness (y, filled) and SSIM (y, open), one colour per preset."""
+    width, height, margin = 900, 560, 70
+    canvas = np.full((height, width, 3), 255, np.uint8)
+    seconds = {r["preset"]: r["seconds"] for r in results
+               if r["grid_option"] is None and r["steps"] == RESTORE_PRESETS[r["preset"]].refine_steps}
+    points = [(scores["preset"], np.log10(seconds[scores["preset"]]), dev_holdout_mean(scores))
+              for scores in dev_results if scores["preset"] in seconds]
+    if not points:
+        return
+    xs = [x for _, x, _ in points]
+    x_range = (min(xs) - 0.1, max(xs) + 0.1)
+    y_range = (0.5, 1.0)
+
+    def point(log_seconds: float, value: float) -> tuple[int, int]:
+        x = margin + (log_seconds - x_range[0]) / (x_range[1] - x_range[0]) * (width - 2 * margin)
+        y = height - margin - (value - y_range[0]) / (y_range[1] - y_range[0]) * (height - 2 * margin)
+        return int(round(x)), int(round(y))
+
+    font = cv2.FONT_HERSHEY_SIMPLEX
+    cv2.rectangle(canvas, (margin, margin), (width - margin, height - margin), (0, 0, 0), 1)
+    for tick in np.arange(0.55, 1.0, 0.05):
+        _, y = point(x_range[0], tick)
+        cv2.line(canvas, (margin, y), (width - margin, y), (225, 225, 225), 1)
+        cv2.putText(canvas, f"{tick:.2f}", (18, y + 5), font, 0.45, (0, 0, 0), 1, cv2.LINE_AA)
+    for tick in (10, 20, 30, 50, 100, 200):
+        if x_range[0] < np.log10(tick) < x_range[1]:
+            x, _ = point(np.log10(tick), y_range[0])
+            cv2.line(canvas, (x, margin), (x, height - margin), (225, 225, 225), 1)
+            cv2.putText(canvas, f"{tick}", (x - 10, height - margin + 20), font, 0.45, (0, 0, 0), 1, cv2.LINE_AA)
+    for key, filled in (("sharpness", True), ("ssim", False)):
+        line = [point(x, mean[key]) for _, x, mean in points]
+        for start, end in zip(line, line[1:]):
+            cv2.line(canvas, start, end, (150, 150, 150), 1, cv2.LINE_AA)
+        for (preset, _, mean), position in zip(points, line):
+            colour = COLOURS[preset]
+            cv2.circle(canvas, position, 6, colour, -1 if filled else 2, cv2.LINE_AA)
+            cv2.putText(canvas, f"{preset} {key} {mean[key]:.2f}", (position[0] + 10, position[1] + 5), font, 0.45, colour, 1,
+                        cv2.LINE_AA)
+    cv2.putText(canvas, "restore wall time on buu (s, log scale)", (width // 2 - 170, height - 20), font, 0.5, (0, 0, 0), 1,
+                cv2.LINE_AA)
+    cv2.putText(canvas, "buu + shrub, both modes, holdout mean: sharpness (filled), SSIM (open)", (margin, margin - 15),
+                font, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), canvas)
+
+
 def table(results: list[dict]) -> str:
     rows = []
     for r in results:
@@ -291,11 +340,13 @@ def main() -> None:
         "Each preset at its own steps, `lumos3d eval` on buu's 3 and shrub's 5 test frames, in the same run; "
         "the mean of the four holdout rows is what the presets are chosen on (issue 36).",
         dev_table(dev_results),
+        "![restore time against the development scenes' sharpness and SSIM](images/preset-detail.png)",
         DEV_REASON,
     ] if dev_results else []))
     print(text)
     if not args.no_doc:
         plot(results, PLOT)
+        plot_detail(results, dev_results, DETAIL_PLOT)
         write_section("presets", text)
 
 
