@@ -35,3 +35,18 @@ def test_a_noisy_view_order_does_not_trigger_it():
         scale = 1 - 0.02 * step
         stop.update({0: 0.1 * scale} if step % 2 else {1: 1.0 * scale})
     assert not stop.should_stop
+
+
+def test_a_restart_gives_the_changed_scene_its_patience_again():
+    """After a densification the loss is judged afresh: a flat loss stops only `patience` steps
+    after the restart, even if it had been flat for longer before."""
+    stop = EarlyStop(views=1, patience=3, tolerance=0.01)
+    for _ in range(3):
+        stop.update({0: 1.0})
+    assert stop.steps_since_mark == 2 and not stop.should_stop
+    stop.restart()
+    for step in range(3):
+        stop.update({0: 1.0})
+        assert not stop.should_stop, step  # the first update sets the new mark
+    stop.update({0: 1.0})
+    assert stop.should_stop

@@ -38,6 +38,12 @@ class EarlyStop:
         else:
             self.steps_since_mark += 1
 
+    def restart(self) -> None:
+        """Forget the best loss so far: after the scene changed (densification), the next
+        `patience` steps are judged against where it is now, not stopped before they settle."""
+        self.mark = math.inf
+        self.steps_since_mark = 0
+
     @property
     def should_stop(self) -> bool:
         return self.steps_since_mark >= self.patience

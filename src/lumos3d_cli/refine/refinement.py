@@ -168,6 +168,7 @@ def refine_gaussians(
             densified = densify(parameters, optimizer, statistics, density, split_generator)
             statistics = GradientStatistics(densified.gaussians, gaussians.means.device)
             densifications.append((step + 1, densified))
+            stop.restart()  # new Gaussians get `patience` steps to settle (stopping at once left them unfitted)
         curve.append(loss.item())
         if on_step is not None:
             on_step(step + 1, curve[-1])
