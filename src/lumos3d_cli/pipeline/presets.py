@@ -92,8 +92,8 @@ RESTORE_PRESETS = {
     # holdout) and the grid of 1: the grid of 2 refined for 200 decaying steps scored 23.58 dB /
     # 0.884 on buu's holdout against 23.76 / 0.891. On the development scenes (buu and shrub, both
     # modes, holdout, the mean of the four) 200 steps without densification scored 20.09 dB /
-    # 0.683 / sharpness 0.83 and with it 20.16 / 0.692 / 0.86 (shrub's foliage gains the most:
-    # over-exposed 17.12 / 0.536 / 0.85 -> 17.41 / 0.560 / 0.89). See docs/performance.md for
+    # 0.683 / sharpness 0.83 and with it 20.17 / 0.694 / 0.86 (shrub's foliage gains the most:
+    # over-exposed 17.12 / 0.536 / 0.85 -> 17.44 / 0.563 / 0.89). See docs/performance.md for
     # the measured trade.
     "best": replace(_BALANCED, name="best", refine_steps=200, densify=DENSIFY),
 }
