@@ -158,24 +158,33 @@ def steps_to_measure(preset: str, presets: list[str], steps: list[int]) -> list[
     return sorted(set(steps) | {own.refine_steps})
 
 
+WIDTH, HEIGHT, MARGIN = 900, 560, 70  # the plots' pixels
+
+
+def _axes(x_range: tuple[float, float], y_range: tuple[float, float]):
+    """A white canvas with the plot's frame, and the map from (log10 seconds, value) to its pixel."""
+    canvas = np.full((HEIGHT, WIDTH, 3), 255, np.uint8)
+    cv2.rectangle(canvas, (MARGIN, MARGIN), (WIDTH - MARGIN, HEIGHT - MARGIN), (0, 0, 0), 1)
+
+    def point(log_seconds: float, value: float) -> tuple[int, int]:
+        x = MARGIN + (log_seconds - x_range[0]) / (x_range[1] - x_range[0]) * (WIDTH - 2 * MARGIN)
+        y = HEIGHT - MARGIN - (value - y_range[0]) / (y_range[1] - y_range[0]) * (HEIGHT - 2 * MARGIN)
+        return int(round(x)), int(round(y))
+
+    return canvas, point
+
+
 def plot(results: list[dict], path: Path) -> None:
     """Restore time (x, log scale) against holdout PSNR (y): one line per preset, its points
     labelled with their refinement steps; the denser Gaussian grids as open circles; the gamma
     curve's context PSNR as a dashed line."""
-    width, height, margin = 900, 560, 70
-    canvas = np.full((height, width, 3), 255, np.uint8)
+    width, height, margin = WIDTH, HEIGHT, MARGIN
     seconds = np.log10([r["seconds"] for r in results])
     psnr = [r["holdout"]["psnr"] for r in results] + [results[0]["gamma"]["psnr"]]
     x_range = (seconds.min() - 0.05, seconds.max() + 0.05)
     y_range = (min(psnr) - 0.3, max(psnr) + 0.3)
-
-    def point(log_seconds: float, value: float) -> tuple[int, int]:
-        x = margin + (log_seconds - x_range[0]) / (x_range[1] - x_range[0]) * (width - 2 * margin)
-        y = height - margin - (value - y_range[0]) / (y_range[1] - y_range[0]) * (height - 2 * margin)
-        return int(round(x)), int(round(y))
-
+    canvas, point = _axes(x_range, y_range)
     font = cv2.FONT_HERSHEY_SIMPLEX
-    cv2.rectangle(canvas, (margin, margin), (width - margin, height - margin), (0, 0, 0), 1)
     for tick in np.arange(np.floor(y_range[0] * 2) / 2, y_range[1], 0.5):
         if tick > y_range[0]:
             x, y = point(x_range[0], tick)
@@ -217,8 +226,7 @@ def plot(results: list[dict], path: Path) -> None:
 def plot_detail(results: list[dict], dev_results: list[dict], path: Path) -> None:
     """Each preset at its own steps: restore time on buu (x, log scale) against the development
     scenes' holdout mean sharpness (y, filled) and SSIM (y, open), one colour per preset."""
-    width, height, margin = 900, 560, 70
-    canvas = np.full((height, width, 3), 255, np.uint8)
+    width, height, margin = WIDTH, HEIGHT, MARGIN
     seconds = {r["preset"]: r["seconds"] for r in results
                if r["grid_option"] is None and r["steps"] == RESTORE_PRESETS[r["preset"]].refine_steps}
     points = [(scores["preset"], np.log10(seconds[scores["preset"]]), dev_holdout_mean(scores))
@@ -228,14 +236,8 @@ def plot_detail(results: list[dict], dev_results: list[dict], path: Path) -> Non
     xs = [x for _, x, _ in points]
     x_range = (min(xs) - 0.1, max(xs) + 0.1)
     y_range = (0.5, 1.0)
-
-    def point(log_seconds: float, value: float) -> tuple[int, int]:
-        x = margin + (log_seconds - x_range[0]) / (x_range[1] - x_range[0]) * (width - 2 * margin)
-        y = height - margin - (value - y_range[0]) / (y_range[1] - y_range[0]) * (height - 2 * margin)
-        return int(round(x)), int(round(y))
-
+    canvas, point = _axes(x_range, y_range)
     font = cv2.FONT_HERSHEY_SIMPLEX
-    cv2.rectangle(canvas, (margin, margin), (width - margin, height - margin), (0, 0, 0), 1)
     for tick in np.arange(0.55, 1.0, 0.05):
         _, y = point(x_range[0], tick)
         cv2.line(canvas, (margin, y), (width - margin, y), (225, 225, 225), 1)
