@@ -36,7 +36,7 @@ REFINE_LR_DECAY = 0.1 ** 0.5  # per 100 steps
 # the Gaussians and more specks of the colour chart's black border around it in buu's low-light
 # novel views (23.51 dB there against 23.70), so 80. At 25 steps (`balanced`), densifying every 8
 # steps lost 0.17 dB and 0.008 SSIM for sharpness 0.77 -> 0.79: the new Gaussians need steps to settle.
-DENSIFY = DensifySettings(every=10, until=80, fraction=0.05)
+DENSIFY = DensifySettings()
 
 
 @dataclass(frozen=True)

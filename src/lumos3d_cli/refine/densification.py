@@ -73,7 +73,7 @@ class DensificationStep:
 
 def _chosen(statistics: GradientStatistics, alive: torch.Tensor, settings: DensifySettings, room: int) -> torch.Tensor:
     """[N] bool: the alive Gaussians with the largest mean gradient, at most `fraction` of them and `room`."""
-    eligible = alive & (statistics.views >= settings.min_views)
+    eligible = alive & (statistics.views > 0)
     count = min(int(settings.fraction * int(alive.sum())), int(eligible.sum()), max(room, 0))
     chosen = torch.zeros_like(alive)
     if count > 0:

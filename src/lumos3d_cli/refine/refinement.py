@@ -147,20 +147,20 @@ def refine_gaussians(
     for step in range(settings.steps):
         batch = next(batches)
         current = parameters.gaussians()
-        losses, outputs = [], []
+        losses = []
         for view in batch:
             if corrections is None:
                 output = render(current, single_views[view], sh_degree=degree)
             else:
                 output = render(corrections.moved_gaussians(view, current, degree), single_views[view])
-            outputs.append(output)
             losses.append(photometric_loss(output.images, images[view : view + 1], settings.ssim_weight))
         loss = torch.stack(losses).mean()
         require_finite(f"refinement loss at step {step + 1}", loss.detach())
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
-        if statistics is not None and parameters.offsets.grad is not None:  # one view per step (RefineSettings): the gradient is that view's
-            statistics.add(parameters.offsets.grad, current.means, outputs[0].radii[0], single_views[batch[0]])
+        if statistics is not None and parameters.offsets.grad is not None:
+            # densification renders one view a step (RefineSettings): the gradient is that view's
+            statistics.add(parameters.offsets.grad, current.means, output.radii[0], single_views[batch[0]])
         optimizer.step()
         schedule.step()
         parameters.normalise()

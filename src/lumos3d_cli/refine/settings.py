@@ -14,14 +14,14 @@ Positions = Literal["free", "ray", "fixed"]
 class DensifySettings:
     """every: steps between densifications (the first after `every` steps); until: no
     densification after this step; fraction: the share of the Gaussians densified each time (the
-    largest mean image-space gradients among those drawn at least `min_views` times since the
-    last densification); prune_opacity: Gaussians below this opacity go; max_gaussians: the most
-    Gaussians the scene may reach (None: no cap)."""
+    largest mean image-space gradients among those drawn since the last densification);
+    prune_opacity: Gaussians below this opacity go (3DGS's 0.005); max_gaussians: the most
+    Gaussians the scene may reach (None: no cap). Defaults chosen on the development scenes
+    (pipeline.presets.DENSIFY says how)."""
 
     every: int = 10
-    until: int = 150
+    until: int = 80
     fraction: float = 0.05
-    min_views: int = 1
     prune_opacity: float = 0.005
     max_gaussians: int | None = None
 
@@ -30,8 +30,6 @@ class DensifySettings:
             raise ValueError(f"every={self.every} must be >= 1 and until={self.until} >= 0")
         if not 0 <= self.fraction <= 1:
             raise ValueError(f"fraction={self.fraction} must be in [0, 1]")
-        if self.min_views < 1:
-            raise ValueError(f"min_views={self.min_views} must be >= 1")
         if not 0 <= self.prune_opacity < 1:
             raise ValueError(f"prune_opacity={self.prune_opacity} must be in [0, 1)")
         if self.max_gaussians is not None and self.max_gaussians < 1:
