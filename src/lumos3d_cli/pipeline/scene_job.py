@@ -4,6 +4,7 @@ went in, what each stage made, where the tensors live and how long each stage to
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,11 +32,12 @@ class SceneJob:
 
     What the stages make: `network` (the forward pass over the `selected` views, indices into the
     photos), `brightened` (the photos as structure-from-motion sees them), `registration` (the
-    cameras known before the network), `geometry` (every view's camera and the aligned depth),
+    cameras known before the network; `pending_registration` while structure-from-motion runs
+    beside the network pass), `geometry` (every view's camera and the aligned depth),
     `grid_size` (the pixel Gaussians' grid per view, width x height), `gaussians` and `counts`,
     `budget` (what `fit_budget` kept, summary.json's gaussians.budget), `refinement` (its summary;
     None: not refined), `restored_photos` [V, 3, H, W] (the operator applied to every photo, CPU;
-    set by the fusion; None for a regression model), `photo_restoration` [1, 3, H, W] (a
+    set after the network pass; None for a regression model), `photo_restoration` [1, 3, H, W] (a
     one-photo scene's 2D restoration) and `denoising` (its measured noise and whether it was
     removed; None: not one photo), `timings` seconds per stage.
     """
@@ -56,6 +58,7 @@ class SceneJob:
     selected: list[int] = field(default_factory=list)
     brightened: Brightened | None = None
     registration: ViewRegistration | None = None
+    pending_registration: Future | None = None
     geometry: SceneGeometry | None = None
     grid_size: tuple[int, int] | None = None
     gaussians: Gaussians | None = None

@@ -3,6 +3,12 @@
 and returns it with its product added; `build_scene` runs the chain and times every stage under
 its name (summary.json's seconds), so a stage can be timed, skipped or moved on its own. The
 Gaussians stay on the model's device from the fusion on.
+
+Structure-from-motion on photos brightened by the blind tone curve (the preset's
+`sfm_brightening`, or a model without a restoration operator) needs nothing from the network: it
+runs on a background thread while the network pass and the operator's restoration of the photos
+run on the main one (COLMAP matches and maps on one core), and `registration_result` waits for
+it. Its "sfm" seconds are then the time the job waited, not what it took.
 """
 
 from __future__ import annotations
@@ -10,6 +16,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
@@ -91,9 +98,10 @@ def operator_restoration(network: NetworkPass, photos: torch.Tensor, selected: l
 
 def restoration_pass(job: SceneJob) -> SceneJob:
     """A model that restores the photos itself runs first, on an even subset of the views, so
-    that structure-from-motion sees its restoration (SIFT finds far more features on it than on
-    the dark photos); other models, and network geometry, skip this."""
-    if not job.has_operator or job.geometry_source == "network":
+    that structure-from-motion sees its restoration (SIFT finds more features on it than on the
+    blind tone curve of the dark photos); other models, presets whose structure-from-motion sees
+    the tone curve, and network geometry skip this."""
+    if not job.has_operator or job.geometry_source == "network" or job.preset.sfm_brightening != "restoration":
         return job
     job.selected = even_subset(len(job.names), job.view_limit, required=list(job.required_views))
     job.network = _network_pass(job, job.selected)
@@ -101,29 +109,66 @@ def restoration_pass(job: SceneJob) -> SceneJob:
     return job
 
 
+def _in_background(call: Callable[[], object]) -> Future:
+    """`call` started on a thread of its own; its Future gives the result or raises its error."""
+    executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lumos3d-sfm")
+    future = executor.submit(call)
+    executor.shutdown(wait=False)  # the thread ends with the call
+    return future
+
+
 def registration(job: SceneJob) -> SceneJob:
     """The cameras known before (the rest of) the network pass: given poses, structure-from-motion
     or none (`pipeline.scene_geometry.register_views`). Structure-from-motion leaves a core idle:
-    the modules later stages import load meanwhile (`pipeline.module_prefetch`)."""
-    if job.geometry_source != "network" and len(job.names) > 1:
+    the modules later stages import load meanwhile (`pipeline.module_prefetch`); on the blind
+    tone curve it runs beside the network pass (module docstring)."""
+    runs_sfm = job.geometry_source != "network" and len(job.names) > 1
+    if runs_sfm:
         prefetch_modules(LATER_MODULES if job.preset.refine_steps > 0 else WRITING_MODULES)
-    job.registration = register_views(job.photos, job.names, job.geometry_source, job.poses, job.mode, job.progress,
-                                      job.brightened, job.sizes, job.preset.sfm_long_side)
+
+    def register() -> object:
+        return register_views(job.photos, job.names, job.geometry_source, job.poses, job.mode, job.progress,
+                              job.brightened, job.sizes, job.preset.sfm_long_side)
+
+    if runs_sfm and job.brightened is None:
+        job.pending_registration = _in_background(register)
+    else:
+        job.registration = register()
+    return job
+
+
+def registration_result(job: SceneJob) -> SceneJob:
+    """Waits for the structure-from-motion that runs beside the network pass (its errors are
+    raised here)."""
+    if job.pending_registration is not None:
+        pending, job.pending_registration = job.pending_registration, None
+        job.registration = pending.result()
     return job
 
 
 def network_pass(job: SceneJob) -> SceneJob:
     """The forward pass over the views the network sees: an even subset up to the view limit,
     always holding the required views and those only the network can place (the restoration
-    pass is reused when it already covers them)."""
-    needed = job.registration.views_needing_network()
+    pass is reused when it already covers them). While structure-from-motion is still running,
+    those are not known yet: the pass runs on the subset, and again after it if it must."""
+    needed = [] if job.registration is None else job.registration.views_needing_network()
     if job.network is not None and not set(needed) - set(job.selected):
         return job
     job.selected = even_subset(len(job.names), job.view_limit, required=[*job.required_views, *needed])
     job.network = _network_pass(job, job.selected)
+    job.restored_photos = None  # of the views an earlier pass saw
     if len(job.selected) < len(job.names):
         logger.info("%d views given; the network sees %d of them, chosen evenly (raise max_views to use more)",
                     len(job.names), len(job.selected))
+    return job
+
+
+def photo_restoration_of_views(job: SceneJob) -> SceneJob:
+    """The operator's restoration of every photo (`operator_restoration`), once: the Gaussians'
+    colours and refinement's targets. It needs only the network pass, so it runs while
+    structure-from-motion may still be running."""
+    if job.has_operator and job.restored_photos is None:
+        job.restored_photos = operator_restoration(job.network, job.photos, job.selected)
     return job
 
 
@@ -137,8 +182,7 @@ def fusion(job: SceneJob) -> SceneJob:
     job.grid_size = dense_grid_size(job.network.network_size, (job.photos.shape[-1], job.photos.shape[-2]),
                                     preset.gaussian_grid)
     prediction, grid_geometry = densify_grid(job.network.prediction, job.geometry, job.grid_size)
-    if job.has_operator:  # once: the Gaussians' colours here, refinement's targets later
-        job.restored_photos = operator_restoration(job.network, job.photos, job.selected)
+    job = photo_restoration_of_views(job)
     restored = None if job.restored_photos is None else job.restored_photos[job.selected]
     prediction = with_full_resolution_colours(prediction, restored, job.model)
     keep = None if job.fuse_views is None else torch.tensor([bool(job.fuse_views[i]) for i in job.selected])
@@ -217,6 +261,9 @@ def photo_restoration(job: SceneJob) -> SceneJob:
 SCENE_STAGES: tuple[tuple[str, Stage], ...] = (
     ("network", restoration_pass),
     ("sfm", registration),
+    ("network", network_pass),
+    ("fuse", photo_restoration_of_views),
+    ("sfm", registration_result),
     ("network", network_pass),
     ("fuse", fusion),
     ("budget", budget),
