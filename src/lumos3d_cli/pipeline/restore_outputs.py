@@ -6,8 +6,10 @@ earlier outputs (io/output_set.py)."""
 from __future__ import annotations
 
 import json
+import os
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -94,16 +96,23 @@ def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_fo
     suffix = VIEW_FORMATS[output_format][0]
     started = time.perf_counter()
     outputs = restore_outputs(scene_path, [*scene.input_paths, *inputs], video)
-    with outputs.staged() as staging:
+    with outputs.staged() as staging, ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
         root = staging.root
+        (root / "restored").mkdir()
+        # The images are encoded on every core (OpenCV and OpenImageIO release the GIL) while this
+        # thread writes the scene, its cameras and the preview: 25 views of 500x375 and the contact
+        # sheet took 0.6 s on one core.
+        # the contact sheet first: one large image, the longest to encode
+        images = [pool.submit(lambda: write_image(root / "contact_sheet.png",
+                                                  scene_contact_sheet(scene).astype(np.float32) / 255))]
+        images += [pool.submit(write_view, root / "restored" / f"{Path(name).stem}{suffix}", image, output_format)
+                   for name, image in zip(scene.names, scene.restored)]
         write_ply(root / scene_path.name, scene.gaussians)
         write_transforms_json(root / "cameras.json", scene.cameras)
         write_colmap_model(root / "colmap", scene.cameras, scene.geometry.points)
-        (root / "restored").mkdir()
-        for name, image in zip(scene.names, scene.restored):
-            write_view(root / "restored" / f"{Path(name).stem}{suffix}", image, output_format)
-        write_image(root / "contact_sheet.png", scene_contact_sheet(scene).astype(np.float32) / 255)
         write_preview_glb(root / "preview.glb", scene.gaussians, scene.cameras)
+        for image in images:
+            image.result()  # raises what the writing raised
         if video is not None:
             write_orbit_video(scene.gaussians, scene.cameras, staging.files[Path(video)], on_frame=on_video_frame)
         scene.timings["write"] = time.perf_counter() - started
