@@ -1,5 +1,6 @@
-"""Structure-from-motion on the blind tone curve runs on its own thread beside the network pass
-(pipeline/scene_stages.py), with the result of running it first."""
+"""Structure-from-motion runs on its own thread (pipeline/scene_stages.py): on the blind tone
+curve beside the network pass, on the model's restoration after it; with the result of running
+it on the main thread."""
 
 import threading
 from dataclasses import replace
@@ -57,13 +58,17 @@ def test_registration_on_the_tone_curve_runs_beside_the_network_with_the_same_re
     torch.testing.assert_close(built.restored_photos, operator_restoration(built.network, photos, built.selected))
 
 
-def test_the_restoration_preset_registers_first_on_the_main_thread(buu, model, monkeypatch):
+def test_registration_on_the_restoration_runs_after_the_network_on_its_own_thread(buu, model, monkeypatch):
     photos = load_images([buu / "low" / name for name in NAMES]).images
     threads = _recording_threads(monkeypatch)
     preset = replace(get_restore_preset("fast", refine_steps=0), sfm_brightening="restoration")
     built = build_scene(photos, NAMES, model, preset, geometry="sfm", max_views=3)
-    assert threads == [threading.current_thread().name]
+    assert len(threads) == 1 and threads[0].startswith("lumos3d-sfm")
     assert built.geometry.summary()["brightening"] == "the model's restoration operator"
+    brightened = scene_stages.Brightened(scene_stages._global_restoration(built.network, photos), "restoration")
+    direct = register_views(photos, NAMES, "sfm", None, "low-light", SilentProgress(), brightened, sfm_long_side=384)
+    assert torch.equal(built.registration.cameras.extrinsics, direct.cameras.extrinsics)
+    torch.testing.assert_close(built.restored_photos, operator_restoration(built.network, photos, built.selected))
 
 
 def test_a_view_structure_from_motion_cannot_place_joins_a_second_network_pass(buu, model):

@@ -4,11 +4,13 @@ and returns it with its product added; `build_scene` runs the chain and times ev
 its name (summary.json's seconds), so a stage can be timed, skipped or moved on its own. The
 Gaussians stay on the model's device from the fusion on.
 
-Structure-from-motion on photos brightened by the blind tone curve (the preset's
-`sfm_brightening`, or a model without a restoration operator) needs nothing from the network: it
-runs on a background thread while the network pass and the operator's restoration of the photos
-run on the main one (COLMAP matches and maps on one core), and `registration_result` waits for
-it. Its "sfm" seconds are then the time the job waited, not what it took.
+Structure-from-motion runs on a background thread (COLMAP matches and maps on one core) while the
+main one goes on with what needs no cameras, and `registration_result` waits for it; its "sfm"
+seconds are the time the job waited, not what it took. On photos brightened by the blind tone
+curve (the preset's `sfm_brightening`, or a model without a restoration operator) it needs
+nothing from the network and runs beside the network pass and the operator's restoration of the
+photos; on the model's restoration it starts after the restoration pass, beside the
+restoration of the photos at full resolution.
 """
 
 from __future__ import annotations
@@ -120,8 +122,8 @@ def _in_background(call: Callable[[], object]) -> Future:
 def registration(job: SceneJob) -> SceneJob:
     """The cameras known before (the rest of) the network pass: given poses, structure-from-motion
     or none (`pipeline.scene_geometry.register_views`). Structure-from-motion leaves a core idle:
-    the modules later stages import load meanwhile (`pipeline.module_prefetch`); on the blind
-    tone curve it runs beside the network pass (module docstring)."""
+    the modules later stages import load meanwhile (`pipeline.module_prefetch`), and it runs on
+    its own thread (module docstring)."""
     runs_sfm = job.geometry_source != "network" and len(job.names) > 1
     if runs_sfm:
         prefetch_modules(LATER_MODULES if job.preset.refine_steps > 0 else WRITING_MODULES)
@@ -130,7 +132,7 @@ def registration(job: SceneJob) -> SceneJob:
         return register_views(job.photos, job.names, job.geometry_source, job.poses, job.mode, job.progress,
                               job.brightened, job.sizes, job.preset.sfm_long_side)
 
-    if runs_sfm and job.brightened is None:
+    if runs_sfm:
         job.pending_registration = _in_background(register)
     else:
         job.registration = register()
