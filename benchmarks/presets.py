@@ -35,21 +35,23 @@ DETAIL_PLOT = REPO / "docs" / "images" / "preset-detail.png"
 # Read off this benchmark's run of 2026-11-25 (late evening, issue 36: `best` densifies; the table it writes);
 # rewrite when the numbers move.
 DEFAULTS_REASON = (
-    "How the defaults were picked. Every row above is one run on the idle machine (2026-11-25, this release's "
-    "low-light head with the exposure prior at 0.75, the pixels no Gaussian covers filled from the render around "
-    "them, and refinement's learning rates falling by a tenth over 200 steps in every preset; times differ by "
-    "about a second run to run). Refinement's first steps are what lift every preset: they take the views from "
-    "sharpness about 0.5 to 0.8 (they are fitted to the operator applied to the full-resolution photos). After "
-    "that, steps alone buy little on buu: `balanced` at 50 steps scores +0.01 dB / +0.004 SSIM on holdout for "
-    "9 s more, `fast` at 50 steps -0.06 dB on holdout. `best` densifies up to step 80 "
-    "(refine/densification.py): its Gaussians grow from 382k to 564k and it scores 23.70 dB / 0.890 / 0.86 on "
-    "holdout against `balanced`'s 23.65 / 0.889 / 0.83, in 4.3x the time (all 200 steps run: the early stop "
+    "How the defaults were picked. Every row above is one run (2026-11-25, night: this release's low-light head "
+    "with the exposure prior at 0.75, the pixels no Gaussian covers filled from the render around them, and "
+    "refinement's learning rates falling by a tenth over 200 steps in every preset). The host ran slower and "
+    "noisier this night than the evening before: the same commit's `fast` took 17.5-19.3 s and `balanced` "
+    "35.3-37.1 s in interleaved runs where the evening's benchmark had measured 14.5 s and 28.3 s, so compare "
+    "times within this table only. Refinement's first steps are what lift every preset: they take the views "
+    "from sharpness about 0.5 to 0.8 (they are fitted to the operator applied to the full-resolution photos). "
+    "After that, steps alone buy little on buu: `balanced` at 50 steps scores +0.02 dB / +0.004 SSIM on holdout "
+    "for 1.2 s more here, `fast` at 50 steps -0.06 dB on holdout. `best` densifies up to step 80 "
+    "(refine/densification.py): its Gaussians grow from 381k to 563k and it scores 23.67 dB / 0.890 / 0.86 on "
+    "holdout against `balanced`'s 23.64 / 0.889 / 0.83, in 3.0x the time (all 200 steps run: the early stop "
     "restarts after each densification); 50 steps of it score 23.43, the new Gaussians still settling. On buu "
     "it buys little; on shrub's foliage it buys most (the next table, which `best` was chosen on). `balanced` "
-    "(the default) stays at 25 steps without densification: 28.3 s, inside issue 37's 30 s. "
-    "`fast` (the network at 0.75x without view-dependent colour, structure-from-motion on photos of at most "
-    "384 px, the budget's weights at half resolution, 15 refinement steps at 256 px) takes 0.51x `balanced`'s "
-    "time, 0.55 dB below it on holdout and 0.73 dB on context. What holds every preset back on buu is the "
+    "(the default) stays at 25 steps without densification. `fast` (the network at 0.75x without "
+    "view-dependent colour, structure-from-motion on the blind tone curve at 384 px running beside the network "
+    "pass, the budget's weights at half resolution, 15 refinement steps at 256 px) takes 0.41x `balanced`'s "
+    "time, 0.51 dB below it on holdout and 0.70 dB on context. What holds every preset back on buu is the "
     "restoration's appearance (at the ground truth's mean grey `balanced` scores 26.4 dB on holdout), which "
     "refinement against the model's own restoration cannot change. The denser Gaussian grid (`--gaussian-grid "
     "2`, not measured in this run) sharpens the views but keeps the amplified noise (-0.2 dB on the development "
@@ -62,13 +64,14 @@ DEV_REASON = (
     "without densification scored 20.09 / 0.683 / 21.43 / 0.83, densified up to step 80 20.16 / 0.692 / 21.50 / "
     "0.86 and up to step 150 20.15 / 0.693 / 21.45 / 0.89 (1.4x the Gaussians, about 10 % more time, and more "
     "specks of the colour chart's black border around it in buu's low-light novel views: 23.51 dB there "
-    "against 23.70), so 80. In this run `best` scores 20.17 / 0.694 / 21.51 / 0.86 (refinement's threads make a few hundredths "
-    "of difference run to run). Densification is what makes `best` sharper, most on shrub's foliage (over-exposed "
+    "against 23.70), so 80. In this run `best` scores 20.14 / 0.692 / 21.47 / 0.86 (20.17 / 0.694 / 21.51 / 0.86 in the evening's run: "
+    "refinement's threads make a few hundredths of difference run to run). Densification is what makes `best` sharper, most on shrub's foliage (over-exposed "
     "holdout 17.12 / 0.536 / 0.85 undensified -> 17.44 / 0.563 / 0.89). What `best` buys over `balanced` is detail and "
-    "structure (+0.054 SSIM, sharpness 0.77 -> 0.86), not PSNR (+0.00 dB). Issue 36's goals, measured: "
-    "`balanced` sharpness 0.77 (goal 0.85, not met); `best` 0.86 (goal 0.9, not met) at +0.00 dB (goal +1.0 "
-    "dB, not met) in 4.3x `balanced`'s time (goal within 5x); `fast` -0.41 dB (goal within 1 dB) in 0.51x the "
-    "time (goal 0.4x, not met). Tried for `balanced` within its time, "
+    "structure (+0.052 SSIM, sharpness 0.77 -> 0.86), not PSNR (-0.03 dB). Issue 36's goals, measured: "
+    "`balanced` sharpness 0.77 (goal 0.85, not met); `best` 0.86 (goal 0.9, not met) at -0.03 dB (goal +1.0 "
+    "dB, not met) in 3.0x `balanced`'s time (goal within 5x); `fast` -0.41 dB (goal within 1 dB) in 0.41x the "
+    "time (goal 0.4x, not met by a hair; 0.51x in the evening's run, before structure-from-motion ran beside "
+    "the network). Tried for `balanced` within its time, "
     "on the same four rows against its 20.17 / 0.640 / 21.25 / 0.77: densifying every 8 of its 25 steps "
     "20.00 / 0.631 / 21.05 / 0.79 (new Gaussians need steps to settle); the Gaussian grid of 2 19.97 / 0.637 / "
     "20.98 / 0.84 (2.2x the Gaussians); a sampling filter of a quarter of the network pixel 20.20 / 0.642 / "
@@ -214,7 +217,8 @@ def plot(results: list[dict], path: Path) -> None:
             cv2.circle(canvas, position, 5, colour, 2, cv2.LINE_AA)
             cv2.putText(canvas, f"{row['steps']}, grid {row['grid_option']:g}", (position[0] - 30, position[1] - 10), font, 0.4,
                         colour, 1, cv2.LINE_AA)
-        cv2.putText(canvas, preset, (margin + 10, margin + 22 + 20 * index), font, 0.55, colour, 2, cv2.LINE_AA)
+        # the legend in the lower right, above the gamma line: the curves run along the top
+        cv2.putText(canvas, preset, (width - margin - 110, gamma_y - 90 + 20 * index), font, 0.55, colour, 2, cv2.LINE_AA)
     cv2.putText(canvas, "restore wall time on buu (s, log scale)", (width // 2 - 170, height - 20), font, 0.5, (0, 0, 0), 1,
                 cv2.LINE_AA)
     cv2.putText(canvas, "holdout PSNR (dB); labels: refinement steps; open circles: --gaussian-grid", (margin, margin - 15), font, 0.5, (0, 0, 0), 1,
