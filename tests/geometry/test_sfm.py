@@ -3,6 +3,7 @@ and LOM buu's dataset cameras. The fast tests use a few small photos; the full s
 
 from pathlib import Path
 
+import pycolmap
 import pytest
 import torch
 import torch.nn.functional as F
@@ -152,3 +153,15 @@ def test_sequential_matching_registers_an_ordered_capture(shared_data):
     assert registration.matching == "sequential" and registration.registered_count >= 28
     reference = truth.extrinsics[registration.registered_indices]
     assert pose_accuracy(registration.cameras.extrinsics, reference).rotation_error_median <= 1.0
+
+
+def test_the_ransac_floor_is_lowered_only_for_many_photos():
+    """Many photos (buu's 25, above: every view within a degree) verify with the lower floor; a
+    few keep COLMAP's, which held the focal length of a one-photo camera (tests/cli/test_faults.py)."""
+    from lumos3d_cli.geometry.sfm import VERIFICATION_FLOOR_FROM_VIEWS, VERIFICATION_MIN_TRIALS, _options
+
+    default = pycolmap.TwoViewGeometryOptions().ransac.min_num_trials
+    few = _options(1, 4096, VERIFICATION_FLOOR_FROM_VIEWS - 1, 1)[3]
+    many = _options(1, 4096, VERIFICATION_FLOOR_FROM_VIEWS, 1)[3]
+    assert few.ransac.min_num_trials == default == 100
+    assert many.ransac.min_num_trials == VERIFICATION_MIN_TRIALS < default

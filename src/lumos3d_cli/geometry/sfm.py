@@ -29,7 +29,10 @@ with the cores shared by other jobs):
   are inliers, which was most of buu's 300 pairs: matching 1.81 -> 1.06 s at 384 px, the same
   rotation accuracy within run-to-run noise on Strecha and buu (mean of the median errors over
   Herz-Jesus-P8, fountain-P11, entry-P10, castle-P19 and buu: 0.82 -> 0.60 degrees at 384 px,
-  0.41 -> 0.42 at 512) and every view registered;
+  0.41 -> 0.42 at 512) and every view registered. Only from VERIFICATION_FLOOR_FROM_VIEWS (20)
+  photos up: under it the pairs are few and the floor saved no time (Strecha's 8-19 photos:
+  within 0.1 s), and 9 of buu's photos in three sizes (one camera each) put the 400x300 photo's
+  focal length 10 % off the expected 0.8x with it, 3 % with COLMAP's 100;
 - one shared SIMPLE_PINHOLE camera (one focal length, principal point at the image centre, no
   distortion) when the photos come from one camera: the renderer is a pinhole, and one focal
   length is better constrained than two. It lands within 0.5 % of fountain's calibrated focal.
@@ -70,8 +73,10 @@ EXHAUSTIVE_MATCHING_LIMIT = 25
 SEQUENTIAL_OVERLAP = 10
 # SIFT features per photo: brute-force matching costs grows with the square of this.
 MAX_FEATURES = 4096
-# The fewest RANSAC trials of a pair's geometric verification (module docstring).
+# The fewest RANSAC trials of a pair's geometric verification, from this many photos up; fewer
+# photos keep COLMAP's 100 (module docstring).
 VERIFICATION_MIN_TRIALS = 20
+VERIFICATION_FLOOR_FROM_VIEWS = 20
 # Below this share of photos in the largest model, photos do not look like one scene.
 ONE_SCENE_SHARE = 0.5
 
@@ -161,7 +166,8 @@ def _options(threads: int, max_features: int, views: int, extraction_threads: in
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = threads
     verification = pycolmap.TwoViewGeometryOptions()
-    verification.ransac.min_num_trials = VERIFICATION_MIN_TRIALS
+    if views >= VERIFICATION_FLOOR_FROM_VIEWS:
+        verification.ransac.min_num_trials = VERIFICATION_MIN_TRIALS
     mapping = pycolmap.IncrementalPipelineOptions()
     mapping.num_threads = threads
     mapping.random_seed = 0
