@@ -101,8 +101,7 @@ def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_fo
         (root / "restored").mkdir()
         # The images are encoded on every core (OpenCV and OpenImageIO release the GIL) while this
         # thread writes the scene, its cameras and the preview: 25 views of 500x375 and the contact
-        # sheet took 0.6 s on one core.
-        # the contact sheet first: one large image, the longest to encode
+        # sheet took 0.6 s on one core. The contact sheet goes first: the longest to encode.
         images = [pool.submit(lambda: write_image(root / "contact_sheet.png",
                                                   scene_contact_sheet(scene).astype(np.float32) / 255))]
         images += [pool.submit(write_view, root / "restored" / f"{Path(name).stem}{suffix}", image, output_format)

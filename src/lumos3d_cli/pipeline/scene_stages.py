@@ -20,6 +20,7 @@ import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 import torch
@@ -124,18 +125,13 @@ def registration(job: SceneJob) -> SceneJob:
     or none (`pipeline.scene_geometry.register_views`). Structure-from-motion leaves a core idle:
     the modules later stages import load meanwhile (`pipeline.module_prefetch`), and it runs on
     its own thread (module docstring)."""
-    runs_sfm = job.geometry_source != "network" and len(job.names) > 1
-    if runs_sfm:
-        prefetch_modules(LATER_MODULES if job.preset.refine_steps > 0 else WRITING_MODULES)
-
-    def register() -> object:
-        return register_views(job.photos, job.names, job.geometry_source, job.poses, job.mode, job.progress,
-                              job.brightened, job.sizes, job.preset.sfm_long_side)
-
-    if runs_sfm:
-        job.pending_registration = _in_background(register)
-    else:
+    register = partial(register_views, job.photos, job.names, job.geometry_source, job.poses, job.mode, job.progress,
+                       job.brightened, job.sizes, job.preset.sfm_long_side)
+    if job.geometry_source == "network" or len(job.names) < 2:  # no structure-from-motion: nothing to wait for
         job.registration = register()
+        return job
+    prefetch_modules(LATER_MODULES if job.preset.refine_steps > 0 else WRITING_MODULES)
+    job.pending_registration = _in_background(register)
     return job
 
 
@@ -166,9 +162,9 @@ def network_pass(job: SceneJob) -> SceneJob:
 
 
 def photo_restoration_of_views(job: SceneJob) -> SceneJob:
-    """The operator's restoration of every photo (`operator_restoration`), once: the Gaussians'
-    colours and refinement's targets. It needs only the network pass, so it runs while
-    structure-from-motion may still be running."""
+    """The operator's restoration of every photo (`operator_restoration`), once per network pass:
+    the Gaussians' colours (`fusion`) and refinement's targets. It needs only the network pass,
+    so it runs while structure-from-motion may still be running."""
     if job.has_operator and job.restored_photos is None:
         job.restored_photos = operator_restoration(job.network, job.photos, job.selected)
     return job
@@ -184,7 +180,6 @@ def fusion(job: SceneJob) -> SceneJob:
     job.grid_size = dense_grid_size(job.network.network_size, (job.photos.shape[-1], job.photos.shape[-2]),
                                     preset.gaussian_grid)
     prediction, grid_geometry = densify_grid(job.network.prediction, job.geometry, job.grid_size)
-    job = photo_restoration_of_views(job)
     restored = None if job.restored_photos is None else job.restored_photos[job.selected]
     prediction = with_full_resolution_colours(prediction, restored, job.model)
     keep = None if job.fuse_views is None else torch.tensor([bool(job.fuse_views[i]) for i in job.selected])
@@ -266,7 +261,8 @@ SCENE_STAGES: tuple[tuple[str, Stage], ...] = (
     ("network", network_pass),
     ("fuse", photo_restoration_of_views),
     ("sfm", registration_result),
-    ("network", network_pass),
+    ("network", network_pass),  # the views structure-from-motion could not place, if any
+    ("fuse", photo_restoration_of_views),  # again only if that pass ran
     ("fuse", fusion),
     ("budget", budget),
     ("refine", refinement),
