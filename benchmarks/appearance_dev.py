@@ -72,6 +72,7 @@ from lumos3d_cli.model.lumos3d import Lumos3D  # noqa: E402
 from lumos3d_cli.pipeline.evaluation import eval_contact_sheet, evaluate_lom  # noqa: E402
 from lumos3d_cli.pipeline.lom_eval import PROTOCOLS  # noqa: E402
 from lumos3d_cli.pipeline.model_loading import load_restoration_model  # noqa: E402
+from lumos3d_cli.pipeline.choices import EXPOSURE_KEYS  # noqa: E402
 from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, RestorePreset, get_restore_preset  # noqa: E402
 from lumos3d_cli.pipeline.quality import QualityMeter  # noqa: E402
 from lumos3d_cli.pipeline.restore import restore_scene  # noqa: E402
@@ -109,13 +110,14 @@ class RestoreOptions:
     fill_unobserved: bool | None = None
     geometry: str = "auto"
     device: str = "cpu"
+    exposure_key: str | None = None
 
     def checkpoint(self, mode: str) -> str | None:
         return self.checkpoint_low_light if mode == "low-light" else self.checkpoint_over_exposure
 
     def settings(self) -> RestorePreset:
         return get_restore_preset(self.preset, self.refine_steps, self.max_gaussians, self.gaussian_grid,
-                                  self.exposure_prior, self.fill_unobserved)
+                                  self.exposure_prior, self.fill_unobserved, exposure_key=self.exposure_key)
 
     @property
     def is_default(self) -> bool:
@@ -194,7 +196,8 @@ def lom_entries(options: RestoreOptions, mode: str, protocol: str, scenes: Seque
     report = evaluate_lom(shared / "lom", list(scenes), mode, protocol, options.checkpoint(mode), options.preset,
                           options.geometry, device=options.device, refine_steps=options.refine_steps,
                           max_gaussians=options.max_gaussians, gaussian_grid=options.gaussian_grid,
-                          exposure_prior=options.exposure_prior, fill_unobserved=options.fill_unobserved)
+                          exposure_prior=options.exposure_prior, fill_unobserved=options.fill_unobserved,
+                          exposure_key=options.exposure_key)
     entries = {}
     for result in report.scenes:
         references = list(result.references)
@@ -420,6 +423,7 @@ def main() -> None:
     parser.add_argument("--max-gaussians", type=int, default=None)
     parser.add_argument("--gaussian-grid", type=float, default=None)
     parser.add_argument("--exposure-prior", type=float, default=None)
+    parser.add_argument("--exposure-key", choices=EXPOSURE_KEYS, default=None)
     parser.add_argument("--black-unobserved", action="store_true", help="leave uncovered pixels black (LOM renders)")
     parser.add_argument("--geometry", default="auto")
     parser.add_argument("--device", default="cpu")
@@ -434,7 +438,7 @@ def main() -> None:
     logger.setLevel(logging.INFO)
     options = RestoreOptions(args.checkpoint_low_light, args.checkpoint_over_exposure, args.preset, args.refine_steps,
                              args.max_gaussians, args.gaussian_grid, args.exposure_prior,
-                             False if args.black_unobserved else None, args.geometry, args.device)
+                             False if args.black_unobserved else None, args.geometry, args.device, args.exposure_key)
     subset = replace(QUICK if args.quick else Subset(), modes=tuple(args.modes), sources=tuple(args.sources))
 
     def progress(mode: str, entry: str, value: dict) -> None:

@@ -44,7 +44,9 @@ def test_structure_from_motion_sees_the_models_restoration(buu):
     photos = load_images([buu / "low" / name for name in names]).images
     model = build_model("tiny-operator", seed=0).eval()
     # fast, but structure-from-motion on the restoration (fast itself sees the tone curve)
-    unexposed = replace(get_restore_preset("fast", exposure_prior=0.0, refine_steps=0), sfm_brightening="restoration")
+    # (the fixed key: this untrained operator's restoration is noise the content key was not fitted on)
+    unexposed = replace(get_restore_preset("fast", exposure_prior=0.0, refine_steps=0, exposure_key="fixed"),
+                        sfm_brightening="restoration")
     built = build_scene(photos, names, model, unexposed, geometry="sfm", max_views=3)
     report = built.geometry.summary()
     assert report["brightening"] == "the model's restoration operator" and report["registered_views"] == 5
@@ -63,7 +65,9 @@ def test_structure_from_motion_sees_the_models_restoration(buu):
 
 def test_the_exposure_prior_moves_the_scene_towards_the_key(buu):
     from lumos3d_cli.errors import InputError
+    from lumos3d_cli.model.appearance.exposure_key import bundled_key_model
     from lumos3d_cli.model.appearance.exposure_prior import EXPOSURE_KEY, EXPOSURE_PRIOR_STRENGTH
+    from lumos3d_cli.train.exposure_key_fit import reference_sample
 
     from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
 
@@ -72,16 +76,24 @@ def test_the_exposure_prior_moves_the_scene_towards_the_key(buu):
     model = build_model("tiny-operator", seed=0).eval()  # an untrained head: the identity
     plain = run_network(model, photos, get_restore_preset("fast", exposure_prior=0.0))
     assert plain.exposure_stops == 0.0
-    network = run_network(model, photos, get_restore_preset("fast"))
+    network = run_network(model, photos, get_restore_preset("fast", exposure_key="fixed"))
     images = network.prepared.images[None]
-    keyed = run_network(model, photos, get_restore_preset("fast", exposure_prior=1.0))
+    keyed = run_network(model, photos, get_restore_preset("fast", exposure_prior=1.0, exposure_key="fixed"))
     # about 2 stops back to the key (buu's reference is a little brighter); the default takes 3/4 of them
     assert 1.0 < keyed.exposure_stops < 3.0
     assert network.exposure_stops == pytest.approx(EXPOSURE_PRIOR_STRENGTH["low-light"] * keyed.exposure_stops, rel=1e-5)
-    over = run_network(model, photos, get_restore_preset("fast"), "over-exposure")  # each mode has its own
+    # the key from the content adds the offset the bundled predictor reads from the scene at the key,
+    # and lands nearer the 2 stops the photos were darkened by
+    content = run_network(model, photos, get_restore_preset("fast", exposure_prior=1.0))
+    offset = float(bundled_key_model().offset_stops(reference_sample(images[0])[0]))
+    assert content.exposure_stops == pytest.approx(keyed.exposure_stops + offset, abs=1e-3)
+    assert abs(content.exposure_stops - 2.0) < abs(keyed.exposure_stops - 2.0)
+    over = run_network(model, photos, get_restore_preset("fast", exposure_key="fixed"), "over-exposure")  # each mode has its own
     assert over.exposure_stops == pytest.approx(EXPOSURE_PRIOR_STRENGTH["over-exposure"] * keyed.exposure_stops, rel=1e-5)
     assert float(keyed.prediction.appearance.apply(images).mean()) == pytest.approx(EXPOSURE_KEY, abs=2e-3)
     brightness = [float(n.prediction.appearance.apply(images).mean()) for n in (plain, network, keyed)]
     assert brightness[0] == pytest.approx(float(images.mean()), abs=1e-4) and brightness[0] < brightness[1] < brightness[2]
     with pytest.raises(InputError, match="exposure_prior"):
         get_restore_preset("fast", exposure_prior=1.5)
+    with pytest.raises(InputError, match="exposure_key"):
+        get_restore_preset("fast", exposure_key="sunny")

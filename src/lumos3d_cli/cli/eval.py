@@ -69,6 +69,7 @@ def eval_command(
     max_gaussians: int | None = preset_options.MAX_GAUSSIANS,
     gaussian_grid: float | None = preset_options.GAUSSIAN_GRID,
     exposure_prior: float | None = preset_options.EXPOSURE_PRIOR,
+    exposure_key: str | None = preset_options.EXPOSURE_KEY,
     fill_unobserved: bool = preset_options.FILL_UNOBSERVED,
     densify: bool | None = preset_options.DENSIFY,
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
@@ -91,7 +92,7 @@ def eval_command(
         report = evaluate_lom(
             root, names, mode=mode, protocol=protocol, checkpoint=checkpoint, preset=preset, geometry=geometry,
             max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, gaussian_grid=gaussian_grid,
-            exposure_prior=exposure_prior, fill_unobserved=fill_unobserved, densify=densify, device=device, baseline=baseline, lpips_weights=lpips_weights,
+            exposure_prior=exposure_prior, exposure_key=exposure_key, fill_unobserved=fill_unobserved, densify=densify, device=device, baseline=baseline, lpips_weights=lpips_weights,
             on_scene=lambda _: bars.advance(task),
         )
         write_eval_report(report, out, inputs)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import typer
 
+from lumos3d_cli.pipeline.choices import EXPOSURE_KEYS
+
 REFINE_STEPS = typer.Option(
     None, "--refine-steps", help="Test-time refinement steps after the forward pass (default: the preset's; 0: none).")
 MAX_GAUSSIANS = typer.Option(
@@ -12,6 +14,9 @@ GAUSSIAN_GRID = typer.Option(
     None, "--gaussian-grid", help="Pixel Gaussians per network pixel along each side, 1 to 4 (default: the preset's; at most the photos' resolution).")
 EXPOSURE_PRIOR = typer.Option(
     None, "--exposure-prior", help="How far the scene's overall brightness moves towards a well-exposed key, 0 (the model's own) to 1 (default: 0.75 in low light, 0.5 over-exposed).")
+EXPOSURE_KEY = typer.Option(
+    None, "--exposure-key",
+    help=f"The brightness the exposure prior aims at: {' or '.join(EXPOSURE_KEYS)} (content, the default: predicted from what the scene shows; fixed: mean sRGB 0.45 for every scene).")
 DENOISE_PHOTO = typer.Option(
     True, "--denoise/--no-denoise",
     help="A single photo: remove the sensor noise its restoration amplified, in proportion to its measured level.")

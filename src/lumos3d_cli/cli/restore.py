@@ -44,6 +44,7 @@ def restore_command(
     max_gaussians: int | None = preset_options.MAX_GAUSSIANS,
     gaussian_grid: float | None = preset_options.GAUSSIAN_GRID,
     exposure_prior: float | None = preset_options.EXPOSURE_PRIOR,
+    exposure_key: str | None = preset_options.EXPOSURE_KEY,
     fill_unobserved: bool = preset_options.FILL_UNOBSERVED,
     densify: bool | None = preset_options.DENSIFY,
     denoise: bool = preset_options.DENOISE_PHOTO,
@@ -79,7 +80,7 @@ def restore_command(
         scene = restore(
             photos, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,
             max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, gaussian_grid=gaussian_grid,
-            exposure_prior=exposure_prior, fill_unobserved=fill_unobserved, densify=densify, denoise_photo=denoise, device=device, reference=reference, lpips_weights=lpips_weights,
+            exposure_prior=exposure_prior, exposure_key=exposure_key, fill_unobserved=fill_unobserved, densify=densify, denoise_photo=denoise, device=device, reference=reference, lpips_weights=lpips_weights,
             progress=ProgressBars(bars),
         )
         frames = bars.add_task("orbit video", total=DEFAULT_ORBIT_FRAMES, visible=video is not None)

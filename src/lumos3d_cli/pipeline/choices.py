@@ -4,3 +4,4 @@ so that it can name them without importing torch, pycolmap and the rest of the j
 
 DEFAULT_RESTORE_PRESET = "balanced"
 GEOMETRY_SOURCES = ("auto", "network", "sfm")
+EXPOSURE_KEYS = ("content", "fixed")  # pipeline.presets.RestorePreset.exposure_key

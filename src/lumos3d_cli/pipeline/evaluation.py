@@ -64,14 +64,15 @@ def evaluate_lom(
     max_views: int | None = None, device: str = "cpu", baseline: str = "gamma", lpips_weights: Path | str | None = None,
     on_scene: Callable[[str], None] | None = None, refine_steps: int | None = None, max_gaussians: int | None = None,
     gaussian_grid: float | None = None, exposure_prior: float | None = None, fill_unobserved: bool | None = None,
-    densify: bool | None = None,
+    densify: bool | None = None, exposure_key: str | None = None,
 ) -> EvalReport:
     """Evaluate restoration on the LOM-layout scenes under `root` (all, or those named) with the
     paper's protocol; `on_scene(name)` is called after each scene. `refine_steps` overrides the
     preset's test-time refinement (fitted to the views in the scene, never to held-out ones),
     `max_gaussians` its Gaussian cap, `gaussian_grid` its grid of pixel Gaussians,
     `exposure_prior` its exposure prior's strength, `fill_unobserved` whether the renders' uncovered
-    pixels are filled, `densify` whether refinement densifies."""
+    pixels are filled, `densify` whether refinement densifies, `exposure_key` the key the exposure
+    prior pulls towards ("content" or "fixed")."""
     if mode not in MODES:
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
     if protocol not in PROTOCOLS:
@@ -80,7 +81,7 @@ def evaluate_lom(
         raise InputError(f"{baseline!r}: use one of {', '.join(BASELINES)}", parameter="baseline")
     check_geometry_source(geometry)
     settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior, fill_unobserved,
-                                  densify=densify)
+                                  densify=densify, exposure_key=exposure_key)
     limit = max_views or settings.max_views
     found = find_lom_scenes(root, mode, scenes)
     weights = resolve_checkpoint(checkpoint, mode)
@@ -97,6 +98,7 @@ def evaluate_lom(
         "root": str(root), "mode": mode, "protocol": protocol, "preset": settings.name, "geometry": geometry,
         "refine_steps": settings.refine_steps, "max_gaussians": settings.max_gaussians,
         "gaussian_grid": settings.gaussian_grid, "exposure_prior": prior_strength(mode, settings.exposure_prior),
+        "exposure_key": settings.exposure_key,
         "fill_unobserved": settings.fill_unobserved, "densify": settings.densify is not None,
         "max_views": limit, "checkpoint": {"name": weights.name, "sha256": file_sha256(weights)},
         "lpips": meter.lpips_note, "rows": rows,

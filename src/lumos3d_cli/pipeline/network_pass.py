@@ -11,6 +11,7 @@ import torch
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.field_of_view import FALLBACK_FOV_DEGREES, longer_side_fov, plausible_intrinsics
 from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.model.appearance.exposure_key import bundled_key_model
 from lumos3d_cli.model.appearance.exposure_prior import exposure_prior_stops, prior_strength
 from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DPrediction
 from lumos3d_cli.model.preprocess import PreparedImages, prepare_images
@@ -81,7 +82,8 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mod
     exposure_stops = None
     if prediction.appearance is not None:
         stops = exposure_prior_stops(prediction.appearance, prepared.images[None].to(device),
-                                     prior_strength(mode, preset.exposure_prior))
+                                     prior_strength(mode, preset.exposure_prior),
+                                     key_model=bundled_key_model() if preset.exposure_key == "content" else None)
         prediction, exposure_stops = replace(prediction, appearance=prediction.appearance.with_gain(stops)), float(stops[0])
     intrinsics, replaced = plausible_intrinsics(prediction.intrinsics[0], prepared.network_size)
     if bool(replaced.any()):

@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.sfm import SFM_LONG_SIDE
-from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET
+from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, EXPOSURE_KEYS
 from lumos3d_cli.refine.settings import DensifySettings, RefineSettings
 
 
@@ -58,6 +58,9 @@ class RestorePreset:
     # how far the scene's brightness moves to the key (0: none; None: the mode's own strength,
     # model.appearance.exposure_prior.EXPOSURE_PRIOR_STRENGTH)
     exposure_prior: float | None = None
+    # the key the prior pulls towards: "content" (predicted from what the scene shows,
+    # model.appearance.exposure_key) or "fixed" (mean sRGB 0.45 for every scene)
+    exposure_key: str = "content"
     fill_unobserved: bool = True  # fill the rendered views' pixels no Gaussian covers (render.hole_filling)
     denoise_photo: bool = True  # a one-photo restore's amplified noise removed (model.appearance.amplified_noise)
     densify: DensifySettings | None = None  # refinement's densification schedule (None: the Gaussians it starts from)
@@ -68,6 +71,8 @@ class RestorePreset:
     def __post_init__(self) -> None:
         if self.sfm_brightening not in SFM_BRIGHTENINGS:
             raise ValueError(f"sfm_brightening {self.sfm_brightening!r}: use one of {', '.join(SFM_BRIGHTENINGS)}")
+        if self.exposure_key not in EXPOSURE_KEYS:
+            raise ValueError(f"exposure_key {self.exposure_key!r}: use one of {', '.join(EXPOSURE_KEYS)}")
 
     def network_image_size(self, model_image_size: int, patch_size: int) -> int:
         """The longer network side: a patch multiple, at least one patch."""
@@ -116,12 +121,13 @@ RESTORE_PRESETS = {
 def get_restore_preset(
     name: str, refine_steps: int | None = None, max_gaussians: int | None = None, gaussian_grid: float | None = None,
     exposure_prior: float | None = None, fill_unobserved: bool | None = None, denoise_photo: bool | None = None,
-    densify: bool | None = None,
+    densify: bool | None = None, exposure_key: str | None = None,
 ) -> RestorePreset:
     """The preset `name`, with its refinement steps, Gaussian cap, Gaussian grid, exposure prior,
     hole filling and one-photo denoising replaced by `refine_steps`, `max_gaussians`,
     `gaussian_grid`, `exposure_prior`, `fill_unobserved` and `denoise_photo` when given;
-    `densify` True refines with `DENSIFY`'s schedule (or the preset's own), False without."""
+    `densify` True refines with `DENSIFY`'s schedule (or the preset's own), False without;
+    `exposure_key` the key the exposure prior pulls towards (EXPOSURE_KEYS)."""
     try:
         preset = RESTORE_PRESETS[name]
     except KeyError:
@@ -142,6 +148,10 @@ def get_restore_preset(
         if not 0 <= exposure_prior <= 1:
             raise InputError(f"{exposure_prior}: use 0 (the model's own exposure) to 1 (the key's)", parameter="exposure_prior")
         preset = replace(preset, exposure_prior=exposure_prior)
+    if exposure_key is not None:
+        if exposure_key not in EXPOSURE_KEYS:
+            raise InputError(f"{exposure_key!r}: use one of {', '.join(EXPOSURE_KEYS)}", parameter="exposure_key")
+        preset = replace(preset, exposure_key=exposure_key)
     if fill_unobserved is not None:
         preset = replace(preset, fill_unobserved=fill_unobserved)
     if denoise_photo is not None:

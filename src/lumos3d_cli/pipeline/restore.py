@@ -211,13 +211,15 @@ def restore(
     lpips_weights: Path | str | None = None, progress: JobProgress | None = None, refine_steps: int | None = None,
     max_gaussians: int | None = None, gaussian_grid: float | None = None, exposure_prior: float | None = None,
     fill_unobserved: bool | None = None, denoise_photo: bool | None = None, densify: bool | None = None,
+    exposure_key: str | None = None,
 ) -> RestoredScene:
     """The whole restore job from files: photos (a folder or files: photos, camera RAW, EXR),
     the bundled model of `mode` or `checkpoint`, and optionally reference photos of the same
     views (same file stems) for PSNR/SSIM/LPIPS. `refine_steps` overrides the preset's
     test-time refinement (0: none), `max_gaussians` caps the scene's Gaussians and
     `gaussian_grid` sets the density of pixel Gaussians (`pipeline.gaussian_grid`),
-    `exposure_prior` the strength of the exposure prior (`model.appearance.exposure_prior`),
+    `exposure_prior` the strength of the exposure prior (`model.appearance.exposure_prior`) and
+    `exposure_key` the key it pulls towards ("content": `model.appearance.exposure_key`, or "fixed"),
     `fill_unobserved` whether pixels no Gaussian covers are filled (`render.hole_filling`),
     `denoise_photo` whether a one-photo restore's amplified noise is removed
     (`model.appearance.amplified_noise`), `densify` whether refinement densifies
@@ -229,7 +231,7 @@ def restore(
     if max_views is not None and max_views < 1:
         raise InputError(f"{max_views}: use at least 1", parameter="max_views")
     settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior, fill_unobserved,
-                                  denoise_photo, densify)
+                                  denoise_photo, densify, exposure_key)
     check_geometry_source(geometry)
     weights = resolve_checkpoint(checkpoint, mode)
     meter = QualityMeter.create(lpips_weights) if reference is not None else None

@@ -94,5 +94,5 @@ class SceneJob:
         """summary.json's exposure_prior: its strength and the gain in stops it gave the scene."""
         if self.network is None or self.network.exposure_stops is None:
             return None
-        return {"strength": prior_strength(self.mode, self.preset.exposure_prior),
+        return {"strength": prior_strength(self.mode, self.preset.exposure_prior), "key": self.preset.exposure_key,
                 "stops": round(self.network.exposure_stops, 4)}

@@ -15,6 +15,10 @@ brightening gain never pushes more than MAX_NEWLY_CLIPPED of the pixels into cli
 of a night street is its dark walls; metering it alone blew the lit bus of
 `lowlight_single/003.jpg` out to orange (+1.7 stops); highlight protection, as a camera's
 metering has, leaves it 0.2 stop. It costs the held-out brackets 0.2 dB of the prior's gain.
+
+The key itself can come from the scene's content (`model.appearance.exposure_key`): the scene is
+metered to the fixed key, and a predictor reads from what it shows how many stops brighter or
+darker its well-exposed photo would be (a black background around a lit object, a pale wall).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ import torch
 
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
+from lumos3d_cli.model.appearance.exposure_key import ExposureKeyModel, key_features
 from lumos3d_cli.model.appearance.operator import AppearanceOperator
 from lumos3d_cli.model.appearance.photo_restoration import BLACK_LEVEL, WHITE_LEVEL
 
@@ -60,10 +65,22 @@ def stops_to_key(restored_linear: torch.Tensor, key: float = EXPOSURE_KEY, max_s
         low = torch.where(below, middle, low)
         high = torch.where(below, high, middle)
     stops = (low + high) / 2
-    # as photo_restoration.frames_without_content: nothing above one 8-bit step of black, or below white
-    encoded = linear_to_srgb(flat.clamp(0.0, 1.0))
-    empty = (encoded.amax(dim=1) <= BLACK_LEVEL) | (encoded.amin(dim=1) >= WHITE_LEVEL)
-    return torch.where(empty, torch.zeros_like(stops), stops).float()
+    return torch.where(_without_content(flat), torch.zeros_like(stops), stops).float()
+
+
+def stops_to_content_key(restored_linear: torch.Tensor, key_model: ExposureKeyModel, key: float = EXPOSURE_KEY,
+                         max_stops: float = MAX_PRIOR_STOPS) -> torch.Tensor:
+    """restored_linear [B, N, 3, H, W] -> [B] float32 log2 gains in [-max_stops, max_stops]: the
+    gain to the fixed `key` (stops_to_key) plus the offset `key_model` predicts from each scene
+    seen at that key; 0 for a scene that holds nothing to meter."""
+    to_key = stops_to_key(restored_linear, key, max_stops)
+    gains = []
+    for scene, gain in zip(restored_linear.detach(), to_key.tolist()):
+        at_key = linear_to_srgb((scene.float() * 2.0**gain).clamp(0.0, 1.0))
+        gains.append(gain + float(key_model.offset_stops(key_features(at_key))))
+    gains = torch.tensor(gains, device=to_key.device).clamp(-max_stops, max_stops)
+    empty = _without_content(_strided(restored_linear.detach().flatten(1)).double().clamp_min(0.0))
+    return torch.where(empty, torch.zeros_like(gains), gains).float()
 
 
 def highlight_headroom(restored_linear: torch.Tensor, newly_clipped: float = MAX_NEWLY_CLIPPED,
@@ -81,12 +98,12 @@ def highlight_headroom(restored_linear: torch.Tensor, newly_clipped: float = MAX
 
 
 def exposure_prior_stops(operator: AppearanceOperator, images: torch.Tensor, strength: float,
-                         key: float = EXPOSURE_KEY) -> torch.Tensor:
+                         key: float = EXPOSURE_KEY, key_model: ExposureKeyModel | None = None) -> torch.Tensor:
     """operator of B scenes, images [B, V, 3, H, W] sRGB (the network images it was predicted
     from; its local grids are for these V views) -> [B] the prior's gain in stops: `strength`
-    times the stops that bring each scene's restored mean to `key` (0: the operator as it is;
-    1: the key alone decides the exposure), a brightening gain limited to the scene's
-    `highlight_headroom`."""
+    times the stops that bring each scene's restored mean to `key`, or with `key_model` to the
+    key its content predicts (0: the operator as it is; 1: the key alone decides the exposure),
+    a brightening gain limited to the scene's `highlight_headroom`."""
     if not 0.0 <= strength <= 1.0:
         raise ValueError(f"exposure prior strength must be in [0, 1], got {strength}")
     if strength == 0.0:
@@ -95,14 +112,15 @@ def exposure_prior_stops(operator: AppearanceOperator, images: torch.Tensor, str
         restored = operator.apply_linear(srgb_to_linear(images.float().clamp(0.0, 1.0)))
         require_finite("restored images the exposure prior meters", restored,
                        "the restoration operator produced NaN/Inf (corrupt weights or an unstable input?)")
-        stops = strength * stops_to_key(restored, key)
+        to_key = stops_to_key(restored, key) if key_model is None else stops_to_content_key(restored, key_model, key)
+        stops = strength * to_key
         return torch.where(stops > 0, torch.minimum(stops, highlight_headroom(restored)), stops)
 
 
 def apply_exposure_prior(operator: AppearanceOperator, images: torch.Tensor, strength: float,
-                         key: float = EXPOSURE_KEY) -> AppearanceOperator:
+                         key: float = EXPOSURE_KEY, key_model: ExposureKeyModel | None = None) -> AppearanceOperator:
     """The operator followed by the gain of `exposure_prior_stops` (same arguments)."""
-    return operator.with_gain(exposure_prior_stops(operator, images, strength, key))
+    return operator.with_gain(exposure_prior_stops(operator, images, strength, key, key_model))
 
 
 def prior_strength(mode: str, strength: float | None = None) -> float:
@@ -113,3 +131,10 @@ def prior_strength(mode: str, strength: float | None = None) -> float:
 def _strided(values: torch.Tensor) -> torch.Tensor:
     """[B, n] -> [B, <= _METERING_SAMPLES] every k-th value (all of them when n is small enough)."""
     return values[:, :: max(1, -(-values.shape[1] // _METERING_SAMPLES))]
+
+
+def _without_content(flat: torch.Tensor) -> torch.Tensor:
+    """flat [B, n] linear values -> [B] bool: as photo_restoration.frames_without_content, nothing
+    above one 8-bit step of black, or nothing below white."""
+    encoded = linear_to_srgb(flat.clamp(0.0, 1.0))
+    return (encoded.amax(dim=1) <= BLACK_LEVEL) | (encoded.amin(dim=1) >= WHITE_LEVEL)
