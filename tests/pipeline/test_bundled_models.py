@@ -41,6 +41,7 @@ def test_the_bundled_model_brightens_the_example_towards_normal_light(run_cli, b
     summary = json.loads(result.out)
     assert summary["checkpoint"]["name"] == WEIGHTS[mode].name
     assert summary["exposure_prior"]["strength"] == 0.75 and 0 < summary["exposure_prior"]["stops"] < 3
+    assert summary["exposure_prior"]["key"] == "content"
     assert summary["restored_views"] == "render" and summary["uncovered"]["filled"]
     restored = load_images(out.parent / "restored").images
     inputs = load_images(EXAMPLE).images

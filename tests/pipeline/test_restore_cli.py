@@ -166,6 +166,8 @@ def test_gaussian_grid_densifies_the_pixel_gaussians(run_cli, buu, tmp_path, ran
     assert summary["uncovered"]["filled"] and len(summary["uncovered"]["unobserved_fraction"]) == 1
     expect_input_error(run_cli("restore", photos, "-o", tmp_path / "bad" / "scene.ply", "--checkpoint", random_checkpoint,
                                "--exposure-prior", "2"), "--exposure-prior 2", "0 (the model's own exposure) to 1")
+    expect_input_error(run_cli("restore", photos, "-o", tmp_path / "bad" / "scene.ply", "--checkpoint", random_checkpoint,
+                               "--exposure-key", "sunny"), "--exposure-key", "content, fixed")
     assert not (tmp_path / "bad").exists()
 
 

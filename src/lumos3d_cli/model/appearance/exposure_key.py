@@ -27,6 +27,7 @@ import torch.nn.functional as F
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
+from lumos3d_cli.model.bundled_models import bundled_weights_path
 
 KEY_FEATURE_NAMES = (
     "luminance quantile 0.02", "luminance quantile 0.10", "luminance quantile 0.25", "luminance median",
@@ -38,7 +39,7 @@ NEAR_BLACK, NEAR_WHITE = 0.05, 0.95  # sRGB luminance: crushed shadows / blown h
 FEATURE_SIZE = 96  # views are averaged down to this long side: the layout of a scene, not its noise
 MAX_OFFSET_STOPS = 2.0  # the prediction never moves a scene further than this from the key
 _QUANTILE_SAMPLES = 2**20  # torch.quantile's input limit is 2^24; a strided sample beyond this
-BUNDLED_KEY_MODEL = Path(__file__).resolve().parents[2] / "weights" / "exposure-key.safetensors"
+BUNDLED_KEY_MODEL = bundled_weights_path("exposure-key")
 _LUMINANCE = (0.2126, 0.7152, 0.0722)  # Rec. 709 / sRGB primaries
 
 
@@ -61,13 +62,18 @@ def key_features(views_at_key: torch.Tensor) -> torch.Tensor:
     rows = luminance.shape[1]
     third = max(1, rows // 3)
     top_minus_bottom = (luminance[:, :third].mean(dim=(1, 2)) - luminance[:, -third:].mean(dim=(1, 2))).mean()
-    h0, h1 = rows // 4, max(rows // 4 + 1, 3 * rows // 4)
-    w0, w1 = luminance.shape[2] // 4, max(luminance.shape[2] // 4 + 1, 3 * luminance.shape[2] // 4)
-    centre_minus_whole = (luminance[:, h0:h1, w0:w1].mean(dim=(1, 2)) - luminance.mean(dim=(1, 2))).mean()
+    centre = luminance[:, _middle_half(rows), _middle_half(luminance.shape[2])]
+    centre_minus_whole = (centre.mean(dim=(1, 2)) - luminance.mean(dim=(1, 2))).mean()
     colourfulness = (views.amax(dim=1) - views.amin(dim=1)).mean()
     return torch.cat([quantiles, torch.stack([
         (pooled < NEAR_BLACK).double().mean(), (pooled > NEAR_WHITE).double().mean(),
         top_minus_bottom, centre_minus_whole, colourfulness])])
+
+
+def _middle_half(length: int) -> slice:
+    """The middle half of an axis of `length` (at least one element)."""
+    start = length // 4
+    return slice(start, max(start + 1, 3 * length // 4))
 
 
 @dataclass(frozen=True)
@@ -91,9 +97,9 @@ class ExposureKeyModel:
             raise ValueError("exposure key model: feature scales must be positive and the intercept finite")
 
     def offset_stops(self, features: torch.Tensor) -> torch.Tensor:
-        """features [..., F] -> [...] float64 stops from the fixed key to the scene's predicted
-        exposure (positive: a brighter scene)."""
-        standardised = (features.double() - self.feature_mean) / self.feature_scale
+        """features [..., F] (any device) -> [...] float64 on the CPU: the stops from the fixed key
+        to the scene's predicted exposure (positive: a brighter scene)."""
+        standardised = (features.detach().to("cpu", torch.float64) - self.feature_mean) / self.feature_scale
         offset = self.intercept + standardised @ self.coefficients
         return offset.clamp(-MAX_OFFSET_STOPS, MAX_OFFSET_STOPS)
 
