@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import torch
 
-from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
-from lumos3d_cli.model.appearance.exposure_key import ExposureKeyModel, key_features
-from lumos3d_cli.model.appearance.exposure_prior import EXPOSURE_KEY, stops_to_key
+from lumos3d_cli.io.colour import srgb_to_linear
+from lumos3d_cli.model.appearance.exposure_key import ExposureKeyModel
+from lumos3d_cli.model.appearance.exposure_prior import EXPOSURE_KEY, features_at_key, stops_to_key
 
 
 def reference_sample(views: torch.Tensor) -> tuple[torch.Tensor, float]:
@@ -22,8 +22,7 @@ def reference_sample(views: torch.Tensor) -> tuple[torch.Tensor, float]:
     to the key)."""
     linear = srgb_to_linear(views.double().clamp(0.0, 1.0))
     to_key = float(stops_to_key(linear[None], EXPOSURE_KEY)[0])
-    at_key = linear_to_srgb((linear * 2.0**to_key).clamp(0.0, 1.0))
-    return key_features(at_key), -to_key
+    return features_at_key(linear, to_key), -to_key
 
 
 def fit_exposure_key(features: torch.Tensor, offsets: torch.Tensor, weights: torch.Tensor | None = None,

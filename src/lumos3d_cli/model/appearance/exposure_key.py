@@ -27,6 +27,7 @@ import torch.nn.functional as F
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
+from lumos3d_cli.model.appearance.clipped_highlights import luminance as linear_luminance
 from lumos3d_cli.model.bundled_models import bundled_weights_path
 
 KEY_FEATURE_NAMES = (
@@ -40,7 +41,6 @@ FEATURE_SIZE = 96  # views are averaged down to this long side: the layout of a 
 MAX_OFFSET_STOPS = 2.0  # the prediction never moves a scene further than this from the key
 _QUANTILE_SAMPLES = 2**20  # torch.quantile's input limit is 2^24; a strided sample beyond this
 BUNDLED_KEY_MODEL = bundled_weights_path("exposure-key")
-_LUMINANCE = (0.2126, 0.7152, 0.0722)  # Rec. 709 / sRGB primaries
 
 
 def key_features(views_at_key: torch.Tensor) -> torch.Tensor:
@@ -54,8 +54,7 @@ def key_features(views_at_key: torch.Tensor) -> torch.Tensor:
     if scale < 1.0:  # averaging in linear light, as a smaller photo of the scene would be
         size = (max(1, round(height * scale)), max(1, round(width * scale)))
         views = linear_to_srgb(F.adaptive_avg_pool2d(srgb_to_linear(views), size))
-    weights = views.new_tensor(_LUMINANCE)
-    luminance = linear_to_srgb(torch.einsum("nchw,c->nhw", srgb_to_linear(views), weights))  # [N, h, w]
+    luminance = linear_to_srgb(linear_luminance(srgb_to_linear(views)))[:, 0]  # [N, h, w]
     pooled = luminance.flatten()
     pooled = pooled[:: max(1, -(-pooled.numel() // _QUANTILE_SAMPLES))]
     quantiles = torch.quantile(pooled, pooled.new_tensor(_QUANTILES))

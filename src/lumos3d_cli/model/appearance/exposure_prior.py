@@ -53,6 +53,13 @@ def stops_to_key(restored_linear: torch.Tensor, key: float = EXPOSURE_KEY, max_s
     The clipped mean rises monotonically with the gain, so bisection in stops finds it. Larger
     scenes are metered on an even stride of _METERING_SAMPLES of their values.
     """
+    stops, empty = _metered(restored_linear, key, max_stops)
+    return torch.where(empty, torch.zeros_like(stops), stops).float()
+
+
+def _metered(restored_linear: torch.Tensor, key: float, max_stops: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """restored_linear [B, N, 3, H, W] -> (the gains of stops_to_key before scenes without content
+    are set to 0 [B] float64, which scenes hold nothing to meter [B] bool)."""
     if restored_linear.dim() != 5:
         raise ValueError(f"restored images must be [B, N, 3, H, W], got {tuple(restored_linear.shape)}")
     flat = _strided(restored_linear.detach().flatten(1)).double().clamp_min(0.0)
@@ -64,8 +71,10 @@ def stops_to_key(restored_linear: torch.Tensor, key: float = EXPOSURE_KEY, max_s
         below = brightness < key
         low = torch.where(below, middle, low)
         high = torch.where(below, high, middle)
-    stops = (low + high) / 2
-    return torch.where(_without_content(flat), torch.zeros_like(stops), stops).float()
+    # as photo_restoration.frames_without_content: nothing above one 8-bit step of black, or below white
+    encoded = linear_to_srgb(flat.clamp(0.0, 1.0))
+    empty = (encoded.amax(dim=1) <= BLACK_LEVEL) | (encoded.amin(dim=1) >= WHITE_LEVEL)
+    return (low + high) / 2, empty
 
 
 def stops_to_content_key(restored_linear: torch.Tensor, key_model: ExposureKeyModel, key: float = EXPOSURE_KEY,
@@ -73,14 +82,17 @@ def stops_to_content_key(restored_linear: torch.Tensor, key_model: ExposureKeyMo
     """restored_linear [B, N, 3, H, W] -> [B] float32 log2 gains in [-max_stops, max_stops]: the
     gain to the fixed `key` (stops_to_key) plus the offset `key_model` predicts from each scene
     seen at that key; 0 for a scene that holds nothing to meter."""
-    to_key = stops_to_key(restored_linear, key, max_stops)
-    gains = []
-    for scene, gain in zip(restored_linear.detach(), to_key.tolist()):
-        at_key = linear_to_srgb((scene.float() * 2.0**gain).clamp(0.0, 1.0))
-        gains.append(gain + float(key_model.offset_stops(key_features(at_key))))
-    gains = torch.tensor(gains, device=to_key.device).clamp(-max_stops, max_stops)
-    empty = _without_content(_strided(restored_linear.detach().flatten(1)).double().clamp_min(0.0))
+    to_key, empty = _metered(restored_linear, key, max_stops)
+    offsets = torch.stack([key_model.offset_stops(features_at_key(scene, float(gain)))
+                           for scene, gain in zip(restored_linear.detach(), to_key)])
+    gains = (to_key.cpu() + offsets).clamp(-max_stops, max_stops).to(to_key.device)
     return torch.where(empty, torch.zeros_like(gains), gains).float()
+
+
+def features_at_key(views_linear: torch.Tensor, gain: float) -> torch.Tensor:
+    """views_linear [N, 3, H, W] (one scene, linear light), the log2 gain that brings it to the
+    key -> its key features [F] (`exposure_key.key_features` of sRGB(clip(2^gain x)))."""
+    return key_features(linear_to_srgb((views_linear * 2.0**gain).clamp(0.0, 1.0)))
 
 
 def highlight_headroom(restored_linear: torch.Tensor, newly_clipped: float = MAX_NEWLY_CLIPPED,
@@ -131,10 +143,3 @@ def prior_strength(mode: str, strength: float | None = None) -> float:
 def _strided(values: torch.Tensor) -> torch.Tensor:
     """[B, n] -> [B, <= _METERING_SAMPLES] every k-th value (all of them when n is small enough)."""
     return values[:, :: max(1, -(-values.shape[1] // _METERING_SAMPLES))]
-
-
-def _without_content(flat: torch.Tensor) -> torch.Tensor:
-    """flat [B, n] linear values -> [B] bool: as photo_restoration.frames_without_content, nothing
-    above one 8-bit step of black, or nothing below white."""
-    encoded = linear_to_srgb(flat.clamp(0.0, 1.0))
-    return (encoded.amax(dim=1) <= BLACK_LEVEL) | (encoded.amin(dim=1) >= WHITE_LEVEL)
