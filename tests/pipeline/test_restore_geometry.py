@@ -27,8 +27,9 @@ def _photos(buu, tmp_path, names=FRAMES, folder="low"):
 
 
 # The presets' speed settings: the size SfM sees buu's 500x375 photos at, and the scale the
-# Gaussian budget renders its weights at; `fast`'s must still place the cameras as well.
-@pytest.mark.parametrize("preset, sfm_size, weights_resolution", [("balanced", [500, 375], 1.0), ("fast", [384, 288], 0.5)])
+# Gaussian budget renders its weights at (`balanced` has fast's SfM size and best's budget); the
+# smaller settings must still place the cameras as well.
+@pytest.mark.parametrize("preset, sfm_size, weights_resolution", [("best", [500, 375], 1.0), ("fast", [384, 288], 0.5)])
 def test_sfm_registers_the_photos_and_writes_a_colmap_model_with_points(run_cli, buu, tmp_path, random_checkpoint,
                                                                          preset, sfm_size, weights_resolution):
     photos = _photos(buu, tmp_path)
