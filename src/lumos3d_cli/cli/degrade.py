@@ -12,6 +12,7 @@ from lumos3d_cli.cli.interrupts import library_imports
 from lumos3d_cli.data.modes import MODES
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.image_files import list_images
+from lumos3d_cli.pipeline.degrade_outputs import degrade_outputs
 
 EXAMPLES = """
   lumos3d degrade photos/ -o dark/ --mode low-light --seed 0
@@ -45,14 +46,15 @@ def degrade_command(
     json_output: bool = typer.Option(False, "--json", help="Print a JSON summary on stdout."),
 ) -> None:
     """Synthesise low-light (the paper's model) or over-exposed images from normal-light ones."""
-    # The job imports torch, OpenCV and the image readers (seconds): imported here, when the
-    # command runs, so that `--help` (which needs only the modes above) stays fast.
-    with library_imports():
-        from lumos3d_cli.pipeline.degrade_job import degrade_files, degrade_outputs
     if mode not in MODES:
         raise InputError(f"--mode {mode!r}: use one of {', '.join(MODES)}")
     paths = list_images(inputs)
     outputs = degrade_outputs(paths, output, bit_depth, inputs)
+    outputs.check()  # a refusal comes before the libraries load (about 2 s); checked again under the lock
+    # The job imports torch, OpenCV and the image readers (seconds): imported here, when the
+    # command runs, so that `--help` and a refused command line stay fast.
+    with library_imports():
+        from lumos3d_cli.pipeline.degrade_job import degrade_files
     with outputs.reserved(), progress_bar() as bars:
         summary = degrade_files(paths, output, mode, seed, noise, per_image, bit_depth, ProgressBars(bars),
                                 colour_cast, jpeg_quality, exposure, gamma, inputs)

@@ -17,6 +17,7 @@ from lumos3d_cli.data.modes import MODES
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, GEOMETRY_SOURCES
+from lumos3d_cli.pipeline.restore_paths import check_view_format, list_photos, restore_outputs
 from lumos3d_cli.viewer.defaults import DEFAULT_HOST, DEFAULT_PORT
 
 if TYPE_CHECKING:
@@ -58,24 +59,26 @@ def restore_command(
     json_output: bool = typer.Option(False, "--json", help="Print the summary as JSON on stdout."),
 ) -> None:
     """Restore a 3D scene from unposed low-light or over-exposed photos."""
-    # The job's modules import torch, pycolmap, trimesh, viser and imageio-ffmpeg (seconds): imported
-    # here, when the command runs, so that `--help` (which needs only the choices above) stays fast.
-    with library_imports():
-        from lumos3d_cli.io.video import video_kind
-        from lumos3d_cli.pipeline.orbit_video import DEFAULT_ORBIT_FRAMES
-        from lumos3d_cli.pipeline.restore import list_photos, restore
-        from lumos3d_cli.pipeline.restore_outputs import check_view_format, restore_outputs, write_restored_scene
     if output.suffix.lower() != ".ply":
         raise InputError(f"{output}: the scene file must end in .ply", parameter="output")
     check_output_path(output, "output")
     check_output_path(video, "video")
     check_view_format(output_format)
-    if video is not None:
-        video_kind(video)
     # Everything the outputs must stay clear of; checked, with what is already in the way, before any
-    # work, while the output folder is held against other runs (io/output_set.py).
+    # work (and before the libraries load: a refusal ends at once), and again while the output
+    # folder is held against other runs (io/output_set.py).
     inputs = [*list_photos(photos), *photos, poses, reference, checkpoint, lpips_weights]
     outputs = restore_outputs(output, inputs, video)
+    outputs.check()
+    # The job's modules import torch, pycolmap, trimesh, viser and imageio-ffmpeg (seconds): imported
+    # here, when the command runs, so that `--help` and a refused command line stay fast.
+    with library_imports():
+        from lumos3d_cli.io.video import video_kind
+        from lumos3d_cli.pipeline.orbit_video import DEFAULT_ORBIT_FRAMES
+        from lumos3d_cli.pipeline.restore import restore
+        from lumos3d_cli.pipeline.restore_outputs import write_restored_scene
+    if video is not None:
+        video_kind(video)
     with outputs.reserved(), progress_bar() as bars:
         scene = restore(
             photos, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,

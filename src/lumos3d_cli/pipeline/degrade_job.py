@@ -12,45 +12,10 @@ import torch
 
 from lumos3d_cli.data.degradations import MODES, Degradation, apply_degradation, is_valid_range, sample_parameters
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.image_files import PHOTO_SUFFIXES
 from lumos3d_cli.io.image_write import write_image
 from lumos3d_cli.io.images import read_image, to_srgb
-from lumos3d_cli.io.output_paths import check_output_path
-from lumos3d_cli.io.output_set import OutputSet
+from lumos3d_cli.pipeline.degrade_outputs import degrade_outputs, is_single_file
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
-
-SINGLE_FILE_SUFFIXES = (".png", ".jpg", ".jpeg")  # what io.image_write encodes
-BIT_DEPTHS = (8, 16)
-
-
-def degrade_outputs(inputs: list[Path], output: Path, bit_depth: int, given: Sequence[Path] = ()) -> OutputSet:
-    """The outputs of degrading the image files `inputs` into `output` (a folder, or one .png/.jpg
-    file for one input), validated before any image is read and kept clear of the inputs and the
-    folders `given` for them. Messages name the user's path (the files are written under
-    temporary names)."""
-    if bit_depth not in BIT_DEPTHS:
-        raise InputError(f"{bit_depth}: use 8 or 16", parameter="bit_depth")
-    suffix = output.suffix.lower()
-    if suffix in PHOTO_SUFFIXES:
-        if len(inputs) != 1:
-            raise InputError(f"{output}: names one file but there are {len(inputs)} inputs; give a folder", parameter="output")
-        if suffix not in SINGLE_FILE_SUFFIXES:
-            raise InputError(f"{output}: cannot write '{output.suffix}' files; use .png or .jpg", parameter="output")
-        if bit_depth != 8 and suffix != ".png":
-            raise InputError(f"{output}: JPEG holds 8 bits only; use .png for 16-bit output", parameter="output")
-        check_output_path(output, "output")
-        return OutputSet(output.parent, "degrade", f"degrade {output.name}", [*inputs, *given]).add_file(output.name)
-    check_output_path(output, "output", folder=True)
-    outputs = OutputSet(output, "degrade", "degrade", [*inputs, *given])
-    for name in [*(f"{path.stem}.png" for path in inputs), "degradation.json"]:
-        outputs.add_file(name)
-    return outputs
-
-
-def is_single_file(output: Path) -> bool:
-    """Whether `output` names one image file rather than a folder."""
-    return output.suffix.lower() in PHOTO_SUFFIXES
-
 
 def degrade_files(
     paths: list[Path], output: Path, mode: str = "low-light", seed: int = 0, noise: bool = False,

@@ -22,9 +22,7 @@ from lumos3d_cli.geometry.given_poses import read_given_poses
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.file_digest import file_sha256
 from lumos3d_cli.io.gaussians import Gaussians
-from lumos3d_cli.io.image_files import list_images
 from lumos3d_cli.io.images import ImageBatch, load_images
-from lumos3d_cli.io.manifest import Manifest
 from lumos3d_cli.model.appearance.photo_restoration import frames_without_content
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D
@@ -32,6 +30,7 @@ from lumos3d_cli.pipeline.model_loading import load_restoration_model
 from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, RestorePreset, get_restore_preset
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
 from lumos3d_cli.pipeline.quality import QualityMeter, load_references, mean_metrics
+from lumos3d_cli.pipeline.restore_paths import list_photos
 from lumos3d_cli.pipeline.scene_geometry import SceneGeometry, check_geometry_source
 from lumos3d_cli.pipeline.scene_stages import build_scene
 from lumos3d_cli.render.hole_filling import OBSERVED_ALPHA, fill_unobserved
@@ -170,23 +169,6 @@ def restore_scene(
         refinement=built.refinement, budget=built.budget, exposure=built.exposure, uncovered=uncovered,
         view_source=view_source, denoising=built.denoising,
     )
-
-
-def list_photos(photos: Path | str | Sequence[Path | str]) -> list[Path]:
-    """The photos of a restore (`io.image_files.list_images`), less the images an earlier restore
-    wrote among them (its contact sheet, when its output folder was the photo folder): the
-    folder's manifest names them (io/manifest.py), and they are no photos of the scene."""
-    paths = list_images(photos)
-    manifests: dict[Path, Manifest] = {}
-    ours = [path for path in paths if getattr(manifests.setdefault(path.parent, Manifest.read(path.parent)).files.get(
-        path.name), "command", None) == "restore"]
-    if ours:
-        logger.info("not photos: %s, written by an earlier restore", ", ".join(str(path) for path in ours))
-    kept = [path for path in paths if path not in ours]
-    if not kept:
-        raise InputError(f"{', '.join(str(path) for path in ours)}: written by an earlier restore, not photos; give the photos",
-                         parameter="photos")
-    return kept
 
 
 def check_photo_contents(batch: ImageBatch, patch_size: int) -> None:

@@ -20,21 +20,12 @@ from lumos3d_cli.eval.contact_sheet import contact_sheet
 from lumos3d_cli.io.colmap import write_colmap_model
 from lumos3d_cli.io.colour import srgb_to_linear
 from lumos3d_cli.io.image_write import write_exr, write_image
-from lumos3d_cli.io.output_set import OutputSet
 from lumos3d_cli.io.ply import write_ply
 from lumos3d_cli.io.preview_glb import write_preview_glb
 from lumos3d_cli.io.transforms_json import write_transforms_json
 from lumos3d_cli.pipeline.restore import RestoredScene
+from lumos3d_cli.pipeline.restore_paths import VIEW_FORMATS, check_view_format, restore_outputs
 from lumos3d_cli.pipeline.orbit_video import write_orbit_video
-
-# output format -> (file suffix, bit depth; 0 for linear EXR)
-VIEW_FORMATS = {"png": (".png", 8), "png16": (".png", 16), "exr": (".exr", 0)}
-
-
-def check_view_format(output_format: str) -> None:
-    if output_format not in VIEW_FORMATS:
-        raise InputError(f"{output_format!r}: use one of {', '.join(VIEW_FORMATS)}", parameter="output_format")
-
 
 def write_view(path: Path, image: torch.Tensor, output_format: str) -> None:
     """image [3, H, W] sRGB -> an 8/16-bit PNG, or a linear half-float EXR."""
@@ -59,28 +50,6 @@ def scene_contact_sheet(scene: RestoredScene) -> np.ndarray:
             row.append((scene.references[index], "reference"))
         rows.append(row)
     return contact_sheet(rows)
-
-
-# The files beside the scene, and the folders of lumos3d's own (they hold nothing else).
-SIDE_FILES = ("cameras.json", "contact_sheet.png", "preview.glb", "summary.json")
-OWN_FOLDERS = ("restored", "colmap")
-
-
-def restore_outputs(scene_path: Path | str, inputs: Sequence[Path | str | None] = (), video: Path | str | None = None) -> OutputSet:
-    """The outputs of a restore into `scene_path`'s folder (and `video`), kept clear of `inputs`:
-    the photos and the folders given for them, the camera file, the references, the checkpoint.
-    `check()` it before the work; `write_restored_scene` writes through it."""
-    scene_path = Path(scene_path)
-    if scene_path.suffix.lower() != ".ply":
-        raise InputError(f"{scene_path}: the scene file must end in .ply", parameter="output")
-    outputs = OutputSet(scene_path.parent, "restore", f"restore {scene_path.name}", inputs)
-    for name in (scene_path.name, *SIDE_FILES):
-        outputs.add_file(name)
-    for name in OWN_FOLDERS:
-        outputs.add_folder(name)
-    if video is not None:
-        outputs.add_elsewhere(Path(video), f"video {Path(video).name}")
-    return outputs
 
 
 def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_format: str = "png",
