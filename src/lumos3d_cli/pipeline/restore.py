@@ -35,6 +35,7 @@ from lumos3d_cli.pipeline.scene_geometry import SceneGeometry, check_geometry_so
 from lumos3d_cli.pipeline.scene_stages import build_scene
 from lumos3d_cli.render.hole_filling import OBSERVED_ALPHA, fill_unobserved
 from lumos3d_cli.render.render import render
+from lumos3d_cli.render.view_threads import map_views
 
 logger = logging.getLogger(__name__)
 
@@ -112,19 +113,22 @@ class RenderedViews:
 
 def render_views(gaussians: Gaussians, cameras: Cameras, sh_degree: int | None,
                  progress: JobProgress | None = None, fill: bool = False) -> RenderedViews:
-    """Every camera rendered at its own size, one view at a time (bounded memory at full
-    resolution); with `fill` the pixels no Gaussian covers are filled (render.hole_filling)."""
+    """Every camera rendered at its own size, one view per thread on the CPU
+    (`render.view_threads`; bounded memory at full resolution); with `fill` the pixels no Gaussian
+    covers are filled (render.hole_filling)."""
     degree = gaussians.sh_degree if sh_degree is None else min(sh_degree, gaussians.sh_degree)
-    images, unobserved = [], []
-    for index in range(len(cameras)):
+
+    def view(index: int) -> tuple[torch.Tensor, float]:
         with torch.no_grad():
             output = render(gaussians, cameras[index], sh_degree=degree)
         image, alpha = output.images[0].cpu(), output.alphas[0].cpu()
         if fill:
-            view = fill_unobserved(image, alpha)
-            image, fraction = view.image, view.unobserved
-        else:
-            fraction = float((alpha < OBSERVED_ALPHA).float().mean())
+            filled = fill_unobserved(image, alpha)
+            return filled.image, filled.unobserved
+        return image, float((alpha < OBSERVED_ALPHA).float().mean())
+
+    images, unobserved = [], []
+    for image, fraction in map_views(view, len(cameras), gaussians.means.device):
         images.append(image)
         unobserved.append(fraction)
         if progress is not None:

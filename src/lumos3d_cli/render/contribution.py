@@ -15,16 +15,19 @@ import torch
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.render.render import render
+from lumos3d_cli.render.view_threads import map_views
 
 
 def rendered_weights(gaussians: Gaussians, cameras: Cameras, resolution: float = 1.0) -> torch.Tensor:
     """[N] each Gaussian's rendered weight summed over `cameras`, in pixels of the cameras' own
     images, on the Gaussians' device. `resolution` < 1 renders smaller images (faster) and scales
-    the weights back by the pixel area, so the result estimates the full-resolution weight."""
+    the weights back by the pixel area, so the result estimates the full-resolution weight. On the
+    CPU the views render one per thread (`render.view_threads`)."""
     if not 0 < resolution <= 1:
         raise ValueError(f"resolution {resolution} must be in (0, 1]")
-    total = torch.zeros(len(gaussians), dtype=torch.float64, device=gaussians.means.device)
-    for index in range(len(cameras)):
+    device = gaussians.means.device
+
+    def view_weights(index: int) -> torch.Tensor:
         camera = cameras[index]
         width, height = camera.sizes[0]
         small = (max(1, round(width * resolution)), max(1, round(height * resolution)))
@@ -33,5 +36,9 @@ def rendered_weights(gaussians: Gaussians, cameras: Cameras, resolution: float =
         # Weights do not depend on colour: degree 0 skips the view-dependent SH terms. The
         # backend follows the Gaussians' device (the CPU kernel, or gsplat on CUDA).
         output = render(gaussians, camera, sh_degree=0, weights=True)
-        total += output.weights[0].double() * (width * height) / (small[0] * small[1])
+        return output.weights[0].double() * (width * height) / (small[0] * small[1])
+
+    total = torch.zeros(len(gaussians), dtype=torch.float64, device=device)
+    for weights in map_views(view_weights, len(cameras), device):  # summed in view order: deterministic
+        total += weights
     return total

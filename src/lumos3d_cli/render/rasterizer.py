@@ -17,17 +17,18 @@ from lumos3d_cli.render.kernels.rasterize import (
     rasterize_forward,
 )
 from lumos3d_cli.render.settings import RasterSettings
+from lumos3d_cli.render.view_threads import kernel_threads
 
 _CHUNKS_PER_THREAD = 8
 # Below this many (Gaussians + pixels) one thread is faster than waking the others.
 _SMALL_PROBLEM = 20_000
 
 
-def _use_torch_thread_count(gaussians: int, pixels: int) -> None:
-    """Run numba with torch's thread count (capped by NUMBA_NUM_THREADS), or one thread for
-    problems too small to gain from more."""
-    threads = max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS))
-    numba.set_num_threads(1 if gaussians + pixels < _SMALL_PROBLEM else threads)
+def _use_kernel_threads(gaussians: int, pixels: int) -> None:
+    """Run numba with this thread's kernel threads (`view_threads.kernel_threads`: torch's count,
+    or 1 in a worker that renders one view of several), or one thread for problems too small to
+    gain from more."""
+    numba.set_num_threads(1 if gaussians + pixels < _SMALL_PROBLEM else kernel_threads())
 
 
 def _array(tensor: torch.Tensor) -> np.ndarray:
@@ -63,7 +64,7 @@ def composite(means, quats, scales, opacities, sh, viewmat, intrinsics, settings
     weights): `projected` and `tiles` as `project` and `bin_and_sort` return them, the images as
     `rasterize_forward` writes them, and weights [N] float64 — each Gaussian's rendered weight,
     the sum over pixels of alpha x transmittance — when `entry_weights`, else None."""
-    _use_torch_thread_count(means.shape[0], settings.width * settings.height)
+    _use_kernel_threads(means.shape[0], settings.width * settings.height)
     numpy_dtype = np.float64 if means.dtype == torch.float64 else np.float32
     width, height = settings.width, settings.height
     projected = project(means, quats, scales, opacities, sh, viewmat, intrinsics, settings)
@@ -125,7 +126,7 @@ class RasterizeGaussians(torch.autograd.Function):
     def backward(ctx, v_colour, v_alpha, v_depth, _v_radii):
         means, quats, scales, opacities, sh = ctx.saved_tensors
         settings: RasterSettings = ctx.settings
-        _use_torch_thread_count(means.shape[0], settings.width * settings.height)
+        _use_kernel_threads(means.shape[0], settings.width * settings.height)
         means2d, conics, depths, opacities_eff, colours, radii = ctx.projected
         tile_offsets, entries, tiles_x = ctx.tiles
         transmittance, last = ctx.pixels
