@@ -65,6 +65,20 @@ def test_restore_and_degrade_refuse_their_own_photo_folder_before_importing_the_
     assert sorted(path.name for path in tmp_path.iterdir()) == ["1.JPG", "2.JPG"]
 
 
+def test_eval_and_convert_refuse_a_users_file_before_importing_the_library(tmp_path):
+    write_ply(tmp_path / "scene.ply", random_gaussians(10, 0))
+    (tmp_path / "report").mkdir()
+    (tmp_path / "report" / "metrics.json").write_text("the user's")
+    (tmp_path / "mine.splat").write_text("the user's")
+    (tmp_path / "lom").mkdir()
+    for args in (("eval", str(tmp_path / "lom"), "--out", str(tmp_path / "report")),
+                 ("convert", str(tmp_path / "scene.ply"), "-o", str(tmp_path / "mine.splat"))):
+        done, modules = imported_modules(*args)
+        assert done.returncode == 2 and "exists and was not written by lumos3d" in done.stderr, done.stderr[-3000:]
+        assert sorted({name.split(".")[0] for name in modules} & set(HEAVY)) == []
+    assert (tmp_path / "report" / "metrics.json").read_text() == (tmp_path / "mine.splat").read_text() == "the user's"
+
+
 # pycolmap's logging library installs its own SIGTERM handler (print a stack dump, abort) when it is
 # first imported, which is now inside a command, after the CLI installed its handlers.
 _SIGNAL_AFTER_IMPORTS = """

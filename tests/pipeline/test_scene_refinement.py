@@ -47,7 +47,7 @@ def test_restore_densifies_within_the_gaussian_cap(run_cli, buu, tmp_path, rando
     never exceeds `--max-gaussians` (checked in the written .ply with plyfile)."""
     from plyfile import PlyData
 
-    photos = _photos(buu, tmp_path, ["1.JPG", "2.JPG", "3.JPG"])
+    photos = _photos(buu, tmp_path, ["1.JPG", "2.JPG"])
     common = ["--checkpoint", random_checkpoint, "--geometry", "network", "--preset", "fast", "--refine-steps", 20,
               "--json"]
     grown = run_cli("restore", photos, "-o", tmp_path / "grown" / "scene.ply", "--densify", *common)

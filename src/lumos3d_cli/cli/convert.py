@@ -41,10 +41,11 @@ def _written_once(source: Path, output: Path) -> OutputSet:
 
 
 def _scene_to_splat(source: Path, output: Path, as_json: bool) -> None:
+    outputs = _written_once(source, output)
+    outputs.check()  # a refusal comes before the libraries load; checked again under the lock
     with library_imports():
         from lumos3d_cli.io.ply import read_ply
         from lumos3d_cli.io.splat import write_splat
-    outputs = _written_once(source, output)
     with outputs.reserved():
         gaussians = read_ply(source)
         with outputs.staged() as staging:
@@ -67,16 +68,17 @@ def convert_command(
     as_json: bool = typer.Option(False, "--json", help="Print the written file's summary as JSON."),
 ) -> None:
     """Rewrite a checkpoint in lumos3d's format (e.g. float16 to halve it), or a scene .ply as .splat."""
-    # Checkpoints and scenes are read and written with torch and safetensors (seconds to import):
-    # imported here and in `_scene_to_splat`, when the command runs, so that `--help` stays fast.
-    with library_imports():
-        from lumos3d_cli.io.weight_files import storage_dtype
-        from lumos3d_cli.model.checkpoints import save_checkpoint, summarize_checkpoint
-        from lumos3d_cli.model.loading import load_model
     if _converts_a_scene(source, output, dtype, architecture):
         check_output_path(output, "output")
         _scene_to_splat(source, output, as_json)
         return
+    # Checkpoints and scenes are read and written with torch and safetensors (seconds to import):
+    # imported here and in `_scene_to_splat`, when the command runs, so that `--help` and a
+    # refused scene conversion stay fast.
+    with library_imports():
+        from lumos3d_cli.io.weight_files import storage_dtype
+        from lumos3d_cli.model.checkpoints import save_checkpoint, summarize_checkpoint
+        from lumos3d_cli.model.loading import load_model
     storage_dtype(dtype)  # refuse a bad --dtype before the (possibly large) checkpoint is read
     check_output_path(output, "output")
     outputs = _written_once(source, output)

@@ -16,6 +16,7 @@ from lumos3d_cli.cli.interrupts import library_imports
 from lumos3d_cli.data.modes import MODES
 from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, GEOMETRY_SOURCES
+from lumos3d_cli.pipeline.eval_outputs import eval_outputs
 
 if TYPE_CHECKING:
     from lumos3d_cli.pipeline.evaluation import EvalReport
@@ -79,14 +80,15 @@ def eval_command(
     json_output: bool = typer.Option(False, "--json", help="Print metrics.json on stdout."),
 ) -> None:
     """Evaluate restoration on LOM scenes (PSNR on [0,1], SSIM 11x11 sigma 1.5, LPIPS)."""
-    # The evaluation imports torch, pycolmap and the whole restore job (seconds): imported here,
-    # when the command runs, so that `--help` (which needs only the choices above) stays fast.
-    with library_imports():
-        from lumos3d_cli.pipeline.evaluation import eval_outputs, evaluate_lom, write_eval_report
     check_output_path(out, "out", folder=True)
     names = [n.strip() for n in scenes.split(",") if n.strip()] if scenes else None
     inputs = [root, checkpoint, lpips_weights]
     outputs = eval_outputs(out, names or [], inputs)
+    outputs.check()  # a refusal comes before the libraries load; checked again under the lock
+    # The evaluation imports torch, pycolmap and the whole restore job (seconds): imported here,
+    # when the command runs, so that `--help` and a refused command line stay fast.
+    with library_imports():
+        from lumos3d_cli.pipeline.evaluation import evaluate_lom, write_eval_report
     with outputs.reserved(), progress_bar() as bars:
         task = bars.add_task(f"eval ({protocol})", total=len(names) if names else None)
         report = evaluate_lom(

@@ -18,9 +18,9 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.eval.contact_sheet import contact_sheet
 from lumos3d_cli.io.file_digest import file_sha256
 from lumos3d_cli.io.image_write import write_image
-from lumos3d_cli.io.output_set import OutputSet
 from lumos3d_cli.model.appearance.exposure_prior import prior_strength
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
+from lumos3d_cli.pipeline.eval_outputs import eval_outputs
 from lumos3d_cli.pipeline.lom_eval import PROTOCOLS, SceneEvaluation, evaluate_lom_scene
 from lumos3d_cli.pipeline.model_loading import load_restoration_model
 from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, get_restore_preset
@@ -124,15 +124,6 @@ def eval_contact_sheet(result: SceneEvaluation, mode: str, with_baseline: bool) 
         row.append((result.references[index], "ground truth (high)"))
         rows.append(row)
     return contact_sheet(rows)
-
-
-def eval_outputs(out: Path | str, scenes: Sequence[str], inputs: Sequence[Path | str | None] = ()) -> OutputSet:
-    """The report's files in `out` (metrics.json, metrics.csv, a contact sheet per scene; the
-    sheets of scenes an earlier report had and this one has not go), kept clear of `inputs`."""
-    outputs = OutputSet(Path(out), "eval", "eval", inputs, parameter="out").add_file("metrics.json").add_file("metrics.csv")
-    for scene in scenes:
-        outputs.add_file(f"contact_sheet_{scene}.png")
-    return outputs
 
 
 def write_eval_report(report: EvalReport, out: Path | str, inputs: Sequence[Path | str | None] = ()) -> None:
