@@ -3,11 +3,13 @@ another, in order, with single-threaded kernels inside the workers."""
 
 import threading
 
+import numba
 import torch
 
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.pipeline.restore import render_views
 from lumos3d_cli.render.contribution import rendered_weights
+from lumos3d_cli.render.kernel_warm_up import load_compiled_kernels
 from lumos3d_cli.render.view_threads import kernel_threads, map_views
 
 from factories import camera_at_origin, random_scene
@@ -36,7 +38,8 @@ class _TorchThreads:
         torch.set_num_threads(self.before)
 
 
-def test_map_views_keeps_the_order_and_gives_each_worker_one_kernel_thread():
+def test_map_views_keeps_the_order_and_gives_each_worker_one_kernel_thread(monkeypatch):
+    load_compiled_kernels()  # a parallel kernel has run: numba's threading layer is chosen
     seen = []
 
     def record(index: int) -> tuple[int, int]:
@@ -55,6 +58,12 @@ def test_map_views_keeps_the_order_and_gives_each_worker_one_kernel_thread():
     with _TorchThreads(1):
         seen.clear()
         assert list(map_views(record, 3, torch.device("cpu"))) == [(index, 1) for index in range(3)]
+        assert set(seen) == {threading.current_thread().name}
+    # numba's workqueue layer takes no kernels from two threads at once: one view after another
+    monkeypatch.setattr(numba, "threading_layer", lambda: "workqueue")
+    with _TorchThreads(2):
+        seen.clear()
+        assert list(map_views(record, 3, torch.device("cpu"))) == [(index, 2) for index in range(3)]
         assert set(seen) == {threading.current_thread().name}
 
 

@@ -38,13 +38,24 @@ def _single_threaded(function: Callable[[int], Result], index: int) -> Result:
         _local.threads = None
 
 
+def _layer_takes_threads() -> bool:
+    """Whether numba's threading layer takes parallel kernels from several threads at once: omp
+    and tbb do; workqueue (numba's fallback when neither library is there) does not, nor is any
+    layer chosen before the first parallel kernel has run."""
+    try:
+        return numba.threading_layer() in ("omp", "tbb")
+    except ValueError:  # not initialised yet
+        return False
+
+
 def map_views(function: Callable[[int], Result], count: int, device: torch.device) -> Iterator[Result]:
     """function(0), ..., function(count - 1), yielded in order as they are done. On the CPU with
     more than one kernel thread the views run concurrently, one per thread, each with
-    single-threaded kernels (module docstring); on another device (gsplat on CUDA), or with one
-    thread, one after another. `function` must not depend on the order its calls run in."""
+    single-threaded kernels (module docstring); on another device (gsplat on CUDA), with one
+    thread, or where numba's threading layer cannot take kernels from several threads, one after
+    another. `function` must not depend on the order its calls run in."""
     workers = min(kernel_threads(), count)
-    if device.type != "cpu" or workers <= 1:
+    if device.type != "cpu" or workers <= 1 or not _layer_takes_threads():
         yield from (function(index) for index in range(count))
         return
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="lumos3d-view") as pool:
