@@ -338,7 +338,8 @@ def main() -> None:
     results.sort(key=lambda r: (order[r["preset"]], r["grid_option"] or 0, r["steps"]))
     text = "\n\n".join([
         "## Restore presets and test-time refinement (LOM buu, low light)",
-        f"Machine: {machine_description()}. Script: `benchmarks/presets.py`, one run. `restore` runs on all 25 "
+        f"Machine: {machine_description()}. Script: `benchmarks/presets.py` (one run, or the rows of an "
+        "earlier one reused with `--results`: the reading below says which). `restore` runs on all 25 "
         "photos of buu (each preset caps the views the network sees); its time is the whole command (start-up, "
         "loading, network, fusion, budget, refinement, rendering every view at 500×375, writing). PSNR / SSIM / "
         "sharpness are `lumos3d eval` on buu's three test frames with the same options; holdout scores novel "
