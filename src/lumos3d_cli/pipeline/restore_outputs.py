@@ -15,7 +15,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lumos3d_cli.errors import InputError
 from lumos3d_cli.eval.contact_sheet import contact_sheet
 from lumos3d_cli.io.colmap import write_colmap_model
 from lumos3d_cli.io.colour import srgb_to_linear
