@@ -2,15 +2,21 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import torch
 
 from lumos3d_cli.errors import NonFiniteError
+from lumos3d_cli.tensors import loaded_torch
+
+if TYPE_CHECKING:
+    import torch
 
 
 def count_non_finite(values: np.ndarray | torch.Tensor) -> int:
     """Number of NaN or Inf entries."""
-    if isinstance(values, torch.Tensor):
+    torch = loaded_torch(values)
+    if torch is not None:
         return int((~torch.isfinite(values)).sum().item()) if values.is_floating_point() else 0
     values = np.asarray(values)
     return int((~np.isfinite(values)).sum()) if np.issubdtype(values.dtype, np.floating) else 0
@@ -22,7 +28,8 @@ def _sum_is_finite(values: np.ndarray | torch.Tensor) -> bool:
     the values' own precision, at least float32: a float64 sum of float32 values was 6x slower
     (48 ms for a scene's 10M SH coefficients, checked at every render), and an overflow only
     sends the check to the exact count."""
-    if isinstance(values, torch.Tensor):
+    torch = loaded_torch(values)
+    if torch is not None:
         if not values.is_floating_point():
             return True
         wide = torch.promote_types(values.dtype, torch.float32)
@@ -41,6 +48,6 @@ def require_finite(name: str, values: np.ndarray | torch.Tensor, hint: str = "")
         return
     bad = count_non_finite(values)
     if bad:
-        total = values.numel() if isinstance(values, torch.Tensor) else np.asarray(values).size
+        total = values.numel() if loaded_torch(values) is not None else np.asarray(values).size
         message = f"{name}: {bad} of {total} values are NaN or Inf"
         raise NonFiniteError(f"{message}; {hint}" if hint else message)

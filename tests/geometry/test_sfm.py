@@ -158,7 +158,7 @@ def test_sequential_matching_registers_an_ordered_capture(shared_data):
 def test_the_ransac_floor_is_lowered_only_for_many_photos():
     """Many photos (buu's 25, above: every view within a degree) verify with the lower floor; a
     few keep COLMAP's, which held the focal length of a one-photo camera (tests/cli/test_faults.py)."""
-    from lumos3d_cli.geometry.sfm import VERIFICATION_FLOOR_FROM_VIEWS, VERIFICATION_MIN_TRIALS, _options
+    from lumos3d_cli.geometry.colmap_run import VERIFICATION_FLOOR_FROM_VIEWS, VERIFICATION_MIN_TRIALS, _options
 
     default = pycolmap.TwoViewGeometryOptions().ransac.min_num_trials
     few = _options(1, 4096, VERIFICATION_FLOOR_FROM_VIEWS - 1, 1)[3]

@@ -12,6 +12,7 @@ from skimage.metrics import peak_signal_noise_ratio
 
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
+from lumos3d_cli.refine.adam import FusedAdam
 from lumos3d_cli.refine.camera_corrections import axis_angle_to_matrix
 from lumos3d_cli.refine.refinement import refine_gaussians
 from lumos3d_cli.refine.settings import RefineSettings
@@ -92,13 +93,13 @@ def test_learning_rates_decay_by_the_factor_every_100_steps(sparse_buu, monkeypa
     """Every parameter group's rate at step k (from 0) is its first rate times decay ** (k / 100),
     whatever the number of steps asked for."""
     rates = []
-    original_step = torch.optim.Adam.step
+    original_step = FusedAdam.step
 
     def recording_step(optimizer, *args, **kwargs):
         rates.append([group["lr"] for group in optimizer.param_groups])
         return original_step(optimizer, *args, **kwargs)
 
-    monkeypatch.setattr(torch.optim.Adam, "step", recording_step)
+    monkeypatch.setattr(FusedAdam, "step", recording_step)
     steps = 5
     result = refine_gaussians(sparse_buu.gaussians, sparse_buu.cameras, sparse_buu.targets,
                               RefineSettings(steps=steps, max_side=64, patience=1000, lr_decay_per_100_steps=decay))

@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 import torch
 
+from lumos3d_cli.eval.tone_curve import auto_gamma_array
 from lumos3d_cli.losses.ssim import ssim_map_mean
 
 
@@ -57,12 +58,14 @@ def ssim(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor:
 
 def auto_gamma(images: torch.Tensor, target_mean: float = 0.45) -> torch.Tensor:
     """The blind no-learning baseline: per image, x^g with g = log(target) / log(mean(x)), so the
-    mean of the sRGB values goes to about `target`. images [..., 3, H, W] in [0, 1]."""
-    flat = _flatten(images)
-    means = flat.mean(dim=(1, 2, 3)).clamp(1e-6, 1 - 1e-6)
-    gammas = math.log(target_mean) / torch.log(means)
-    corrected = flat.clamp_min(0.0) ** gammas[:, None, None, None]
-    return corrected.clamp(0, 1).to(images.dtype).reshape(images.shape)
+    mean of the sRGB values goes to about `target`. images [..., 3, H, W] in [0, 1]
+    (`eval.tone_curve.auto_gamma_array`, on the CPU)."""
+    _flatten(images)  # the shape check
+    values = images.detach().cpu()
+    if values.dtype not in (torch.float16, torch.float32, torch.float64):  # bfloat16 has no numpy dtype
+        values = values.float()
+    corrected = auto_gamma_array(values.numpy(), target_mean)
+    return torch.from_numpy(corrected).to(device=images.device, dtype=images.dtype)
 
 
 SHARPNESS_SIGMAS = (0.7, 2.0)  # the band of a difference of Gaussians: pixel-scale detail, not shading

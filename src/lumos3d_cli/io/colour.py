@@ -6,12 +6,16 @@ tensors alike (any shape), returns the input's type and dtype.
 
 from __future__ import annotations
 
-from typing import TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
-import torch
 
-Array = TypeVar("Array", np.ndarray, torch.Tensor)
+from lumos3d_cli.tensors import loaded_torch
+
+if TYPE_CHECKING:
+    import torch
+
+Array = TypeVar("Array", np.ndarray, "torch.Tensor")
 
 # IEC 61966-2-1 constants.
 _SRGB_DECODE_KNEE = 0.04045  # encoded value where the linear segment ends
@@ -24,7 +28,8 @@ _SRGB_OFFSET = 0.055
 def srgb_to_linear(encoded: Array) -> Array:
     """Decode sRGB values in [0, 1] to linear light. Values outside [0, 1] follow the same curve
     (negative values stay on the linear segment)."""
-    if isinstance(encoded, torch.Tensor):
+    torch = loaded_torch(encoded)
+    if torch is not None:
         # Clamp inside the power branch so that its gradient stays finite where it is masked out.
         curve = ((encoded.clamp_min(_SRGB_DECODE_KNEE) + _SRGB_OFFSET) / (1 + _SRGB_OFFSET)) ** _SRGB_GAMMA
         return torch.where(encoded <= _SRGB_DECODE_KNEE, encoded / _SRGB_SLOPE, curve)
@@ -36,7 +41,8 @@ def srgb_to_linear(encoded: Array) -> Array:
 def linear_to_srgb(linear: Array) -> Array:
     """Encode linear light to sRGB. Inputs above 1 follow the curve (callers clip when they need
     [0, 1]); negative inputs stay on the linear segment."""
-    if isinstance(linear, torch.Tensor):
+    torch = loaded_torch(linear)
+    if torch is not None:
         curve = (1 + _SRGB_OFFSET) * linear.clamp_min(_SRGB_ENCODE_KNEE) ** (1 / _SRGB_GAMMA) - _SRGB_OFFSET
         return torch.where(linear <= _SRGB_ENCODE_KNEE, linear * _SRGB_SLOPE, curve)
     linear = np.asarray(linear)

@@ -10,7 +10,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import torch
 
 from lumos3d_cli.io.colour import linear_to_srgb
 from lumos3d_cli.io.hdr import probe_hdr, read_hdr
@@ -57,6 +56,28 @@ def resize_image(pixels: np.ndarray, width: int, height: int) -> np.ndarray:
 
 
 @dataclass
+class LoadedPhotos:
+    """Photos of one scene decoded, before any torch (`pipeline.early_registration` reads them
+    while torch is still being imported).
+
+    pixels: [V, 3, H, W] float32 sRGB in [0, 1], contiguous, every photo at the most common size
+    (`ImageBatch`: a photo of another size is stretched to it); original_sizes: (width, height)
+    of each file before any resize.
+    """
+
+    pixels: np.ndarray
+    paths: list[Path]
+    original_sizes: list[tuple[int, int]]
+    kinds: list[str]
+
+    def batch(self) -> ImageBatch:
+        """The same photos as a torch batch (sharing the pixels' memory)."""
+        import torch  # here, not at the top: this module is read before torch is imported
+
+        return ImageBatch(torch.from_numpy(self.pixels), self.paths, self.original_sizes, self.kinds)
+
+
+@dataclass
 class ImageBatch:
     """Images of one scene in one working tensor.
 
@@ -87,6 +108,8 @@ class ImageBatch:
         width, height = self.original_sizes[index]
         if (width, height) == self.size:
             return self.images[index]
+        import torch  # here, not at the top: this module is read before torch is imported
+
         pixels = resize_image(np.ascontiguousarray(self.images[index].permute(1, 2, 0).numpy()), width, height)
         return torch.from_numpy(pixels).permute(2, 0, 1)
 
@@ -104,6 +127,14 @@ def load_images(
 ) -> ImageBatch:
     """Load a folder or list of files into one batch; photos of other sizes are stretched to the
     most common size (`ImageBatch`). `progress` is called after each file."""
+    return load_photos(inputs, progress).batch()
+
+
+def load_photos(
+    inputs: Path | str | Sequence[Path | str],
+    progress: Callable[[Path], None] | None = None,
+) -> LoadedPhotos:
+    """`load_images` without torch: the photos as one numpy array (`LoadedPhotos`)."""
     paths = list_images(inputs)
     pixels: list[np.ndarray] = []
     kinds: list[str] = []
@@ -123,5 +154,4 @@ def load_images(
             len(mismatched), len(paths), width, height, shown,
         )
     stacked = np.stack([resize_image(p, width, height) for p in pixels])
-    images = torch.from_numpy(stacked).permute(0, 3, 1, 2).contiguous()
-    return ImageBatch(images=images, paths=paths, original_sizes=sizes, kinds=kinds)
+    return LoadedPhotos(np.ascontiguousarray(stacked.transpose(0, 3, 1, 2)), paths, sizes, kinds)

@@ -2,7 +2,7 @@
 sees, at which resolution (relative to the model's), the SH degree written and rendered, the
 voxel size (relative to the model's pixel footprint), the steps of test-time refinement
 (pipeline.scene_refinement) and whether it densifies (refine.densification), the most Gaussians a scene may keep (render.gaussian_budget), and
-two speed settings: the size structure-from-motion sees the photos at (geometry.sfm) and the
+two speed settings: the size structure-from-motion sees the photos at (geometry.colmap_run) and the
 resolution the budget renders the Gaussians' weights at; the size of the images refinement
 fits (`balanced` and `best` fit LOM's 500x375 photos at their own size, `fast` at most
 256 px); the decay of refinement's learning rates, the strength of the exposure prior
@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.geometry.sfm import SFM_LONG_SIDE
+from lumos3d_cli.geometry.colmap_run import SFM_LONG_SIDE
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, EXPOSURE_KEYS
 from lumos3d_cli.refine.settings import DensifySettings, RefineSettings
 

@@ -27,6 +27,7 @@ from lumos3d_cli.model.appearance.photo_restoration import frames_without_conten
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D
 from lumos3d_cli.pipeline.model_loading import load_restoration_model
+from lumos3d_cli.pipeline.early_registration import EarlyRegistration
 from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, RestorePreset, get_restore_preset
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
 from lumos3d_cli.pipeline.quality import QualityMeter, load_references, mean_metrics
@@ -139,9 +140,11 @@ def render_views(gaussians: Gaussians, cameras: Cameras, sh_degree: int | None,
 def restore_scene(
     batch: ImageBatch, model: Lumos3D, preset: RestorePreset, geometry: str = "auto", poses: Path | str | None = None,
     max_views: int | None = None, mode: str = "low-light", progress: JobProgress | None = None,
+    early_registration: EarlyRegistration | None = None,
 ) -> RestoredScene:
-    """The job on loaded photos and a loaded model (`build_scene`), then every view that has a
-    camera rendered at it, at its photo's own size."""
+    """The job on loaded photos and a loaded model (`build_scene`, which takes structure-from-motion
+    from `early_registration` when it was started before), then every view that has a camera
+    rendered at it, at its photo's own size."""
     progress = progress or SilentProgress()
     names = [path.name for path in batch.paths]
     if batch.mixed_sizes:
@@ -150,7 +153,7 @@ def restore_scene(
                        "cameras and restored views keep each photo's own size and aspect ratio", len(odd), len(names),
                        *batch.size, ", ".join(odd[:5]) + (" ..." if len(odd) > 5 else ""))
     built = build_scene(batch.images, names, model, preset, geometry, poses, max_views, mode, progress,
-                        sizes=batch.original_sizes)
+                        sizes=batch.original_sizes, early_registration=early_registration)
     cameras = built.geometry.cameras
     missing = [name for name in names if name not in cameras.names]
     if missing:
@@ -197,7 +200,7 @@ def restore(
     lpips_weights: Path | str | None = None, progress: JobProgress | None = None, refine_steps: int | None = None,
     max_gaussians: int | None = None, gaussian_grid: float | None = None, exposure_prior: float | None = None,
     fill_unobserved: bool | None = None, denoise_photo: bool | None = None, densify: bool | None = None,
-    exposure_key: str | None = None,
+    exposure_key: str | None = None, early_registration: EarlyRegistration | None = None,
 ) -> RestoredScene:
     """The whole restore job from files: photos (a folder or files: photos, camera RAW, EXR),
     the bundled model of `mode` or `checkpoint`, and optionally reference photos of the same
@@ -209,7 +212,9 @@ def restore(
     `fill_unobserved` whether pixels no Gaussian covers are filled (`render.hole_filling`),
     `denoise_photo` whether a one-photo restore's amplified noise is removed
     (`model.appearance.amplified_noise`), `densify` whether refinement densifies
-    (`refine.densification`). Write the result with `write_restored_scene`."""
+    (`refine.densification`). `early_registration`: the photos read and structure-from-motion
+    started before torch was imported (`pipeline.early_registration`, as `lumos3d restore` does).
+    Write the result with `write_restored_scene`."""
     progress = progress or SilentProgress()
     started = time.perf_counter()
     if mode not in MODES:
@@ -225,7 +230,13 @@ def restore(
     stage_started = time.perf_counter()
     paths = list_photos(photos)
     progress.start("load images", len(paths))
-    batch = load_images(paths, progress=lambda _: progress.advance("load images"))
+    if early_registration is not None:
+        if early_registration.paths != paths:
+            raise ValueError("the early registration was started for other photos")
+        batch = early_registration.photos().batch()
+        progress.advance("load images", len(paths))
+    else:
+        batch = load_images(paths, progress=lambda _: progress.advance("load images"))
     if poses is not None:  # a camera file that does not fit the photos stops the run before the work
         read_given_poses(poses, [path.name for path in paths], batch.original_sizes)
     # References are matched and read before the work, so that a missing one stops the run at once.
@@ -236,7 +247,7 @@ def restore(
     model = load_restoration_model(weights, device)
     timings["load_model"] = time.perf_counter() - stage_started
     check_photo_contents(batch, model.architecture.patch_size)
-    scene = restore_scene(batch, model, settings, geometry, poses, max_views, mode, progress)
+    scene = restore_scene(batch, model, settings, geometry, poses, max_views, mode, progress, early_registration)
     scene.device = device
     scene.checkpoint = {"name": weights.name, "sha256": file_sha256(weights)}
     if reference is not None:

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -32,12 +32,8 @@ from lumos3d_cli.geometry.depth_alignment import MIN_POINTS, align_depth
 from lumos3d_cli.geometry.depth_correction import GRID as DEPTH_CORRECTION_GRID
 from lumos3d_cli.geometry.depth_correction import correct_depth
 from lumos3d_cli.geometry.given_poses import read_given_poses
-from lumos3d_cli.geometry.sfm import (
-    EXHAUSTIVE_MATCHING_LIMIT,
-    SFM_LONG_SIDE,
-    Registration,
-    register_photos,
-)
+from lumos3d_cli.geometry.colmap_run import SFM_LONG_SIDE, ColmapRun, matching_threads
+from lumos3d_cli.geometry.sfm import Registration, register_photos
 from lumos3d_cli.geometry.similarity import (
     fill_unregistered_views,
     fit_camera_similarity,
@@ -84,14 +80,13 @@ class ViewRegistration:
 
 
 def _structure_from_motion(images: torch.Tensor, names: list[str], sizes: list[tuple[int, int]],
-                           progress: JobProgress, long_side: int | None) -> Registration:
+                           progress: JobProgress, long_side: int | None, run: ColmapRun | None = None) -> Registration:
     """images: the photos already brightened (`Brightened`); sizes: each photo's own size;
-    long_side: the longest side SfM sees (`register_photos`)."""
+    long_side: the longest side SfM sees (`register_photos`); run: COLMAP's run on them at
+    `long_side` already made (None: run it here)."""
     progress.start("structure from motion", 1)
-    # One thread makes COLMAP's result repeatable (with more, a small photo set can settle on
-    # another focal length from run to run); above the exhaustive-matching range speed matters more.
-    threads = 1 if len(names) <= EXHAUSTIVE_MATCHING_LIMIT else None
-    registration = register_photos(images, names, long_side=long_side, threads=threads, sizes=sizes)
+    threads = matching_threads(len(names))
+    registration = register_photos(images, names, long_side=long_side, threads=threads, sizes=sizes, run=run)
     if registration.registered_count < len(names) and long_side is not None and long_side < SFM_LONG_SIDE:
         # Smaller photos hold fewer features: where some view did not register at the reduced
         # size, the default size gets its chance, and the model that places more views is kept.
@@ -123,13 +118,15 @@ class Brightened:
 def register_views(
     images: torch.Tensor, names: list[str], geometry: str, poses: Path | str | None, mode: str, progress: JobProgress,
     brightened: Brightened | None = None, sizes: Sequence[tuple[int, int]] | None = None,
-    sfm_long_side: int | None = SFM_LONG_SIDE,
+    sfm_long_side: int | None = SFM_LONG_SIDE, blind_run: Callable[[], ColmapRun] | None = None,
 ) -> ViewRegistration:
     """images [V, 3, H, W] (the photos in the working tensor) -> the cameras known before the
     network runs. `brightened`: the photos as SfM should see them (default: the blind tone
     curve); `sizes`: each photo's own (width, height) before it was stretched into `images`
     (None: the tensor's size); `sfm_long_side`: the longest side structure-from-motion sees each
-    photo at (None: its own size)."""
+    photo at (None: its own size); `blind_run`: gives COLMAP's run on the blind tone curve at
+    `sfm_long_side`, already started (`pipeline.early_registration`; used when `brightened` is
+    None and no `poses` are given)."""
     check_geometry_source(geometry)
     brightened = brightened if brightened is not None else Brightened.blind(images)
     images = brightened.images
@@ -148,7 +145,8 @@ def register_views(
             raise InputError("sfm: structure-from-motion needs at least two photos; use geometry network",
                              parameter="geometry")
         return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, None)
-    registration = _structure_from_motion(images, names, sizes, progress, sfm_long_side)
+    run = blind_run() if blind_run is not None and brightened.method == BRIGHTENING else None
+    registration = _structure_from_motion(images, names, sizes, progress, sfm_long_side, run)
     seconds = {"sfm": time.perf_counter() - started}
     if registration.registered_count > AUTO_MIN_REGISTERED_SHARE * count:
         return ViewRegistration(geometry, sizes, "sfm", registration.registered.clone(), registration.cameras,

@@ -13,6 +13,7 @@ import torch
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.model.appearance.exposure_prior import prior_strength
 from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D
+from lumos3d_cli.pipeline.early_registration import EarlyRegistration
 from lumos3d_cli.pipeline.network_pass import NetworkPass
 from lumos3d_cli.pipeline.presets import RestorePreset
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
@@ -27,7 +28,9 @@ class SceneJob:
     `names`, each photo's own (width, height) in `sizes` (None: the tensor's), the model, the
     preset, the geometry source, given `poses`, the cap on the views the network sees, the mode,
     the views the network must see (`required_views`) and, for evaluation's holdout, the views
-    whose Gaussians are fused (`fuse_views` [V] bool; None: all). `device` is the model's: the
+    whose Gaussians are fused (`fuse_views` [V] bool; None: all), and structure-from-motion's run
+    on the blind tone curve when it was started before the job (`early_registration`; None: the
+    job runs it). `device` is the model's: the
     network pass, the Gaussians, the budget and the refinement stay on it.
 
     What the stages make: `network` (the forward pass over the `selected` views, indices into the
@@ -54,6 +57,7 @@ class SceneJob:
     required_views: Sequence[int] = ()
     fuse_views: Sequence[bool] | None = None
     sizes: Sequence[tuple[int, int]] | None = None
+    early_registration: EarlyRegistration | None = None
     network: NetworkPass | None = None
     selected: list[int] = field(default_factory=list)
     brightened: Brightened | None = None

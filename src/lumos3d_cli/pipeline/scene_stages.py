@@ -36,7 +36,8 @@ from lumos3d_cli.model.appearance.photo_restoration import restore_photos
 from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DPrediction
 from lumos3d_cli.model.pixel_footprint import DEFAULT_FOOTPRINT_SCALE
 from lumos3d_cli.pipeline.gaussian_grid import dense_grid_size, densify_grid
-from lumos3d_cli.pipeline.module_prefetch import LATER_MODULES, WRITING_MODULES, prefetch_modules
+from lumos3d_cli.pipeline.early_registration import EarlyRegistration
+from lumos3d_cli.pipeline.module_prefetch import prefetch_modules
 from lumos3d_cli.pipeline.network_pass import NetworkPass, even_subset, run_network
 from lumos3d_cli.pipeline.presets import RestorePreset
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
@@ -125,12 +126,14 @@ def registration(job: SceneJob) -> SceneJob:
     or none (`pipeline.scene_geometry.register_views`). Structure-from-motion leaves a core idle:
     the modules later stages import load meanwhile (`pipeline.module_prefetch`), and it runs on
     its own thread (module docstring)."""
+    early = job.early_registration
     register = partial(register_views, job.photos, job.names, job.geometry_source, job.poses, job.mode, job.progress,
-                       job.brightened, job.sizes, job.preset.sfm_long_side)
+                       job.brightened, job.sizes, job.preset.sfm_long_side,
+                       None if early is None else early.colmap_run)
     if job.geometry_source == "network" or len(job.names) < 2:  # no structure-from-motion: nothing to wait for
         job.registration = register()
         return job
-    prefetch_modules(LATER_MODULES if job.preset.refine_steps > 0 else WRITING_MODULES)
+    prefetch_modules()
     job.pending_registration = _in_background(register)
     return job
 
@@ -274,7 +277,7 @@ def build_scene(
     images: torch.Tensor, names: list[str], model: Lumos3D, preset: RestorePreset, geometry: str = "auto",
     poses: Path | str | None = None, max_views: int | None = None, mode: str = "low-light",
     progress: JobProgress | None = None, required_views: Sequence[int] = (), fuse_views: Sequence[bool] | None = None,
-    sizes: Sequence[tuple[int, int]] | None = None,
+    sizes: Sequence[tuple[int, int]] | None = None, early_registration: EarlyRegistration | None = None,
 ) -> SceneJob:
     """photos [V, 3, H, W] named `names` -> cameras and fused Gaussians, through SCENE_STAGES.
     `sizes`: each photo's own (width, height) when it was stretched into `images`
@@ -287,14 +290,20 @@ def build_scene(
     cameras instead. `max_views` (default: the preset's) caps the views that go through the
     network, which always include `required_views` and the views only the network can place.
     `fuse_views` [V] bool (evaluation's holdout) keeps only those views' Gaussians.
+    `early_registration`: structure-from-motion on these photos' blind tone curve, started before
+    the job (`pipeline.early_registration`), for the preset's size.
 
     The preset sets the grid of pixel Gaussians (`pipeline.gaussian_grid`), their voxels (a
     multiple of each point's pixel footprint), the budget (`render.gaussian_budget`: what no
     rendered view shows goes, at most `max_gaussians` stay) and the refinement steps.
     """
     check_geometry_source(geometry)
+    if early_registration is not None and ([path.name for path in early_registration.paths] != list(names)
+                                           or early_registration.long_side != preset.sfm_long_side):
+        raise ValueError("the early registration was started for other photos or another size")
     job = SceneJob(images, list(names), model, preset, geometry, poses, max_views, mode,
-                   progress if progress is not None else SilentProgress(), required_views, fuse_views, sizes)
+                   progress if progress is not None else SilentProgress(), required_views, fuse_views, sizes,
+                   early_registration)
     for name, stage in SCENE_STAGES:
         started = time.perf_counter()
         job = stage(job)

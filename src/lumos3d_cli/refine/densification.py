@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import torch
 
 from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.refine.adam import FusedAdam
 from lumos3d_cli.refine.parameters import GaussianParameters
 from lumos3d_cli.refine.settings import DensifySettings
 from lumos3d_cli.rotations import quaternion_to_matrix
@@ -82,7 +83,7 @@ def _chosen(statistics: GradientStatistics, alive: torch.Tensor, settings: Densi
     return chosen
 
 
-def densify(parameters: GaussianParameters, optimizer: torch.optim.Optimizer, statistics: GradientStatistics,
+def densify(parameters: GaussianParameters, optimizer: FusedAdam | torch.optim.Optimizer, statistics: GradientStatistics,
             settings: DensifySettings, generator: torch.Generator) -> DensificationStep:
     """Prune, split and clone in place: `parameters`' leaves and the `optimizer`'s parameters
     and moments are replaced by the new set (the survivors first, in their order, then the
@@ -118,7 +119,7 @@ def densify(parameters: GaussianParameters, optimizer: torch.optim.Optimizer, st
     return DensificationStep(int(split.sum()), int(cloned.sum()), pruned, len(rows))
 
 
-def _replace_rows(parameters: GaussianParameters, optimizer: torch.optim.Optimizer, rows: torch.Tensor,
+def _replace_rows(parameters: GaussianParameters, optimizer: FusedAdam | torch.optim.Optimizer, rows: torch.Tensor,
                   fresh: torch.Tensor, means: torch.Tensor, log_scales: torch.Tensor) -> None:
     """New leaves made of `rows` of the old ones (positions and log scales given), swapped into
     the optimiser with their moments gathered too (zero where `fresh`)."""

@@ -13,6 +13,7 @@ import torch
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
+from lumos3d_cli.refine.adam import FUSED_DEVICES, FusedAdam
 from lumos3d_cli.refine.camera_corrections import CameraCorrections
 from lumos3d_cli.refine.densification import DensificationStep, GradientStatistics, densify
 from lumos3d_cli.refine.early_stop import EarlyStop
@@ -81,7 +82,7 @@ def _view_batches(views: int, per_step: int, generator: torch.Generator) -> Iter
 
 
 def _optimizer(parameters: GaussianParameters, corrections: CameraCorrections | None, settings: RefineSettings,
-               extent: float) -> torch.optim.Adam:
+               extent: float) -> FusedAdam | torch.optim.Adam:
     groups = [
         (parameters.offsets, settings.position_lr * extent), (parameters.quats, settings.rotation_lr),
         (parameters.log_scales, settings.scale_lr), (parameters.opacity_logits, settings.opacity_lr),
@@ -90,12 +91,21 @@ def _optimizer(parameters: GaussianParameters, corrections: CameraCorrections | 
     if corrections is not None:
         groups += [(corrections.rotations, settings.camera_rotation_lr),
                    (corrections.translations, settings.camera_translation_lr * extent)]
+    groups = [(tensor, lr) for tensor, lr in groups if tensor.requires_grad and tensor.numel()]
     # eps 1e-15 as 3DGS: a Gaussian's gradients can be 1e-9 and below, and Adam's default 1e-8
     # would shrink its steps far under the learning rate. The fused kernel (CPU and CUDA) does the
-    # same update in one pass: 21 -> 6 ms a step for 382k Gaussians on 2 cores.
-    fused = parameters.offsets.device.type in ("cpu", "cuda")
-    return torch.optim.Adam([{"params": [t], "lr": lr} for t, lr in groups if t.requires_grad and t.numel()], eps=1e-15,
-                            fused=fused)
+    # same update in one pass: 21 -> 6 ms a step for 382k Gaussians on 2 cores; called without
+    # torch.optim's step, which imports torch._dynamo (refine/adam.py).
+    if parameters.offsets.device.type in FUSED_DEVICES:
+        return FusedAdam(groups, eps=1e-15)
+    return torch.optim.Adam([{"params": [tensor], "lr": lr} for tensor, lr in groups], eps=1e-15)
+
+
+def _decay_learning_rates(optimizer: FusedAdam | torch.optim.Adam, first_rates: list[float], factor: float) -> None:
+    """Each group's rate becomes its first rate times `factor` (closed form: step k's rate depends
+    on k alone, not on the steps asked for)."""
+    for group, first in zip(optimizer.param_groups, first_rates):
+        group["lr"] = first * factor
 
 
 def refine_gaussians(
@@ -145,8 +155,7 @@ def refine_gaussians(
     split_generator = torch.Generator().manual_seed(settings.seed)
     curve: list[float] = []
     densifications: list[tuple[int, DensificationStep]] = []
-    # closed form from the first rates: step k's rate depends on k alone, not on the steps asked
-    schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda step: settings.lr_decay_per_100_steps ** (step / 100))
+    first_rates = [group["lr"] for group in optimizer.param_groups]
     for step in range(settings.steps):
         batch = next(batches)
         current = parameters.gaussians()
@@ -165,7 +174,7 @@ def refine_gaussians(
             # densification renders one view a step (RefineSettings): the gradient is that view's
             statistics.add(parameters.offsets.grad, current.means, output.radii[0], single_views[batch[0]])
         optimizer.step()
-        schedule.step()
+        _decay_learning_rates(optimizer, first_rates, settings.lr_decay_per_100_steps ** ((step + 1) / 100))
         parameters.normalise()
         if density is not None and density.due(step + 1, settings.steps):
             densified = densify(parameters, optimizer, statistics, density, split_generator)

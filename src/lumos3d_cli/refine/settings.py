@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from lumos3d_cli.losses.ssim import RADIUS
 
 Positions = Literal["free", "ray", "fixed"]
 
@@ -92,6 +91,9 @@ class RefineSettings:
     def __post_init__(self) -> None:
         if self.steps < 0:
             raise ValueError(f"steps={self.steps} must be >= 0")
+        # imported here: the presets read these settings before torch is imported (pipeline.early_registration)
+        from lumos3d_cli.losses.ssim import RADIUS
+
         if self.max_side <= 2 * RADIUS:
             raise ValueError(f"max_side={self.max_side}: SSIM needs images of at least {2 * RADIUS + 1} pixels")
         if self.views_per_step < 1:

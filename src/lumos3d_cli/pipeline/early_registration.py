@@ -1,0 +1,74 @@
+"""Structure-from-motion started before torch is imported.
+
+Where structure-from-motion sees the photos through the blind tone curve (a preset's
+`sfm_brightening` "tone curve": `fast`), it needs nothing from the network, so `lumos3d restore`
+starts it first: a thread reads the photos, brightens them and runs COLMAP (which releases the
+GIL) while the main thread imports torch and loads the model (1.5-2.5 s of a 2-core restore that
+otherwise left a core idle). The job then takes the photos from here instead of reading them again,
+and the registration stage reads COLMAP's run instead of starting one
+(`pipeline.scene_stages.registration`). The run is the one the job would make itself (the same
+pixels, curve and options), so the cameras are the same.
+
+This module imports no torch: numpy, OpenCV, OpenImageIO, rawpy and pycolmap only.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Sequence
+from concurrent.futures import Future
+from pathlib import Path
+
+from lumos3d_cli.checks import require_finite
+from lumos3d_cli.eval.tone_curve import auto_gamma_array
+from lumos3d_cli.geometry.colmap_run import ColmapRun, matching_threads, run_colmap
+from lumos3d_cli.io.images import LoadedPhotos, load_photos
+from lumos3d_cli.pipeline.presets import RestorePreset
+
+
+class EarlyRegistration:
+    """The photos at `paths` read, then COLMAP run on their blind tone curve at `long_side`, on a
+    thread of their own from construction on. `photos()` and `colmap_run()` wait for their part
+    and raise what it raised (an unreadable photo: the InputError the job would raise)."""
+
+    def __init__(self, paths: Sequence[Path], long_side: int | None):
+        self.paths = list(paths)
+        self.long_side = long_side
+        self._photos: Future = Future()
+        self._run: Future = Future()
+        # a daemon: a command that fails meanwhile exits without waiting for COLMAP
+        threading.Thread(target=self._work, name="lumos3d-early-sfm", daemon=True).start()
+
+    def _work(self) -> None:
+        try:
+            photos = load_photos(self.paths)
+        except BaseException as error:  # noqa: BLE001 - handed to the thread that waits for it
+            self._photos.set_exception(error)
+            self._run.set_exception(error)
+            return
+        self._photos.set_result(photos)
+        try:
+            brightened = auto_gamma_array(photos.pixels)
+            require_finite("photos for structure-from-motion", brightened)
+            self._run.set_result(run_colmap(brightened, photos.original_sizes, self.long_side,
+                                            threads=matching_threads(len(self.paths))))
+        except BaseException as error:  # noqa: BLE001 - handed to the thread that waits for it
+            self._run.set_exception(error)
+
+    def photos(self) -> LoadedPhotos:
+        """The photos, as `io.images.load_photos` reads them."""
+        return self._photos.result()
+
+    def colmap_run(self) -> ColmapRun:
+        """COLMAP's run on the photos' blind tone curve (`eval.tone_curve.auto_gamma_array`)."""
+        return self._run.result()
+
+
+def start_early_registration(paths: Sequence[Path], preset: RestorePreset, geometry: str,
+                             poses: Path | str | None) -> EarlyRegistration | None:
+    """Structure-from-motion started now when the job would run it on the blind tone curve: the
+    preset brightens so for it, the cameras come from structure-from-motion (`geometry` "auto"
+    or "sfm", no `poses`) and there are at least two photos. None otherwise."""
+    if preset.sfm_brightening != "tone curve" or geometry == "network" or poses is not None or len(paths) < 2:
+        return None
+    return EarlyRegistration(paths, preset.sfm_long_side)

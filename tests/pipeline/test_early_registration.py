@@ -1,0 +1,118 @@
+"""Structure-from-motion started before torch is imported (pipeline/early_registration.py): the
+same photos and the same cameras as the job's own run (the oracle: register_views on the main
+thread, one matching thread, which repeats exactly), no torch imported on the way, errors that
+reach the caller as the job's own, and only where the job would brighten with the tone curve."""
+
+import json
+import subprocess
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+from assertions import expect_input_error
+
+from lumos3d_cli import build_model, load_images
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.pipeline.early_registration import EarlyRegistration, start_early_registration
+from lumos3d_cli.pipeline.presets import get_restore_preset
+from lumos3d_cli.pipeline.progress import SilentProgress
+from lumos3d_cli.pipeline.scene_geometry import register_views
+from lumos3d_cli.pipeline.scene_stages import build_scene
+
+NAMES = ["3.JPG", "4.JPG", "5.JPG", "6.JPG", "7.JPG"]
+
+
+def _fast(**changes):
+    return replace(get_restore_preset("fast", refine_steps=0), **changes)
+
+
+def test_the_job_takes_photos_and_cameras_from_the_early_run_unchanged(buu):
+    paths = [buu / "low" / name for name in NAMES]
+    early = EarlyRegistration(paths, _fast().sfm_long_side)
+    batch = load_images(paths)
+    assert np.array_equal(early.photos().pixels, batch.images.numpy())  # read once, as load_images reads
+    model = build_model("tiny-operator", seed=0).eval()
+    built = build_scene(early.photos().batch().images, NAMES, model, _fast(), geometry="sfm", max_views=3,
+                        early_registration=early)
+    assert built.geometry.summary()["registered_views"] == 5
+    direct = register_views(batch.images, NAMES, "sfm", None, "low-light", SilentProgress(), sfm_long_side=384)
+    assert torch.equal(built.registration.cameras.extrinsics, direct.cameras.extrinsics)
+    assert torch.equal(built.registration.cameras.intrinsics, direct.cameras.intrinsics)
+    assert torch.equal(built.registration.sfm.points.xyz, direct.sfm.points.xyz)
+
+
+def test_the_early_run_imports_no_torch(buu):
+    script = f"""
+import sys
+from pathlib import Path
+from lumos3d_cli.pipeline.early_registration import EarlyRegistration
+from lumos3d_cli.pipeline.presets import get_restore_preset
+early = EarlyRegistration([Path({str(buu / "low")!r}) / name for name in {NAMES!r}], get_restore_preset("fast").sfm_long_side)
+run = early.colmap_run()
+print(max(model.num_reg_images() for model in run.models), "torch" in sys.modules)
+"""
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    assert result.stdout.split() == ["5", "False"]
+
+
+def test_an_unreadable_photo_reaches_the_caller_from_both_parts(buu, tmp_path):
+    (tmp_path / "1.JPG").write_bytes((buu / "low" / "1.JPG").read_bytes())
+    data = (buu / "low" / "2.JPG").read_bytes()
+    (tmp_path / "2.JPG").write_bytes(data[: len(data) // 2])
+    early = EarlyRegistration([tmp_path / "1.JPG", tmp_path / "2.JPG"], 384)
+    for wait in (early.photos, early.colmap_run):
+        with pytest.raises(InputError, match="2.JPG: cannot decode as JPG"):
+            wait()
+
+
+def test_the_cli_refuses_an_unreadable_photo_with_one_line(run_cli, buu, tmp_path, random_checkpoint):
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    (photos / "1.JPG").write_bytes((buu / "low" / "1.JPG").read_bytes())
+    data = (buu / "low" / "2.JPG").read_bytes()
+    (photos / "2.JPG").write_bytes(data[: len(data) // 2])
+    out = tmp_path / "out" / "scene.ply"
+    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--preset", "fast"),
+                       "2.JPG: cannot decode as JPG")
+    assert not out.parent.exists()
+
+
+def test_a_fast_restore_registers_with_the_early_run(run_cli, buu, tmp_path, random_checkpoint):
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for name in NAMES:
+        (photos / name).write_bytes((buu / "low" / name).read_bytes())
+    out = tmp_path / "out" / "scene.ply"
+    result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--preset", "fast",
+                     "--refine-steps", 0, "--json")
+    assert result.code == 0, result.err
+    geometry = json.loads(result.out)["geometry"]
+    assert geometry["source"] == "sfm" and geometry["registered_views"] == 5
+    assert geometry["brightening"].startswith("auto-gamma") and geometry["sfm_size"] == [384, 288]
+
+
+def test_only_where_the_job_would_brighten_with_the_tone_curve(buu):
+    paths = [buu / "low" / name for name in NAMES[:2]]
+    fast = get_restore_preset("fast")
+    assert start_early_registration(paths, get_restore_preset("balanced"), "auto", None) is None  # sees the restoration
+    assert start_early_registration(paths, fast, "network", None) is None
+    assert start_early_registration(paths, fast, "auto", buu / "transforms_train.json") is None
+    assert start_early_registration(paths[:1], fast, "auto", None) is None
+    early = start_early_registration(paths, fast, "sfm", None)
+    assert isinstance(early, EarlyRegistration) and early.long_side == fast.sfm_long_side
+    early.colmap_run()
+
+
+def test_an_early_run_of_other_photos_or_size_is_refused(buu):
+    paths = [buu / "low" / name for name in NAMES[:2]]
+    early = EarlyRegistration(paths, 512)
+    photos = early.photos().batch().images
+    model = build_model("tiny-operator", seed=0).eval()
+    with pytest.raises(ValueError, match="other photos or another size"):
+        build_scene(photos, NAMES[:2], model, _fast(), geometry="sfm", early_registration=early)
+    with pytest.raises(ValueError, match="other photos or another size"):
+        build_scene(photos, ["a.JPG", "b.JPG"], model, _fast(sfm_long_side=512), geometry="sfm",
+                    early_registration=early)
+    early.colmap_run()
