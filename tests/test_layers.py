@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "lumos3d_cli"
-ROOT_MODULES = ("errors", "checks", "rotations", "typed_config", "__init__")  # layer 0: shared by all
+ROOT_MODULES = ("errors", "checks", "rotations", "tensors", "typed_config", "__init__")  # layer 0: shared by all
 LAYERS = ("<root>", "io", "model", "geometry", "render", "losses", "refine", "data", "eval", "train", "pipeline", "viewer", "cli")
 ENTRY_POINTS = {"__main__": "cli"}  # `python -m lumos3d_cli` runs the CLI
 
