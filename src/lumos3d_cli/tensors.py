@@ -13,6 +13,9 @@ from types import ModuleType
 
 
 def loaded_torch(values: object) -> ModuleType | None:
-    """The torch module when `values` is a torch.Tensor (torch is then already imported), else None."""
+    """The torch module when `values` is a torch.Tensor (torch is then already imported), else None.
+    While another thread is still importing torch, the module exists without its `Tensor` class:
+    no value can be a tensor yet."""
     torch = sys.modules.get("torch")
-    return torch if torch is not None and isinstance(values, torch.Tensor) else None
+    tensor_class = getattr(torch, "Tensor", None)
+    return torch if tensor_class is not None and isinstance(values, tensor_class) else None

@@ -6,8 +6,11 @@ reach the caller as the job's own, and only where the job would brighten with th
 import json
 import subprocess
 import sys
+import tempfile
 from dataclasses import replace
+from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -15,6 +18,9 @@ from assertions import expect_input_error
 
 from lumos3d_cli import build_model, load_images
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.geometry.colmap_run import ColmapStopped
+from lumos3d_cli.io.colour import srgb_to_linear
+from lumos3d_cli.io.image_write import write_exr
 from lumos3d_cli.pipeline.early_registration import EarlyRegistration, start_early_registration
 from lumos3d_cli.pipeline.presets import get_restore_preset
 from lumos3d_cli.pipeline.progress import SilentProgress
@@ -31,8 +37,9 @@ def _fast(**changes):
 def test_the_job_takes_photos_and_cameras_from_the_early_run_unchanged(buu):
     paths = [buu / "low" / name for name in NAMES]
     early = EarlyRegistration(paths, _fast().sfm_long_side)
+    decoded = np.stack([cv2.imread(str(path))[..., ::-1].transpose(2, 0, 1) for path in paths]) / 255.0
+    assert np.abs(early.photos().pixels - decoded).max() < 1e-6  # the photos as OpenCV decodes them
     batch = load_images(paths)
-    assert np.array_equal(early.photos().pixels, batch.images.numpy())  # read once, as load_images reads
     model = build_model("tiny-operator", seed=0).eval()
     built = build_scene(early.photos().batch().images, NAMES, model, _fast(), geometry="sfm", max_views=3,
                         early_registration=early)
@@ -55,6 +62,23 @@ print(max(model.num_reg_images() for model in run.models), "torch" in sys.module
 """
     result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     assert result.stdout.split() == ["5", "False"]
+
+
+def test_linear_photos_register_while_torch_is_being_imported(buu, tmp_path):
+    """EXR photos go through the checks and colour code that take tensors too; torch's import in
+    the main thread (its module half-made meanwhile) must not break them."""
+    for name in NAMES:
+        srgb = cv2.imread(str(buu / "low" / name))[..., ::-1].astype(np.float32) / 255
+        write_exr(tmp_path / f"{Path(name).stem}.exr", srgb_to_linear(srgb))
+    script = f"""
+from pathlib import Path
+from lumos3d_cli.pipeline.early_registration import EarlyRegistration
+early = EarlyRegistration(sorted(Path({str(tmp_path)!r}).glob("*.exr")), 384)
+import torch
+print(max(model.num_reg_images() for model in early.colmap_run().models))
+"""
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert result.returncode == 0 and result.stdout.split() == ["5"], result.stderr
 
 
 def test_an_unreadable_photo_reaches_the_caller_from_both_parts(buu, tmp_path):
@@ -116,3 +140,27 @@ def test_an_early_run_of_other_photos_or_size_is_refused(buu):
         build_scene(photos, ["a.JPG", "b.JPG"], model, _fast(sfm_long_side=512), geometry="sfm",
                     early_registration=early)
     early.colmap_run()
+
+
+def test_closing_stops_colmap_and_leaves_no_work_folder(buu, tmp_path, monkeypatch):
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    early = EarlyRegistration(sorted((buu / "low").iterdir()), 384)
+    early.close()
+    with pytest.raises(ColmapStopped):
+        early.colmap_run()
+    assert early.photos().pixels.shape[0] == 25  # what was done is kept
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_fast_command_refused_after_the_start_leaves_no_work_folder(run_cli, buu, tmp_path, random_checkpoint,
+                                                                    monkeypatch):
+    work = tmp_path / "tmp"
+    work.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(work))
+    out = tmp_path / "out" / "scene.ply"
+    for option, value, message in (("--max-views", 0, "use at least 1"), ("--mode", "dusk", "'dusk'"),
+                                   ("--checkpoint", tmp_path / "none.safetensors", "no such")):
+        arguments = ["--checkpoint", random_checkpoint] if option != "--checkpoint" else []
+        expect_input_error(run_cli("restore", buu / "low", "-o", out, "--preset", "fast", option, value, *arguments),
+                           message)
+        assert list(work.iterdir()) == [] and not out.parent.exists()

@@ -83,17 +83,23 @@ def restore_command(
         from lumos3d_cli.pipeline.orbit_video import DEFAULT_ORBIT_FRAMES
         from lumos3d_cli.pipeline.restore import restore
         from lumos3d_cli.pipeline.restore_outputs import write_restored_scene
-    if video is not None:
-        video_kind(video)
-    with outputs.reserved(), progress_bar() as bars:
-        scene = restore(
-            photos, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,
-            max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, gaussian_grid=gaussian_grid,
-            exposure_prior=exposure_prior, exposure_key=exposure_key, fill_unobserved=fill_unobserved, densify=densify, denoise_photo=denoise, device=device, reference=reference, lpips_weights=lpips_weights,
-            progress=ProgressBars(bars), early_registration=early,
-        )
-        frames = bars.add_task("orbit video", total=DEFAULT_ORBIT_FRAMES, visible=video is not None)
-        summary = write_restored_scene(scene, output, output_format, video, inputs, on_video_frame=lambda: bars.advance(frames))
+    try:
+        if video is not None:
+            video_kind(video)
+        with outputs.reserved(), progress_bar() as bars:
+            scene = restore(
+                photos, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,
+                max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, gaussian_grid=gaussian_grid,
+                exposure_prior=exposure_prior, exposure_key=exposure_key, fill_unobserved=fill_unobserved, densify=densify,
+                denoise_photo=denoise, device=device, reference=reference, lpips_weights=lpips_weights,
+                progress=ProgressBars(bars), early_registration=early,
+            )
+            frames = bars.add_task("orbit video", total=DEFAULT_ORBIT_FRAMES, visible=video is not None)
+            summary = write_restored_scene(scene, output, output_format, video, inputs,
+                                           on_video_frame=lambda: bars.advance(frames))
+    finally:
+        if early is not None:  # a refused or interrupted job stops COLMAP and removes its folder
+            early.close()
     if json_output:
         print_json(summary)
     else:

@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -68,6 +69,10 @@ MAX_FEATURES = 4096
 # photos keep COLMAP's 100 (module docstring).
 VERIFICATION_MIN_TRIALS = 20
 VERIFICATION_FLOOR_FROM_VIEWS = 20
+
+
+class ColmapStopped(Exception):
+    """A COLMAP run was asked to stop (its `stop` event was set) and did, between two stages."""
 
 
 @dataclass
@@ -154,12 +159,19 @@ def run_colmap(
     shared_camera: bool = True,
     threads: int | None = None,
     max_features: int = MAX_FEATURES,
+    stop: threading.Event | None = None,
 ) -> ColmapRun:
     """COLMAP on V brightened photos, each [3, H, W] float sRGB in [0, 1] (possibly stretched to a
     common size), whose own (width, height) are `photo_sizes`: each is seen at its own aspect
     ratio, its long side at most `long_side`. `shared_camera`, `threads`, `max_features`:
     `geometry.sfm.register_photos`. COLMAP's log is silenced; what it found is the caller's to
-    report."""
+    report. `stop` set: ColmapStopped at the next stage (writing, features, matching, mapping; a
+    stage itself runs to its end), the work folder removed."""
+
+    def check_stop() -> None:
+        if stop is not None and stop.is_set():
+            raise ColmapStopped("structure-from-motion was stopped")
+
     views = len(images)
     sfm_sizes = [sfm_size(w, h, long_side) for w, h in photo_sizes]
     cores = os.cpu_count() or 1
@@ -175,6 +187,7 @@ def run_colmap(
             folder, database = Path(work) / "images", Path(work) / "database.db"
             folder.mkdir()
             for index, file in enumerate(files):
+                check_stop()
                 (folder / file).parent.mkdir(exist_ok=True)
                 cv2.imwrite(str(folder / file), sfm_pixels(images[index], *sfm_sizes[index]))
             pycolmap.set_random_seed(0)
@@ -185,6 +198,7 @@ def run_colmap(
             pycolmap.extract_features(database, folder, files, camera_mode=mode, reader_options=reader,
                                       extraction_options=extraction, device=pycolmap.Device.cpu)
             stage_seconds["features"] = time.perf_counter() - started
+            check_stop()
             if matching == "exhaustive":
                 pycolmap.match_exhaustive(database, matching_options=matching_options, verification_options=verification,
                                           device=pycolmap.Device.cpu)
@@ -194,6 +208,7 @@ def run_colmap(
                 pycolmap.match_sequential(database, matching_options=matching_options, pairing_options=pairing,
                                           verification_options=verification, device=pycolmap.Device.cpu)
             stage_seconds["matching"] = time.perf_counter() - started - stage_seconds["features"]
+            check_stop()
             (Path(work) / "models").mkdir()
             models = pycolmap.incremental_mapping(database, folder, Path(work) / "models", mapping)
             stage_seconds["mapping"] = time.perf_counter() - started - stage_seconds["features"] - stage_seconds["matching"]

@@ -7,7 +7,8 @@ GIL) while the main thread imports torch and loads the model (1.5-2.5 s of a 2-c
 otherwise left a core idle). The job then takes the photos from here instead of reading them again,
 and the registration stage reads COLMAP's run instead of starting one
 (`pipeline.scene_stages.registration`). The run is the one the job would make itself (the same
-pixels, curve and options), so the cameras are the same.
+pixels, curve and options), so the cameras are the same. A command that fails or is interrupted
+meanwhile closes it (`close`): COLMAP stops at its next stage and its work folder goes.
 
 This module imports no torch: numpy, OpenCV, OpenImageIO, rawpy and pycolmap only.
 """
@@ -29,15 +30,23 @@ from lumos3d_cli.pipeline.presets import RestorePreset
 class EarlyRegistration:
     """The photos at `paths` read, then COLMAP run on their blind tone curve at `long_side`, on a
     thread of their own from construction on. `photos()` and `colmap_run()` wait for their part
-    and raise what it raised (an unreadable photo: the InputError the job would raise)."""
+    and raise what it raised (an unreadable photo: the InputError the job would raise); `close()`
+    stops what is left and waits for the thread."""
 
     def __init__(self, paths: Sequence[Path], long_side: int | None):
         self.paths = list(paths)
         self.long_side = long_side
         self._photos: Future = Future()
         self._run: Future = Future()
-        # a daemon: a command that fails meanwhile exits without waiting for COLMAP
-        threading.Thread(target=self._work, name="lumos3d-early-sfm", daemon=True).start()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._work, name="lumos3d-early-sfm", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        """Stop COLMAP at its next stage (a finished run is kept) and wait for the thread, so that
+        no work folder outlives the command."""
+        self._stop.set()
+        self._thread.join()
 
     def _work(self) -> None:
         try:
@@ -51,7 +60,7 @@ class EarlyRegistration:
             brightened = auto_gamma_array(photos.pixels)
             require_finite("photos for structure-from-motion", brightened)
             self._run.set_result(run_colmap(brightened, photos.original_sizes, self.long_side,
-                                            threads=matching_threads(len(self.paths))))
+                                            threads=matching_threads(len(self.paths)), stop=self._stop))
         except BaseException as error:  # noqa: BLE001 - handed to the thread that waits for it
             self._run.set_exception(error)
 
@@ -68,7 +77,8 @@ def start_early_registration(paths: Sequence[Path], preset: RestorePreset, geome
                              poses: Path | str | None) -> EarlyRegistration | None:
     """Structure-from-motion started now when the job would run it on the blind tone curve: the
     preset brightens so for it, the cameras come from structure-from-motion (`geometry` "auto"
-    or "sfm", no `poses`) and there are at least two photos. None otherwise."""
-    if preset.sfm_brightening != "tone curve" or geometry == "network" or poses is not None or len(paths) < 2:
+    or "sfm", no `poses`) and there are at least two photos. None otherwise (the job refuses a
+    `geometry` it does not know)."""
+    if preset.sfm_brightening != "tone curve" or geometry not in ("auto", "sfm") or poses is not None or len(paths) < 2:
         return None
     return EarlyRegistration(paths, preset.sfm_long_side)

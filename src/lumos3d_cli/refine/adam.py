@@ -3,8 +3,8 @@
 `torch.optim.Optimizer.step` imports torch._dynamo on its first call (with sympy: 1.1-1.5 s of one
 core, 1.9 s while the network pass and structure-from-motion hold both cores of a `fast`
 restore). Refinement needs none of what that buys (compilation, hooks, differentiable steps): this
-keeps the state as torch.optim.Adam keeps it (`param_groups` of one tensor with its "lr" and
-"initial_lr", `state[tensor]` with "step", "exp_avg" and "exp_avg_sq"; densification swaps
+keeps the state as torch.optim.Adam keeps it (`param_groups` of one tensor with its "lr",
+`state[tensor]` with "step", "exp_avg" and "exp_avg_sq"; densification swaps
 tensors and moments in place: `refine.densification`) and updates each tensor with
 `torch._fused_adam_`, the kernel `torch.optim.Adam(fused=True)` calls, on the CPU and CUDA alike.
 Tested against `torch.optim.Adam` (tests/refine/test_adam.py).
@@ -29,7 +29,7 @@ class FusedAdam:
         for tensor, _ in groups:
             if tensor.device.type not in FUSED_DEVICES:
                 raise ValueError(f"the fused Adam runs on {', '.join(FUSED_DEVICES)}, not {tensor.device.type}")
-        self.param_groups = [{"params": [tensor], "lr": lr, "initial_lr": lr} for tensor, lr in groups]
+        self.param_groups = [{"params": [tensor], "lr": lr} for tensor, lr in groups]
         self.state: dict[torch.Tensor, dict[str, torch.Tensor]] = {}
         self.eps, self.betas = eps, betas
 
