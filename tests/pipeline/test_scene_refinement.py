@@ -2,16 +2,19 @@
 
 import json
 import shutil
+from dataclasses import replace
 
 import pytest
 import torch
 from assertions import expect_input_error
 
 from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.images import load_images
 from lumos3d_cli.model.lumos3d import build_model
 from lumos3d_cli.pipeline.network_pass import run_network
 from lumos3d_cli.pipeline.presets import REFINE_LR_DECAY, RESTORE_PRESETS, get_restore_preset
 from lumos3d_cli.pipeline.scene_refinement import network_colours, refinement_targets
+from lumos3d_cli.pipeline.scene_stages import build_scene
 
 
 def _photos(buu, tmp_path, names):
@@ -79,6 +82,21 @@ def test_presets_refine_more_as_they_slow_down_and_the_option_overrides():
     assert get_restore_preset("best", 0).refine_steps == 0 and get_restore_preset("fast", 7).refine_steps == 7
     assert get_restore_preset("fast", densify=True).densify is not None
     assert get_restore_preset("best", densify=False).densify is None
+
+
+def test_balanced_fits_every_view_at_least_once_unless_told_the_steps(buu):
+    """A scene of more views than the preset's steps refines one step per view (each view fitted
+    once); `--refine-steps N` (get_restore_preset's refine_steps) means exactly N."""
+    assert get_restore_preset("balanced").refine_each_view and not get_restore_preset("fast").refine_each_view
+    assert not get_restore_preset("balanced", refine_steps=25).refine_each_view
+    names = ["1.JPG", "2.JPG", "3.JPG", "4.JPG", "5.JPG"]
+    photos = torch.stack([load_images([buu / "low" / name]).images[0] for name in names])
+    model = build_model("tiny-operator", seed=0).eval()
+    each_view = replace(get_restore_preset("balanced"), refine_steps=2, refine_side=64)
+    built = build_scene(photos, names, model, each_view, geometry="network")
+    assert built.refinement["steps"] == 5
+    exact = replace(each_view, refine_each_view=False)
+    assert build_scene(photos, names, model, exact, geometry="network").refinement["steps"] == 2
 
 
 def test_targets_leave_out_held_out_views_and_follow_the_cameras(buu):
