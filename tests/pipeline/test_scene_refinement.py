@@ -14,7 +14,7 @@ from lumos3d_cli.model.lumos3d import build_model
 from lumos3d_cli.pipeline.network_pass import run_network
 from lumos3d_cli.pipeline.presets import REFINE_LR_DECAY, RESTORE_PRESETS, get_restore_preset
 from lumos3d_cli.pipeline.scene_refinement import network_colours, refinement_targets
-from lumos3d_cli.pipeline.scene_stages import build_scene
+from lumos3d_cli.pipeline.scene_stages import build_scene, refinement
 
 
 def _photos(buu, tmp_path, names):
@@ -93,10 +93,11 @@ def test_balanced_fits_every_view_at_least_once_unless_told_the_steps(buu):
     photos = torch.stack([load_images([buu / "low" / name]).images[0] for name in names])
     model = build_model("tiny-operator", seed=0).eval()
     each_view = replace(get_restore_preset("balanced"), refine_steps=2, refine_side=64)
-    built = build_scene(photos, names, model, each_view, geometry="network")
-    assert built.refinement["steps"] == 5
-    exact = replace(each_view, refine_each_view=False)
-    assert build_scene(photos, names, model, exact, geometry="network").refinement["steps"] == 2
+    job = build_scene(photos, names, model, replace(each_view, refine_steps=0), geometry="network")
+    fused = job.gaussians
+    for preset, steps in ((each_view, 5), (replace(each_view, refine_each_view=False), 2)):
+        job.preset, job.gaussians = preset, fused
+        assert refinement(job).refinement["steps"] == steps
 
 
 def test_targets_leave_out_held_out_views_and_follow_the_cameras(buu):
