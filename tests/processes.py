@@ -41,10 +41,12 @@ def run_lumos3d(*args, timeout: float = 600, cwd: Path | None = None) -> Process
 
 
 def interrupt_when(args, ready: Callable[[subprocess.Popen], bool], signum: int, timeout: float = 600,
-                   poll: float = 0.01, cwd: Path | None = None) -> ProcessResult:
-    """Start `lumos3d ARGS...`, send `signum` as soon as `ready(process)` holds, and wait for the
-    end. Fails when the command ends before it was ready (the signal would test nothing)."""
-    process = subprocess.Popen(command(*args), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_ENV, cwd=cwd)
+                   poll: float = 0.01, cwd: Path | None = None, env: dict[str, str] | None = None) -> ProcessResult:
+    """Start `lumos3d ARGS...` (with `env` added to the environment), send `signum` as soon as
+    `ready(process)` holds, and wait for the end. Fails when the command ends before it was ready
+    (the signal would test nothing)."""
+    process = subprocess.Popen(command(*args), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               env={**_ENV, **(env or {})}, cwd=cwd)
     try:
         deadline = time.monotonic() + timeout
         while not ready(process):

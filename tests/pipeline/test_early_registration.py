@@ -4,6 +4,7 @@ thread, one matching thread, which repeats exactly), no torch imported on the wa
 reach the caller as the job's own, and only where the job would brighten with the tone curve."""
 
 import json
+import signal
 import subprocess
 import sys
 import tempfile
@@ -15,6 +16,7 @@ import numpy as np
 import pytest
 import torch
 from assertions import expect_input_error
+from processes import interrupt_when
 
 from lumos3d_cli import build_model, load_images
 from lumos3d_cli.errors import InputError
@@ -164,3 +166,13 @@ def test_a_fast_command_refused_after_the_start_leaves_no_work_folder(run_cli, b
         expect_input_error(run_cli("restore", buu / "low", "-o", out, "--preset", "fast", option, value, *arguments),
                            message)
         assert list(work.iterdir()) == [] and not out.parent.exists()
+
+
+def test_ctrl_c_while_colmap_runs_stops_it_and_leaves_no_work_folder(buu, tmp_path, random_checkpoint):
+    work = tmp_path / "tmp"
+    work.mkdir()
+    out = tmp_path / "out" / "scene.ply"
+    result = interrupt_when(("restore", buu / "low", "-o", out, "--checkpoint", random_checkpoint, "--preset", "fast"),
+                            lambda _: any(work.glob("lumos3d-sfm-*")), signal.SIGINT, env={"TMPDIR": str(work)})
+    assert result.code == 130 and result.last_line.startswith("interrupted by SIGINT"), result.err[-2000:]
+    assert list(work.iterdir()) == [] and not out.parent.exists()

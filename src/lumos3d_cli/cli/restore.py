@@ -74,16 +74,17 @@ def restore_command(
     # here, when the command runs, so that `--help` and a refused command line stay fast. Where
     # structure-from-motion needs nothing from the network, it starts before torch is imported
     # (pipeline/early_registration.py), on photos read once for the whole job.
-    with library_imports():
-        from lumos3d_cli.pipeline.early_registration import start_early_registration
-        from lumos3d_cli.pipeline.presets import get_restore_preset
-
-        early = start_early_registration(list_photos(photos), get_restore_preset(preset), geometry, poses)
-        from lumos3d_cli.io.video import video_kind
-        from lumos3d_cli.pipeline.orbit_video import DEFAULT_ORBIT_FRAMES
-        from lumos3d_cli.pipeline.restore import restore
-        from lumos3d_cli.pipeline.restore_outputs import write_restored_scene
+    early = None
     try:
+        with library_imports():
+            from lumos3d_cli.pipeline.early_registration import start_early_registration
+            from lumos3d_cli.pipeline.presets import get_restore_preset
+
+            early = start_early_registration(list_photos(photos), get_restore_preset(preset), geometry, poses)
+            from lumos3d_cli.io.video import video_kind
+            from lumos3d_cli.pipeline.orbit_video import DEFAULT_ORBIT_FRAMES
+            from lumos3d_cli.pipeline.restore import restore
+            from lumos3d_cli.pipeline.restore_outputs import write_restored_scene
         if video is not None:
             video_kind(video)
         with outputs.reserved(), progress_bar() as bars:
