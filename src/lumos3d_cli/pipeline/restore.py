@@ -213,7 +213,8 @@ def restore(
     `denoise_photo` whether a one-photo restore's amplified noise is removed
     (`model.appearance.amplified_noise`), `densify` whether refinement densifies
     (`refine.densification`). `early_registration`: the photos read and structure-from-motion
-    started before torch was imported (`pipeline.early_registration`, as `lumos3d restore` does).
+    started before torch was imported (`pipeline.early_registration`, as `lumos3d restore` does;
+    the caller closes it).
     Write the result with `write_restored_scene`."""
     progress = progress or SilentProgress()
     started = time.perf_counter()
