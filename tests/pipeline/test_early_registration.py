@@ -8,6 +8,8 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -144,14 +146,34 @@ def test_an_early_run_of_other_photos_or_size_is_refused(buu):
     early.colmap_run()
 
 
-def test_closing_stops_colmap_and_leaves_no_work_folder(buu, tmp_path, monkeypatch):
+def test_closing_stops_colmap_within_its_stage_and_leaves_no_work_folder(buu, tmp_path, monkeypatch):
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     early = EarlyRegistration(sorted((buu / "low").iterdir()), 384)
+    assert early.photos().pixels.shape[0] == 25
+    while not any(tmp_path.glob("lumos3d-sfm-*/database.db")):  # COLMAP is at work
+        time.sleep(0.01)
+    started = time.perf_counter()
     early.close()
+    assert time.perf_counter() - started < 1.5  # not the 3-4 s the run takes
     with pytest.raises(ColmapStopped):
         early.colmap_run()
-    assert early.photos().pixels.shape[0] == 25  # what was done is kept
     assert list(tmp_path.iterdir()) == []
+
+
+def test_closing_while_the_photos_are_read_stops_the_reading(buu, tmp_path, monkeypatch):
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for copy in range(8):  # 200 photos: about 1 s to read
+        for path in sorted((buu / "low").iterdir()):
+            (photos / f"{copy}-{path.name}").write_bytes(path.read_bytes())
+    work = tmp_path / "tmp"
+    work.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(work))
+    early = EarlyRegistration(sorted(photos.iterdir()), 384)
+    early.close()
+    with pytest.raises(ColmapStopped):
+        early.photos()
+    assert list(work.iterdir()) == []
 
 
 def test_a_fast_command_refused_after_the_start_leaves_no_work_folder(run_cli, buu, tmp_path, random_checkpoint,
@@ -166,9 +188,10 @@ def test_a_fast_command_refused_after_the_start_leaves_no_work_folder(run_cli, b
         expect_input_error(run_cli("restore", buu / "low", "-o", out, "--preset", "fast", option, value, *arguments),
                            message)
         assert list(work.iterdir()) == [] and not out.parent.exists()
+        assert not any(thread.name == "lumos3d-early-sfm" for thread in threading.enumerate())  # closed, not left running
 
 
-def test_ctrl_c_while_colmap_runs_stops_it_and_leaves_no_work_folder(buu, tmp_path, random_checkpoint):
+def test_ctrl_c_while_colmap_runs_exits_130_and_leaves_no_work_folder(buu, tmp_path, random_checkpoint):
     work = tmp_path / "tmp"
     work.mkdir()
     out = tmp_path / "out" / "scene.ply"

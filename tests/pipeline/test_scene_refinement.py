@@ -86,16 +86,20 @@ def test_presets_refine_more_as_they_slow_down_and_the_option_overrides():
 
 def test_balanced_fits_every_view_at_least_once_unless_told_the_steps(buu):
     """A scene of more views than the preset's steps refines one step per view (each view fitted
-    once); `--refine-steps N` (get_restore_preset's refine_steps) means exactly N."""
+    once), up to twice the preset's steps; `--refine-steps N` (get_restore_preset's refine_steps)
+    means exactly N."""
     assert get_restore_preset("balanced").refine_each_view and not get_restore_preset("fast").refine_each_view
     assert not get_restore_preset("balanced", refine_steps=25).refine_each_view
+    balanced = get_restore_preset("balanced")
+    assert [balanced.refinement_steps(views) for views in (3, 25, 35, 64)] == [25, 25, 35, 50]  # capped at twice
+    assert get_restore_preset("fast").refinement_steps(64) == 15
     names = ["1.JPG", "2.JPG", "3.JPG", "4.JPG", "5.JPG"]
     photos = torch.stack([load_images([buu / "low" / name]).images[0] for name in names])
     model = build_model("tiny-operator", seed=0).eval()
-    each_view = replace(get_restore_preset("balanced"), refine_steps=2, refine_side=64)
+    each_view = replace(get_restore_preset("balanced"), refine_steps=3, refine_side=64)
     job = build_scene(photos, names, model, replace(each_view, refine_steps=0), geometry="network")
     fused = job.gaussians
-    for preset, steps in ((each_view, 5), (replace(each_view, refine_each_view=False), 2)):
+    for preset, steps in ((each_view, 5), (replace(each_view, refine_each_view=False), 3)):
         job.preset, job.gaussians = preset, fused
         assert refinement(job).refinement["steps"] == steps
 

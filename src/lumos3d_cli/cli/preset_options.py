@@ -7,7 +7,9 @@ import typer
 from lumos3d_cli.pipeline.choices import EXPOSURE_KEYS
 
 REFINE_STEPS = typer.Option(
-    None, "--refine-steps", help="Test-time refinement steps after the forward pass (default: the preset's; 0: none).")
+    None, "--refine-steps",
+    help="Test-time refinement steps after the forward pass, exactly (default: the preset's, in balanced and best "
+         "at least one per photo up to twice its steps; 0: none).")
 MAX_GAUSSIANS = typer.Option(
     None, "--max-gaussians", help="Keep at most this many Gaussians, the ones the views draw most (default: all that the views show).")
 GAUSSIAN_GRID = typer.Option(

@@ -50,7 +50,6 @@ from __future__ import annotations
 
 import os
 import tempfile
-import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -72,7 +71,7 @@ VERIFICATION_FLOOR_FROM_VIEWS = 20
 
 
 class ColmapStopped(Exception):
-    """A COLMAP run was asked to stop (its `stop` event was set) and did, between two stages."""
+    """A COLMAP run was asked to stop (its `stop` token cancelled) and did."""
 
 
 @dataclass
@@ -159,17 +158,18 @@ def run_colmap(
     shared_camera: bool = True,
     threads: int | None = None,
     max_features: int = MAX_FEATURES,
-    stop: threading.Event | None = None,
+    stop: pycolmap.CancellationToken | None = None,
 ) -> ColmapRun:
     """COLMAP on V brightened photos, each [3, H, W] float sRGB in [0, 1] (possibly stretched to a
     common size), whose own (width, height) are `photo_sizes`: each is seen at its own aspect
     ratio, its long side at most `long_side`. `shared_camera`, `threads`, `max_features`:
     `geometry.sfm.register_photos`. COLMAP's log is silenced; what it found is the caller's to
-    report. `stop` set: ColmapStopped at the next stage (writing, features, matching, mapping; a
-    stage itself runs to its end), the work folder removed."""
+    report. `stop` cancelled: ColmapStopped within the stage it is in (COLMAP checks the token as
+    it goes: 0.1-0.6 s on buu's 25 photos), the work folder removed."""
+    token = stop if stop is not None else pycolmap.CancellationToken()
 
     def check_stop() -> None:
-        if stop is not None and stop.is_set():
+        if token.is_cancelled:
             raise ColmapStopped("structure-from-motion was stopped")
 
     views = len(images)
@@ -196,22 +196,29 @@ def run_colmap(
             pycolmap.Database.open(str(database)).close()
             pycolmap.import_images(database, folder, mode, files, reader)
             pycolmap.extract_features(database, folder, files, camera_mode=mode, reader_options=reader,
-                                      extraction_options=extraction, device=pycolmap.Device.cpu)
+                                      extraction_options=extraction, device=pycolmap.Device.cpu,
+                                      cancellation_token=token)
             stage_seconds["features"] = time.perf_counter() - started
             check_stop()
             if matching == "exhaustive":
                 pycolmap.match_exhaustive(database, matching_options=matching_options, verification_options=verification,
-                                          device=pycolmap.Device.cpu)
+                                          device=pycolmap.Device.cpu, cancellation_token=token)
             else:
                 pairing = pycolmap.SequentialPairingOptions()
                 pairing.overlap = SEQUENTIAL_OVERLAP
                 pycolmap.match_sequential(database, matching_options=matching_options, pairing_options=pairing,
-                                          verification_options=verification, device=pycolmap.Device.cpu)
+                                          verification_options=verification, device=pycolmap.Device.cpu,
+                                          cancellation_token=token)
             stage_seconds["matching"] = time.perf_counter() - started - stage_seconds["features"]
             check_stop()
             (Path(work) / "models").mkdir()
-            models = pycolmap.incremental_mapping(database, folder, Path(work) / "models", mapping)
+            models = pycolmap.incremental_mapping(database, folder, Path(work) / "models", mapping,
+                                                  cancellation_token=token)
             stage_seconds["mapping"] = time.perf_counter() - started - stage_seconds["features"] - stage_seconds["matching"]
+    except InterruptedError as error:  # pycolmap's answer to a cancelled token
+        if not token.is_cancelled:
+            raise
+        raise ColmapStopped("structure-from-motion was stopped") from error
     finally:
         pycolmap.logging.minloglevel = previous_level
     return ColmapRun(list(models.values()), matching, sfm_sizes, long_side, time.perf_counter() - started, stage_seconds)

@@ -8,23 +8,33 @@ otherwise left a core idle). The job then takes the photos from here instead of 
 and the registration stage reads COLMAP's run instead of starting one
 (`pipeline.scene_stages.registration`). The run is the one the job would make itself (the same
 pixels, curve and options), so the cameras are the same. A command that fails or is interrupted
-meanwhile closes it (`close`): COLMAP stops at its next stage and its work folder goes.
+meanwhile closes it (`close`): COLMAP stops within its stage and its work folder goes.
 
 This module imports no torch: numpy, OpenCV, OpenImageIO, rawpy and pycolmap only.
 """
 
 from __future__ import annotations
 
+import logging
+import tempfile
 import threading
 from collections.abc import Sequence
 from concurrent.futures import Future
 from pathlib import Path
 
+import pycolmap
+
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.eval.tone_curve import auto_gamma_array
-from lumos3d_cli.geometry.colmap_run import ColmapRun, matching_threads, run_colmap
+from lumos3d_cli.geometry.colmap_run import ColmapRun, ColmapStopped, matching_threads, run_colmap
 from lumos3d_cli.io.images import LoadedPhotos, load_photos
 from lumos3d_cli.pipeline.presets import RestorePreset
+
+logger = logging.getLogger(__name__)
+
+# How long `close` waits for the thread: a stop lands within COLMAP's stage or after the photo being
+# decoded; past this (a photo on a stalled drive) the command ends without it.
+CLOSE_WAIT_SECONDS = 10.0
 
 
 class EarlyRegistration:
@@ -38,19 +48,27 @@ class EarlyRegistration:
         self.long_side = long_side
         self._photos: Future = Future()
         self._run: Future = Future()
-        self._stop = threading.Event()
+        self._stop = pycolmap.CancellationToken()
         self._thread = threading.Thread(target=self._work, name="lumos3d-early-sfm", daemon=True)
         self._thread.start()
 
     def close(self) -> None:
-        """Stop COLMAP at its next stage (a finished run is kept) and wait for the thread, so that
-        no work folder outlives the command."""
-        self._stop.set()
-        self._thread.join()
+        """Stop what is left (COLMAP within its stage, the reading after the photo it is on; a
+        finished run is kept) and wait for the thread, so that no work folder outlives the
+        command (at most CLOSE_WAIT_SECONDS)."""
+        self._stop.cancel()
+        self._thread.join(CLOSE_WAIT_SECONDS)
+        if self._thread.is_alive():
+            logger.warning("structure-from-motion did not stop within %.0f s; its work folder may stay in %s",
+                           CLOSE_WAIT_SECONDS, tempfile.gettempdir())
+
+    def _check_stop(self, _path: Path) -> None:
+        if self._stop.is_cancelled:
+            raise ColmapStopped("structure-from-motion was stopped")
 
     def _work(self) -> None:
         try:
-            photos = load_photos(self.paths)
+            photos = load_photos(self.paths, progress=self._check_stop)
         except BaseException as error:  # noqa: BLE001 - handed to the thread that waits for it
             self._photos.set_exception(error)
             self._run.set_exception(error)

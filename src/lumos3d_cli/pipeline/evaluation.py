@@ -96,7 +96,8 @@ def evaluate_lom(
     rows = _rows(results, methods)
     document = {
         "root": str(root), "mode": mode, "protocol": protocol, "preset": settings.name, "geometry": geometry,
-        "refine_steps": settings.refine_steps, "max_gaussians": settings.max_gaussians,
+        "refine_steps": settings.refine_steps, "refine_each_view": settings.refine_each_view,
+        "max_gaussians": settings.max_gaussians,
         "gaussian_grid": settings.gaussian_grid, "exposure_prior": prior_strength(mode, settings.exposure_prior),
         "exposure_key": settings.exposure_key,
         "fill_unobserved": settings.fill_unobserved, "densify": settings.densify is not None,

@@ -49,8 +49,9 @@ class RestorePreset:
     sh_degree: int | None  # None: the model's full degree
     voxel_scale: float  # multiple of the pixel footprint a voxel may span (model.pixel_footprint)
     refine_steps: int = 0  # test-time refinement steps (0: the forward pass as it is)
-    # at least one step per fitted view (a scene of more views than `refine_steps` takes more steps),
-    # so that no view keeps the fusion's errors unfitted; `--refine-steps N` asks for exactly N
+    # at least one step per fitted view, up to twice `refine_steps` (a scene of more views than
+    # `refine_steps` takes more steps, so that no view keeps the fusion's errors unfitted; the cap
+    # bounds the time of a scene of hundreds of photos); `--refine-steps N` asks for exactly N
     refine_each_view: bool = False
     max_gaussians: int | None = None  # cap on the scene's Gaussians (None: all that the views show)
     gaussian_grid: float = 1.0  # pixel Gaussians per network pixel along each side (pipeline.gaussian_grid)
@@ -77,6 +78,12 @@ class RestorePreset:
         if self.exposure_key not in EXPOSURE_KEYS:
             raise ValueError(f"exposure_key {self.exposure_key!r}: use one of {', '.join(EXPOSURE_KEYS)}")
 
+    def refinement_steps(self, fitted_views: int) -> int:
+        """The refinement steps for a scene of `fitted_views` fitted views (`refine_each_view`)."""
+        if not self.refine_each_view:
+            return self.refine_steps
+        return min(max(self.refine_steps, fitted_views), 2 * self.refine_steps)
+
     def network_image_size(self, model_image_size: int, patch_size: int) -> int:
         """The longer network side: a patch multiple, at least one patch."""
         return max(patch_size, round(model_image_size * self.resolution / patch_size) * patch_size)
@@ -94,7 +101,7 @@ class RestorePreset:
 # 0.770 against 20.59 / 0.641 / 0.772 at 512 px, every view registered, and each evaluation about
 # 4 s shorter; the cameras' median rotation error against the scenes' reference rises from about
 # 0.25 to 0.35 degrees (buu and shrub), which `best` keeps at 512 px.
-# Every fitted view gets at least one step (`refine_each_view`): with 25 steps, one view each, 5 of
+# Every fitted view gets at least one step, up to 50 (`refine_each_view`): with 25 steps, one view each, 5 of
 # shrub's 30 fitted views (10 of 35 in the context protocol) stayed as the fusion made them; with
 # one step per view all four of shrub's rows rose by 0.03-0.05 dB and 0.012-0.024 SSIM (the mean of
 # the four 20.61 / 0.642 / 0.77 -> 20.63 / 0.649 / 0.78), buu's 22-25 views need no more steps.

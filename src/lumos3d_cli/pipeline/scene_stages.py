@@ -222,7 +222,7 @@ def budget(job: SceneJob) -> SceneJob:
 def refinement(job: SceneJob) -> SceneJob:
     """The preset's steps of test-time refinement against the model's own restoration of the
     fitted views (`pipeline.scene_refinement`), at least one per fitted view where the preset asks
-    (`refine_each_view`: one view a step, so each is fitted once), densified on the preset's
+    (`RestorePreset.refinement_steps`: one view a step, so each is fitted once), densified on the preset's
     schedule within its Gaussian cap; skipped at 0 steps."""
     if job.preset.refine_steps <= 0:
         return job
@@ -235,9 +235,8 @@ def refinement(job: SceneJob) -> SceneJob:
     densify = job.preset.densify
     if densify is not None:  # the preset's cap holds for the Gaussians densification adds
         densify = replace(densify, max_gaussians=job.preset.max_gaussians)
-    steps = max(job.preset.refine_steps, len(cameras)) if job.preset.refine_each_view else job.preset.refine_steps
-    result = refine_scene(job.gaussians, targets, cameras, steps, job.progress, job.preset.refine_side,
-                          job.preset.refine_lr_decay, densify)
+    result = refine_scene(job.gaussians, targets, cameras, job.preset.refinement_steps(len(cameras)), job.progress,
+                          job.preset.refine_side, job.preset.refine_lr_decay, densify)
     job.gaussians, job.refinement = result.gaussians, result.summary()
     return job
 
