@@ -60,7 +60,6 @@ def auto_gamma(images: torch.Tensor, target_mean: float = 0.45) -> torch.Tensor:
     """The blind no-learning baseline: per image, x^g with g = log(target) / log(mean(x)), so the
     mean of the sRGB values goes to about `target`. images [..., 3, H, W] in [0, 1]
     (`eval.tone_curve.auto_gamma_array`, on the CPU)."""
-    _flatten(images)  # the shape check
     values = images.detach().cpu()
     if values.dtype not in (torch.float16, torch.float32, torch.float64):  # bfloat16 has no numpy dtype
         values = values.float()

@@ -20,8 +20,9 @@ def auto_gamma_array(images: np.ndarray, target_mean: float = 0.45) -> np.ndarra
     flat = images.reshape(-1, *images.shape[-3:])
     corrected = np.empty(flat.shape, dtype=images.dtype)
     for index, image in enumerate(flat):
-        values = np.maximum(image.astype(np.float64), 0.0)
-        mean = min(max(float(image.astype(np.float64).mean()), 1e-6), 1 - 1e-6)
+        wide = image.astype(np.float64)
+        mean = min(max(float(wide.mean()), 1e-6), 1 - 1e-6)
+        values = np.maximum(wide, 0.0)
         gamma = math.log(target_mean) / math.log(mean)
         corrected[index] = np.clip(cv2.pow(values.reshape(-1, 1), gamma), 0, 1).reshape(image.shape)
     return corrected.reshape(images.shape)
