@@ -43,6 +43,11 @@ def test_sfm_registers_the_photos_and_writes_a_colmap_model_with_points(run_cli,
     assert geometry["source"] == "sfm" and geometry["registered_views"] == 5 and geometry["sparse_points"] > 50
     assert geometry["reprojection_error_px"] < 2 and geometry["brightening"].startswith("auto-gamma")
     assert 0 <= geometry["depth_consistency"] <= 1 and geometry["depth_alignment"]["views"] == 3
+    # best sweeps the registered depth against the neighbouring photos, fast does not
+    sweep = geometry["depth_sweep"]
+    assert (sweep is not None) == (preset == "best")
+    if sweep is not None:
+        assert 0 <= sweep["changed_pixels"] <= 1 and sweep["hypotheses"] % 2 == 1
     assert set(summary["seconds"]) >= {"sfm", "network", "fuse", "render"}
     # every photo is restored although the network saw three of them
     assert summary["views"] == FRAMES and len(summary["network_views"]) == 3
@@ -113,3 +118,35 @@ def test_photos_sfm_cannot_place(run_cli, buu, shared_data, tmp_path, random_che
                      "--refine-steps", 0, "--json")
     assert result.code == 0, result.err
     assert json.loads(result.out)["geometry"]["source"] == "network" and "Traceback" not in result.err
+
+
+def test_the_depth_sweep_never_compares_with_held_out_views(buu, monkeypatch):
+    """Evaluation's holdout leaves the test frames out of the scene: the depth sweep gets the
+    other views' photos as neighbours only, the restored photos of the network's views, and its
+    depth is what the scene is fused from."""
+    from lumos3d_cli.io.images import load_images
+    from lumos3d_cli.model.lumos3d import build_model
+    from lumos3d_cli.pipeline import scene_geometry
+    from lumos3d_cli.pipeline.presets import get_restore_preset
+    from lumos3d_cli.pipeline.scene_stages import build_scene
+
+    seen = {}
+    real_sweep = scene_geometry.sweep_depth
+
+    def recording_sweep(depth, cameras, images, settings, neighbour_views):
+        seen.update(views=list(neighbour_views), images=images.clone())
+        result = real_sweep(depth, cameras, images, settings, neighbour_views)
+        seen["depth"] = result.depth
+        return result
+
+    monkeypatch.setattr(scene_geometry, "sweep_depth", recording_sweep)
+    photos = load_images([buu / "low" / name for name in FRAMES]).images
+    model = build_model("tiny-operator", seed=0).eval()
+    fused = [True, True, False, True, True]
+    job = build_scene(photos, FRAMES, model, get_restore_preset("best", refine_steps=0), geometry="sfm",
+                      required_views=[2], fuse_views=fused)
+    assert job.geometry.source == "sfm" and job.selected == [0, 1, 2, 3, 4]
+    assert seen["views"] == fused
+    assert torch.equal(seen["images"], job.restored_photos[job.selected])
+    assert torch.equal(seen["depth"], job.geometry.depth)
+    assert job.geometry.report["depth_sweep"]["neighbours"] == 4

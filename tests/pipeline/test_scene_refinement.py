@@ -12,7 +12,7 @@ from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.images import load_images
 from lumos3d_cli.model.lumos3d import build_model
 from lumos3d_cli.pipeline.network_pass import run_network
-from lumos3d_cli.pipeline.presets import REFINE_LR_DECAY, RESTORE_PRESETS, get_restore_preset
+from lumos3d_cli.pipeline.presets import DEPTH_SWEEP, REFINE_LR_DECAY, RESTORE_PRESETS, get_restore_preset
 from lumos3d_cli.pipeline.scene_refinement import network_colours, refinement_targets
 from lumos3d_cli.pipeline.scene_stages import build_scene, refinement
 
@@ -82,6 +82,8 @@ def test_presets_refine_more_as_they_slow_down_and_the_option_overrides():
     assert get_restore_preset("best", 0).refine_steps == 0 and get_restore_preset("fast", 7).refine_steps == 7
     assert get_restore_preset("fast", densify=True).densify is not None
     assert get_restore_preset("best", densify=False).densify is None
+    assert get_restore_preset("fast", depth_sweep=True).depth_sweep == DEPTH_SWEEP
+    assert get_restore_preset("balanced", depth_sweep=False).depth_sweep is None
 
 
 def test_balanced_fits_every_view_at_least_once_unless_told_the_steps(buu):

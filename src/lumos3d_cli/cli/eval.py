@@ -73,6 +73,7 @@ def eval_command(
     exposure_key: str | None = preset_options.EXPOSURE_KEY,
     fill_unobserved: bool = preset_options.FILL_UNOBSERVED,
     densify: bool | None = preset_options.DENSIFY,
+    depth_sweep: bool | None = preset_options.DEPTH_SWEEP,
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     out: Path = typer.Option(Path("report"), "--out", help="Report folder (metrics.json, metrics.csv, contact sheets)."),
     baseline: str = typer.Option("gamma", "--baseline", help="gamma (blind auto-gamma row) or none."),
@@ -94,7 +95,7 @@ def eval_command(
         report = evaluate_lom(
             root, names, mode=mode, protocol=protocol, checkpoint=checkpoint, preset=preset, geometry=geometry,
             max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, gaussian_grid=gaussian_grid,
-            exposure_prior=exposure_prior, exposure_key=exposure_key, fill_unobserved=fill_unobserved, densify=densify, device=device, baseline=baseline, lpips_weights=lpips_weights,
+            exposure_prior=exposure_prior, exposure_key=exposure_key, fill_unobserved=fill_unobserved, densify=densify, depth_sweep=depth_sweep, device=device, baseline=baseline, lpips_weights=lpips_weights,
             on_scene=lambda _: bars.advance(task),
         )
         write_eval_report(report, out, inputs)

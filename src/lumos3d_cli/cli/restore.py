@@ -48,6 +48,7 @@ def restore_command(
     exposure_key: str | None = preset_options.EXPOSURE_KEY,
     fill_unobserved: bool = preset_options.FILL_UNOBSERVED,
     densify: bool | None = preset_options.DENSIFY,
+    depth_sweep: bool | None = preset_options.DEPTH_SWEEP,
     denoise: bool = preset_options.DENOISE_PHOTO,
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
     reference: Path | None = typer.Option(None, "--reference", help="Normal-light photos of the same views (metrics)."),
@@ -92,6 +93,7 @@ def restore_command(
                 photos, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,
                 max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, gaussian_grid=gaussian_grid,
                 exposure_prior=exposure_prior, exposure_key=exposure_key, fill_unobserved=fill_unobserved, densify=densify,
+                depth_sweep=depth_sweep,
                 denoise_photo=denoise, device=device, reference=reference, lpips_weights=lpips_weights,
                 progress=ProgressBars(bars), early_registration=early,
             )

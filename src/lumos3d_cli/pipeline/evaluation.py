@@ -64,7 +64,7 @@ def evaluate_lom(
     max_views: int | None = None, device: str = "cpu", baseline: str = "gamma", lpips_weights: Path | str | None = None,
     on_scene: Callable[[str], None] | None = None, refine_steps: int | None = None, max_gaussians: int | None = None,
     gaussian_grid: float | None = None, exposure_prior: float | None = None, fill_unobserved: bool | None = None,
-    densify: bool | None = None, exposure_key: str | None = None,
+    densify: bool | None = None, exposure_key: str | None = None, depth_sweep: bool | None = None,
 ) -> EvalReport:
     """Evaluate restoration on the LOM-layout scenes under `root` (all, or those named) with the
     paper's protocol; `on_scene(name)` is called after each scene. `refine_steps` overrides the
@@ -72,7 +72,8 @@ def evaluate_lom(
     `max_gaussians` its Gaussian cap, `gaussian_grid` its grid of pixel Gaussians,
     `exposure_prior` its exposure prior's strength, `fill_unobserved` whether the renders' uncovered
     pixels are filled, `densify` whether refinement densifies, `exposure_key` the key the exposure
-    prior pulls towards ("content" or "fixed")."""
+    prior pulls towards ("content" or "fixed"), `depth_sweep` whether the registered depth is
+    refined by the neighbouring photos."""
     if mode not in MODES:
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
     if protocol not in PROTOCOLS:
@@ -81,7 +82,7 @@ def evaluate_lom(
         raise InputError(f"{baseline!r}: use one of {', '.join(BASELINES)}", parameter="baseline")
     check_geometry_source(geometry)
     settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior, fill_unobserved,
-                                  densify=densify, exposure_key=exposure_key)
+                                  densify=densify, exposure_key=exposure_key, depth_sweep=depth_sweep)
     limit = max_views or settings.max_views
     found = find_lom_scenes(root, mode, scenes)
     weights = resolve_checkpoint(checkpoint, mode)
@@ -101,6 +102,7 @@ def evaluate_lom(
         "gaussian_grid": settings.gaussian_grid, "exposure_prior": prior_strength(mode, settings.exposure_prior),
         "exposure_key": settings.exposure_key,
         "fill_unobserved": settings.fill_unobserved, "densify": settings.densify is not None,
+        "depth_sweep": settings.depth_sweep is not None,
         "max_views": limit, "checkpoint": {"name": weights.name, "sha256": file_sha256(weights)},
         "lpips": meter.lpips_note, "rows": rows,
         "frames": {r.scene: {"test": r.test_frames, "views_used": r.views_used, "lumos3d": r.ours, "gamma": r.baseline}

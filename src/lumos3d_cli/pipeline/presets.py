@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.colmap_run import SFM_LONG_SIDE
+from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, EXPOSURE_KEYS
 from lumos3d_cli.refine.settings import DensifySettings, RefineSettings
 
@@ -37,6 +38,8 @@ REFINE_LR_DECAY = 0.1 ** 0.5  # per 100 steps
 # novel views (23.51 dB there against 23.70), so 80. At 25 steps (`balanced`), densifying every 8
 # steps lost 0.17 dB and 0.008 SSIM for sharpness 0.77 -> 0.79: the new Gaussians need steps to settle.
 DENSIFY = DensifySettings()
+
+DEPTH_SWEEP = DepthSweepSettings()
 
 SFM_BRIGHTENINGS = ("restoration", "tone curve")  # RestorePreset.sfm_brightening
 
@@ -71,6 +74,8 @@ class RestorePreset:
     # what structure-from-motion sees: "restoration" (the model's operator: the network runs
     # first) or "tone curve" (the blind curve: structure-from-motion runs beside the network)
     sfm_brightening: str = "restoration"
+    # the registered depth refined where neighbouring photos agree (geometry.photo_consistency; None: as aligned)
+    depth_sweep: DepthSweepSettings | None = None
 
     def __post_init__(self) -> None:
         if self.sfm_brightening not in SFM_BRIGHTENINGS:
@@ -106,7 +111,7 @@ class RestorePreset:
 # one step per view all four of shrub's rows rose by 0.03-0.05 dB and 0.012-0.024 SSIM (the mean of
 # the four 20.61 / 0.642 / 0.77 -> 20.63 / 0.649 / 0.78), buu's 22-25 views need no more steps.
 _BALANCED = RestorePreset("balanced", max_views=32, resolution=1.0, sh_degree=None, voxel_scale=1.0, refine_steps=25,
-                          refine_each_view=True, refine_side=512, sfm_long_side=384)
+                          refine_each_view=True, refine_side=512, sfm_long_side=384, depth_sweep=DEPTH_SWEEP)
 
 RESTORE_PRESETS = {
     # fast: a smaller network image without view-dependent colour, 15 refinement steps against
@@ -140,13 +145,14 @@ RESTORE_PRESETS = {
 def get_restore_preset(
     name: str, refine_steps: int | None = None, max_gaussians: int | None = None, gaussian_grid: float | None = None,
     exposure_prior: float | None = None, fill_unobserved: bool | None = None, denoise_photo: bool | None = None,
-    densify: bool | None = None, exposure_key: str | None = None,
+    densify: bool | None = None, exposure_key: str | None = None, depth_sweep: bool | None = None,
 ) -> RestorePreset:
     """The preset `name`, with its refinement steps, Gaussian cap, Gaussian grid, exposure prior,
     hole filling and one-photo denoising replaced by `refine_steps`, `max_gaussians`,
     `gaussian_grid`, `exposure_prior`, `fill_unobserved` and `denoise_photo` when given;
     `densify` True refines with `DENSIFY`'s schedule (or the preset's own), False without;
-    `exposure_key` the key the exposure prior pulls towards (EXPOSURE_KEYS)."""
+    `exposure_key` the key the exposure prior pulls towards (EXPOSURE_KEYS); `depth_sweep` True
+    refines the registered depth with `DEPTH_SWEEP` (or the preset's own settings), False not."""
     try:
         preset = RESTORE_PRESETS[name]
     except KeyError:
@@ -177,4 +183,6 @@ def get_restore_preset(
         preset = replace(preset, denoise_photo=denoise_photo)
     if densify is not None:
         preset = replace(preset, densify=(preset.densify or DENSIFY) if densify else None)
+    if depth_sweep is not None:
+        preset = replace(preset, depth_sweep=(preset.depth_sweep or DEPTH_SWEEP) if depth_sweep else None)
     return preset

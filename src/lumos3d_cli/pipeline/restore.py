@@ -201,6 +201,7 @@ def restore(
     max_gaussians: int | None = None, gaussian_grid: float | None = None, exposure_prior: float | None = None,
     fill_unobserved: bool | None = None, denoise_photo: bool | None = None, densify: bool | None = None,
     exposure_key: str | None = None, early_registration: EarlyRegistration | None = None,
+    depth_sweep: bool | None = None,
 ) -> RestoredScene:
     """The whole restore job from files: photos (a folder or files: photos, camera RAW, EXR),
     the bundled model of `mode` or `checkpoint`, and optionally reference photos of the same
@@ -212,7 +213,8 @@ def restore(
     `fill_unobserved` whether pixels no Gaussian covers are filled (`render.hole_filling`),
     `denoise_photo` whether a one-photo restore's amplified noise is removed
     (`model.appearance.amplified_noise`), `densify` whether refinement densifies
-    (`refine.densification`). `early_registration`: the photos read and structure-from-motion
+    (`refine.densification`), `depth_sweep` whether the registered depth is refined by the
+neighbouring photos (`geometry.photo_consistency`). `early_registration`: the photos read and structure-from-motion
     started before torch was imported (`pipeline.early_registration`, as `lumos3d restore` does;
     the caller closes it).
     Write the result with `write_restored_scene`."""
@@ -223,7 +225,7 @@ def restore(
     if max_views is not None and max_views < 1:
         raise InputError(f"{max_views}: use at least 1", parameter="max_views")
     settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior, fill_unobserved,
-                                  denoise_photo, densify, exposure_key)
+                                  denoise_photo, densify, exposure_key, depth_sweep)
     check_geometry_source(geometry)
     weights = resolve_checkpoint(checkpoint, mode)
     meter = QualityMeter.create(lpips_weights) if reference is not None else None

@@ -32,6 +32,8 @@ from lumos3d_cli.geometry.depth_alignment import MIN_POINTS, align_depth
 from lumos3d_cli.geometry.depth_correction import GRID as DEPTH_CORRECTION_GRID
 from lumos3d_cli.geometry.depth_correction import correct_depth
 from lumos3d_cli.geometry.given_poses import read_given_poses
+from lumos3d_cli.geometry.photo_consistency import sweep_depth
+from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
 from lumos3d_cli.geometry.colmap_run import SFM_LONG_SIDE, ColmapRun, matching_threads
 from lumos3d_cli.geometry.sfm import Registration, register_photos
 from lumos3d_cli.geometry.similarity import (
@@ -265,10 +267,18 @@ def _aligned_depth(
     return depth * similarity.scale, {"form": "camera similarity scale", "scale": similarity.scale, "views": len(selected)}
 
 
-def place_views(registration: ViewRegistration, network: NetworkPass, selected: list[int], names: list[str]) -> SceneGeometry:
+def place_views(
+    registration: ViewRegistration, network: NetworkPass, selected: list[int], names: list[str],
+    images: torch.Tensor | None = None, sweep: DepthSweepSettings | None = None,
+    fused: Sequence[bool] | None = None,
+) -> SceneGeometry:
     """Combine the registration with the network pass over the `selected` views (indices into
     `names`): every view gets a camera in one frame, and the network's depth of the selected views
-    is aligned to the sparse points."""
+    is aligned to the sparse points. With `sweep` and `images` [S, 3, H, W] (the selected views'
+    photos, restored or not: the sweep's score ignores gain and offset), registered depth is then
+    refined where the neighbouring photos agree (`geometry.photo_consistency`), comparing each
+    view only with the views `fused` [S] marks (None: all; evaluation's held-out views are never
+    compared with). Network geometry keeps the network's depth."""
     selected_names = [names[i] for i in selected]
     if registration.source == "network":
         return _network_geometry(registration, network, selected, selected_names)
@@ -303,6 +313,10 @@ def place_views(registration: ViewRegistration, network: NetworkPass, selected: 
     network_cameras = _to_network(network, selected_cameras)
     points = _points_in_frame(registration)
     depth, alignment_report = _aligned_depth(network, selected, network_cameras, points, selected_names, selected_cameras)
+    sweep_report = None
+    if sweep is not None and images is not None and len(selected) > 1:
+        swept = sweep_depth(depth, network_cameras, images, sweep, fused)
+        depth, sweep_report = swept.depth, swept.summary(sweep)
     # float32 is ample for a 2 % test (the figure is reported, not used)
     consistency = depth_consistency(depth.float(), network_cameras.to(torch.float32)) if len(selected) > 1 else None
     fuse_pixels = confirmed_pixels(depth, network_cameras)
@@ -318,6 +332,7 @@ def place_views(registration: ViewRegistration, network: NetworkPass, selected: 
         "matching": sfm.matching if sfm is not None else None,
         "sfm_size": list(sfm.sfm_size) if sfm is not None else None,
         "depth_alignment": alignment_report,
+        "depth_sweep": sweep_report,
         "depth_consistency": round(consistency.share, 4) if consistency is not None else None,
         "pixels_kept": round(float(fuse_pixels.float().mean()), 4),
     }

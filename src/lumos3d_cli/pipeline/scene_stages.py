@@ -174,16 +174,19 @@ def photo_restoration_of_views(job: SceneJob) -> SceneJob:
 
 
 def fusion(job: SceneJob) -> SceneJob:
-    """Every view placed in one frame (`place_views`), the pixel Gaussians on the preset's grid
+    """Every view placed in one frame (`place_views`; the preset's depth sweep compares the
+    operator's restoration of the photos, or the photos themselves for a model without one), the pixel Gaussians on the preset's grid
     with the operator's colours from the full-resolution photos, fused into voxels that follow
     each point's pixel footprint, and the network grid baked into their size (sampling filter).
     The Gaussians stay on the model's device."""
     preset = job.preset
-    job.geometry = place_views(job.registration, job.network, job.selected, job.names)
+    restored = None if job.restored_photos is None else job.restored_photos[job.selected]
+    fused = None if job.fuse_views is None else [job.fuse_views[i] for i in job.selected]
+    job.geometry = place_views(job.registration, job.network, job.selected, job.names,
+                               restored if restored is not None else job.photos[job.selected], preset.depth_sweep, fused)
     job.grid_size = dense_grid_size(job.network.network_size, (job.photos.shape[-1], job.photos.shape[-2]),
                                     preset.gaussian_grid)
     prediction, grid_geometry = densify_grid(job.network.prediction, job.geometry, job.grid_size)
-    restored = None if job.restored_photos is None else job.restored_photos[job.selected]
     prediction = with_full_resolution_colours(prediction, restored, job.model)
     keep = None if job.fuse_views is None else torch.tensor([bool(job.fuse_views[i]) for i in job.selected])
     if keep is not None and not bool(keep.any()):

@@ -1,0 +1,174 @@
+"""Depth that the neighbouring photos agree on: a plane sweep scored by normalised cross-correlation.
+
+The network's depth, aligned to the sparse points (`geometry.depth_alignment`, a smooth
+correction on top), is right at the points and smooth between them; on fine structure (foliage,
+a chart propped on a shrub) it is off by a few per cent, and each view's Gaussians then land
+beside their neighbours' copies of the same surface: the fused scene blurs and ghosts. Multi-view
+stereo fixes that where the photos have texture (as COLMAP's PatchMatch and MVSNet's cost volume
+score depth hypotheses by photo-consistency; COLMAP's runs only on CUDA):
+
+for every pixel of a view, depths d (1 + f) for `hypotheses` factors f evenly in [-span, span]
+are each projected into the view's nearest fused neighbours, the neighbour's photo is sampled
+there, and the hypothesis is scored by the NCC of a (2 radius + 1)² window around the pixel
+(invariant to each photo's gain and offset, so over- and under-exposed photos compare alike).
+Each hypothesis keeps the mean of its `best` neighbours' scores (a neighbour whose photo does
+not hold the whole window drops out; an occluded one scores low and is not among the best). The best hypothesis, refined by a parabola
+through its neighbours, replaces the depth where its score is at least `min_score`, above the
+score of the depth as it was (which a neighbour must see), and inside the swept range; elsewhere (no texture, clipped or black
+photos, noise the neighbours do not share) the depth stays as it was.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import torch
+import torch.nn.functional as F
+
+from lumos3d_cli.checks import require_finite
+from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
+from lumos3d_cli.io.cameras import Cameras
+
+# Variance floor of a window (grey levels in [0, 1], squared): a flat window scores 0 against anything.
+_VARIANCE_FLOOR = 1e-6
+
+
+@dataclass
+class DepthSweep:
+    """depth [V, h, w] (the input's dtype); changed [V, h, w] bool: the pixels whose depth the
+    sweep replaced; share: their fraction over the views that had neighbours; seconds."""
+
+    depth: torch.Tensor
+    changed: torch.Tensor
+    share: float
+    seconds: float
+
+    def summary(self, settings: DepthSweepSettings) -> dict:
+        return {"changed_pixels": round(self.share, 4), "seconds": round(self.seconds, 3),
+                "neighbours": settings.neighbours, "span": settings.span, "hypotheses": settings.hypotheses,
+                "window_px": 2 * settings.radius + 1, "min_score": settings.min_score}
+
+
+def box_mean(values: torch.Tensor, radius: int) -> torch.Tensor:
+    """[..., h, w] -> the mean over each (2 radius + 1)² window, the border replicated: two
+    running sums (one per axis), so the cost does not grow with the window."""
+    size = 2 * radius + 1
+    rows = F.pad(values, (radius + 1, radius, 0, 0), mode="replicate").cumsum(-1)
+    values = rows[..., size:] - rows[..., :-size]
+    columns = F.pad(values, (0, 0, radius + 1, radius), mode="replicate").cumsum(-2)
+    return (columns[..., size:, :] - columns[..., :-size, :]) / (size * size)
+
+
+def _neighbours(cameras: Cameras, count: int, allowed: torch.Tensor) -> list[list[int]]:
+    """For each view, up to `count` nearest other cameras (by centre) among the `allowed` ones."""
+    centres = cameras.centers().double()
+    distances = torch.cdist(centres, centres)
+    distances[:, ~allowed] = float("inf")
+    distances.fill_diagonal_(float("inf"))
+    order = distances.argsort(dim=1)
+    return [[int(o) for o in order[view] if torch.isfinite(distances[view, o])][:count] for view in range(len(cameras))]
+
+
+def _scores(grey: torch.Tensor, mean: torch.Tensor, deviation: torch.Tensor, cameras: Cameras, view: int,
+            others: list[int], points: torch.Tensor, factors: torch.Tensor, radius: int) -> torch.Tensor:
+    """[N, J, h, w] NCC of `view`'s windows with each neighbour's photo sampled at the J depth
+    hypotheses; -inf where a hypothesis takes part of the window out of a neighbour's photo or
+    behind it. points
+    [h, w, 3]: the view's pixels in its camera frame at the current depth (a hypothesis scales them)."""
+    height, width = grey.shape[-2:]
+    rotation, translation = cameras.extrinsics[view, :, :3], cameras.extrinsics[view, :, 3]
+    scores = []
+    for other in others:
+        other_rotation, other_translation = cameras.extrinsics[other, :, :3], cameras.extrinsics[other, :, 3]
+        relative = other_rotation @ rotation.T  # view's camera frame -> other's
+        offset = other_translation - relative @ translation
+        # a depth factor scales the point in the view's frame, so it scales its rotated copy too
+        local = (1 + factors)[:, None, None, None] * (points @ relative.T)[None] + offset  # [J, h, w, 3]
+        intrinsics = cameras.intrinsics[other]
+        z = local[..., 2]
+        safe = z.clamp_min(1e-12)
+        gx = (intrinsics[0, 0] * local[..., 0] / safe + intrinsics[0, 2]) * (2 / width) - 1
+        gy = (intrinsics[1, 1] * local[..., 1] / safe + intrinsics[1, 2]) * (2 / height) - 1
+        visible = (z > 0) & (gx.abs() < 1) & (gy.abs() < 1)
+        sampled = F.grid_sample(grey[other][None].expand(len(factors), -1, -1, -1), torch.stack([gx, gy], dim=-1),
+                                mode="bilinear", align_corners=False, padding_mode="border")  # [J, 1, h, w]
+        moments = box_mean(torch.cat([sampled, sampled * sampled, sampled * grey[view][None],
+                                      visible[:, None].to(sampled.dtype)], dim=1), radius)
+        sampled_mean = moments[:, 0]
+        sampled_deviation = (moments[:, 1] - sampled_mean.square()).clamp_min(_VARIANCE_FLOOR).sqrt()
+        ncc = (moments[:, 2] - sampled_mean * mean[view]) / (sampled_deviation * deviation[view])
+        # the whole window must land inside the neighbour's photo: a window that runs off its edge
+        # compares the clamped border, and a wrong depth that keeps it inside would win there
+        whole = moments[:, 3] > 1 - 1e-3
+        scores.append(torch.where(whole, ncc, torch.full_like(ncc, -torch.inf)))
+    return torch.stack(scores)
+
+
+def sweep_depth(
+    depth: torch.Tensor, cameras: Cameras, images: torch.Tensor, settings: DepthSweepSettings | None = None,
+    neighbour_views: Sequence[bool] | None = None,
+) -> DepthSweep:
+    """depth [V, h, w] (positive, one frame), cameras [V] with intrinsics in pixels of the depth
+    maps, images [V, 3, H, W] in [0, 1] (any size: area-resized to the depth maps) -> DepthSweep
+    (module docstring). neighbour_views [V] bool: the views that may serve as neighbours (None:
+    all; evaluation's held-out views must not). A view with no allowed neighbour keeps its depth.
+    Runs in float32 on the depth's device."""
+    settings = settings or DepthSweepSettings()
+    started = time.perf_counter()
+    views, height, width = depth.shape
+    if images.dim() != 4 or images.shape[:2] != (views, 3) or len(cameras) != views:
+        raise ValueError(f"images {tuple(images.shape)} and {len(cameras)} cameras must match depth {tuple(depth.shape)}")
+    require_finite("depth", depth)
+    require_finite("images", images)
+    if not bool((depth > 0).all()):
+        raise ValueError("the depth sweep needs positive depth everywhere")
+    device = depth.device
+    allowed = (torch.ones(views, dtype=torch.bool) if neighbour_views is None
+               else torch.tensor([bool(v) for v in neighbour_views], dtype=torch.bool))
+    cameras = cameras.to(device=device, dtype=torch.float32)
+    working = depth.float()
+    grey = F.interpolate(images.to(device).float(), size=(height, width), mode="area").mean(1, keepdim=True)
+    grey = grey - 0.5  # centred: the window sums lose less to float32 rounding
+    mean = box_mean(grey, settings.radius)
+    deviation = (box_mean(grey * grey, settings.radius) - mean.square()).clamp_min(_VARIANCE_FLOOR).sqrt()
+    factors = torch.linspace(-settings.span, settings.span, settings.hypotheses, device=device)
+    step = float(factors[1] - factors[0])
+    middle = settings.hypotheses // 2
+    ys, xs = torch.meshgrid(torch.arange(height, device=device) + 0.5, torch.arange(width, device=device) + 0.5,
+                            indexing="ij")
+    refined = depth.clone()
+    changed = torch.zeros(depth.shape, dtype=torch.bool, device=device)
+    neighbours = _neighbours(cameras, settings.neighbours, allowed)
+    for view, others in enumerate(neighbours):
+        if not others:
+            continue
+        intrinsics = cameras.intrinsics[view]
+        rays = torch.stack([(xs - intrinsics[0, 2]) / intrinsics[0, 0], (ys - intrinsics[1, 2]) / intrinsics[1, 1],
+                            torch.ones_like(xs)], dim=-1)
+        scores = _scores(grey[:, 0], mean[:, 0], deviation[:, 0], cameras, view, others, rays * working[view][..., None],
+                         factors, settings.radius)
+        # the mean of the best neighbours that see the window: a neighbour that does not is left
+        # out, not scored -1 (else a wrong depth that brings a second neighbour in would win)
+        top = scores.topk(min(settings.best, len(others)), dim=0).values
+        seen = torch.isfinite(top)
+        score = torch.where(seen, top, torch.zeros_like(top)).sum(0) / seen.sum(0).clamp_min(1)
+        score = torch.where(seen.any(0), score, torch.full_like(score, -1.0))  # [J, h, w]
+        best_score, best = score.max(0)
+        inner = best.clamp(1, settings.hypotheses - 2)
+        below, at, above = (score.gather(0, (inner + shift)[None])[0] for shift in (-1, 0, 1))
+        curvature = below - 2 * at + above
+        # the parabola's vertex, within half a step of the best hypothesis
+        vertex = torch.where(curvature < -1e-6, 0.5 * (below - above) / curvature.clamp_max(-1e-6),
+                             torch.zeros_like(curvature)).clamp(-0.5, 0.5)
+        factor = factors[best] + vertex * step
+        # only where a neighbour sees the window at the current depth: at the edge of the overlap
+        # a depth that moves the window into a neighbour's photo has nothing to be compared with
+        accept = ((best_score >= settings.min_score) & (best_score > score[middle]) & seen[:, middle].any(0)
+                  & (best > 0) & (best < settings.hypotheses - 1))
+        refined[view] = torch.where(accept, depth[view] * (1 + factor.to(depth.dtype)), depth[view])
+        changed[view] = accept
+    compared = [view for view, others in enumerate(neighbours) if others]
+    share = float(changed[compared].float().mean()) if compared else 0.0
+    return DepthSweep(refined, changed, share, time.perf_counter() - started)

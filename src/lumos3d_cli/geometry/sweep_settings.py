@@ -1,0 +1,34 @@
+"""How the depth sweep (`geometry.photo_consistency`) searches: torch-free, so that the presets
+can be read before torch is imported (`pipeline.early_registration`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class DepthSweepSettings:
+    """neighbours: the nearest cameras (by centre) each view is compared with; span: the largest
+    relative depth change tried; hypotheses: depths tried per pixel (odd: the current depth is
+    one); radius: the NCC window's half size in depth-map pixels; best: the neighbours whose
+    scores are averaged per hypothesis; min_score: the NCC a new depth needs. Defaults chosen on
+    the development scenes (pipeline.presets.DEPTH_SWEEP says how)."""
+
+    neighbours: int = 4
+    span: float = 0.15
+    hypotheses: int = 31
+    radius: int = 2
+    best: int = 2
+    min_score: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.neighbours < 1 or not 1 <= self.best <= self.neighbours:
+            raise ValueError(f"neighbours={self.neighbours} must be >= 1 and best={self.best} in [1, neighbours]")
+        if not 0 < self.span < 1:
+            raise ValueError(f"span={self.span} must be in (0, 1)")
+        if self.hypotheses < 3 or self.hypotheses % 2 == 0:
+            raise ValueError(f"hypotheses={self.hypotheses} must be odd and >= 3 (the current depth is the middle one)")
+        if self.radius < 1:
+            raise ValueError(f"radius={self.radius} must be >= 1")
+        if not -1 <= self.min_score <= 1:
+            raise ValueError(f"min_score={self.min_score} must be in [-1, 1]")

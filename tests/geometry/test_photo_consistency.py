@@ -1,0 +1,133 @@
+import math
+
+import pytest
+import torch
+import torch.nn.functional as F
+
+from lumos3d_cli.errors import NonFiniteError
+from lumos3d_cli.geometry.photo_consistency import box_mean, sweep_depth
+from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
+from lumos3d_cli.model.geometry import unproject_depth
+
+from synthetic_scene import plane_cameras, plane_depth
+
+WIDTH, HEIGHT = 96, 64
+
+
+def _texture(world: torch.Tensor, seed: int = 0) -> torch.Tensor:
+    """[..., 3] world points -> [..., 3] colours in [0, 1]: a sum of sinusoids on the plane's x, y
+    (about 3-10 pixels a period at these cameras), the same wherever a camera sees the point."""
+    generator = torch.Generator().manual_seed(seed)
+    frequencies = 6 + 14 * torch.rand(12, 2, generator=generator, dtype=torch.float64)
+    phases = 2 * math.pi * torch.rand(12, generator=generator, dtype=torch.float64)
+    weights = torch.rand(12, 3, generator=generator, dtype=torch.float64)
+    waves = torch.sin(world[..., :2] @ frequencies.T + phases)  # [..., 12]
+    return (0.5 + 0.4 * (waves @ weights) / weights.sum(0)).clamp(0, 1)
+
+
+def _scene(views: int = 5):
+    cameras = plane_cameras(views, WIDTH, HEIGHT)
+    depth = plane_depth(cameras)
+    world = unproject_depth(depth, cameras.extrinsics, cameras.intrinsics)  # [V, h, w, 3]
+    images = _texture(world).permute(0, 3, 1, 2).float()
+    return cameras, depth, images
+
+
+def _biased(depth: torch.Tensor) -> torch.Tensor:
+    """A smooth error of 4-8 % (what alignment to sparse points leaves on fine structure)."""
+    ramp = torch.linspace(0.04, 0.08, depth.shape[-1], dtype=depth.dtype)
+    return depth * (1 + ramp)
+
+
+def test_box_mean_matches_average_pooling_of_the_replicated_border():
+    values = torch.rand(2, 3, 17, 23, dtype=torch.float64)
+    for radius in (1, 2, 4):
+        expected = F.avg_pool2d(F.pad(values, (radius,) * 4, mode="replicate"), 2 * radius + 1, stride=1)
+        assert torch.allclose(box_mean(values, radius), expected, atol=1e-12)
+
+
+def test_the_sweep_moves_biased_depth_onto_the_textured_plane():
+    cameras, truth, images = _scene()
+    biased = _biased(truth)
+    swept = sweep_depth(biased, cameras, images)
+    before = ((biased - truth).abs() / truth)[:, 4:-4, 4:-4]
+    after = ((swept.depth - truth).abs() / truth)[:, 4:-4, 4:-4]
+    assert swept.depth.dtype == truth.dtype and swept.depth.shape == truth.shape
+    assert float(before.median()) > 0.04
+    assert float(after.median()) < 0.005  # a step of the sweep is 1 %: the parabola lands within a fraction of it
+    assert swept.share > 0.6
+    # what did not change is exactly the input
+    assert torch.equal(swept.depth[~swept.changed], biased[~swept.changed])
+
+
+def test_depth_already_right_stays_within_a_fraction_of_a_step():
+    cameras, truth, images = _scene()
+    swept = sweep_depth(truth, cameras, images)
+    error = ((swept.depth - truth).abs() / truth)[:, 4:-4, 4:-4]  # at the border the windows run off the photos
+    assert float(error.median()) < 0.002
+    # a wrong depth wins only where a window leaves a neighbour's photo and the periodic texture repeats
+    assert float((error > 0.015).float().mean()) < 0.005
+
+
+@pytest.mark.parametrize("fill", [0.0, 1.0, 0.37])
+def test_flat_black_and_clipped_photos_change_nothing(fill):
+    cameras, truth, _ = _scene()
+    biased = _biased(truth)
+    swept = sweep_depth(biased, cameras, torch.full((5, 3, HEIGHT, WIDTH), fill))
+    assert torch.equal(swept.depth, biased) and swept.share == 0.0
+
+
+def test_noise_the_neighbours_do_not_share_changes_little():
+    cameras, truth, _ = _scene()
+    noise = torch.rand(5, 3, HEIGHT, WIDTH, generator=torch.Generator().manual_seed(1))
+    swept = sweep_depth(truth, cameras, noise)
+    assert swept.share < 0.05
+
+
+def test_held_out_views_are_never_compared_with():
+    cameras, truth, images = _scene()
+    biased = _biased(truth)
+    allowed = [True, True, False, True, True]
+    swept = sweep_depth(biased, cameras, images, neighbour_views=allowed)
+    scrambled = images.clone()
+    scrambled[2] = torch.rand(3, HEIGHT, WIDTH, generator=torch.Generator().manual_seed(2))
+    again = sweep_depth(biased, cameras, scrambled, neighbour_views=allowed)
+    others = [0, 1, 3, 4]
+    assert torch.equal(swept.depth[others], again.depth[others])
+    # a view whose only allowed neighbour is missing keeps its depth
+    alone = sweep_depth(biased, cameras, images, neighbour_views=[True, False, False, False, False])
+    assert torch.equal(alone.depth[0], biased[0])
+
+
+def test_one_view_keeps_its_depth():
+    cameras, truth, images = _scene()
+    swept = sweep_depth(truth[:1], cameras[[0]], images[:1])
+    assert torch.equal(swept.depth, truth[:1]) and swept.share == 0.0
+
+
+def test_huge_and_tiny_scenes_give_the_same_relative_depth():
+    cameras, truth, images = _scene()
+    biased = _biased(truth)
+    reference = sweep_depth(biased, cameras, images).depth / truth
+    for scale in (1e-4, 1e4):
+        scaled = cameras.to(torch.float64)
+        extrinsics = scaled.extrinsics.clone()
+        extrinsics[:, :, 3] *= scale
+        moved = type(cameras)(extrinsics, scaled.intrinsics, list(cameras.sizes), list(cameras.names))
+        result = sweep_depth(biased * scale, moved, images).depth / (truth * scale)
+        assert torch.allclose(result, reference, atol=2e-3)
+
+
+def test_bad_inputs_are_refused():
+    cameras, truth, images = _scene()
+    with pytest.raises(ValueError, match="positive"):
+        sweep_depth(truth * 0, cameras, images)
+    bad = images.clone()
+    bad[0, 0, 0, 0] = float("nan")
+    with pytest.raises(NonFiniteError, match="images"):
+        sweep_depth(truth, cameras, bad)
+    with pytest.raises(ValueError, match="must match"):
+        sweep_depth(truth, cameras, images[:3])
+    for settings in (dict(hypotheses=4), dict(span=1.5), dict(best=5, neighbours=4), dict(radius=0)):
+        with pytest.raises(ValueError):
+            DepthSweepSettings(**settings)
