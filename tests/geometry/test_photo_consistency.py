@@ -54,7 +54,7 @@ def test_the_sweep_moves_biased_depth_onto_the_textured_plane():
     after = ((swept.depth - truth).abs() / truth)[:, 4:-4, 4:-4]
     assert swept.depth.dtype == truth.dtype and swept.depth.shape == truth.shape
     assert float(before.median()) > 0.04
-    assert float(after.median()) < 0.005  # a step of the sweep is 1 %: the parabola lands within a fraction of it
+    assert float(after.median()) < 0.005  # a step of the sweep is 2 %: the parabola lands within a fraction of it
     assert swept.share > 0.6
     # what did not change is exactly the input
     assert torch.equal(swept.depth[~swept.changed], biased[~swept.changed])

@@ -82,6 +82,8 @@ def test_presets_refine_more_as_they_slow_down_and_the_option_overrides():
     assert get_restore_preset("best", 0).refine_steps == 0 and get_restore_preset("fast", 7).refine_steps == 7
     assert get_restore_preset("fast", densify=True).densify is not None
     assert get_restore_preset("best", densify=False).densify is None
+    assert all(RESTORE_PRESETS[name].depth_sweep == DEPTH_SWEEP for name in ("fast", "balanced", "best"))
+    assert get_restore_preset("fast", depth_sweep=False).depth_sweep is None
     assert get_restore_preset("fast", depth_sweep=True).depth_sweep == DEPTH_SWEEP
     assert get_restore_preset("balanced", depth_sweep=False).depth_sweep is None
 

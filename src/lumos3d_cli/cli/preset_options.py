@@ -27,7 +27,7 @@ DENSIFY = typer.Option(
     help="Split and clone the Gaussians where the views disagree with the scene during refinement (default: the preset's; best densifies).")
 DEPTH_SWEEP = typer.Option(
     None, "--depth-sweep/--no-depth-sweep",
-    help="Refine the registered depth where neighbouring photos agree (a plane sweep) before fusing (default: the preset's; balanced and best sweep).")
+    help="Refine the registered depth where neighbouring photos agree (a plane sweep) before fusing (default: the preset's; every preset sweeps).")
 FILL_UNOBSERVED = typer.Option(
     True, "--fill-unobserved/--black-unobserved",
     help="Fill the restored views' pixels that no Gaussian covers from the render around them, or leave them black.")

@@ -16,8 +16,8 @@ class DepthSweepSettings:
 
     neighbours: int = 4
     span: float = 0.15
-    hypotheses: int = 31
-    radius: int = 2
+    hypotheses: int = 15
+    radius: int = 3
     best: int = 2
     min_score: float = 0.5
 
