@@ -85,12 +85,13 @@ def _scores(grey: torch.Tensor, mean: torch.Tensor, deviation: torch.Tensor, cam
         relative = other_rotation @ rotation.T  # view's camera frame -> other's
         offset = other_translation - relative @ translation
         # a depth factor scales the point in the view's frame, so it scales its rotated copy too
-        local = (1 + factors)[:, None, None, None] * (points @ relative.T)[None] + offset  # [J, h, w, 3]
+        rotated = (points @ relative.T).unbind(-1)  # 3 x [h, w]
+        scale = (1 + factors)[:, None, None]
+        x, y, z = (scale * rotated[axis] + offset[axis] for axis in range(3))  # [J, h, w] each
         intrinsics = cameras.intrinsics[other]
-        z = local[..., 2]
         safe = z.clamp_min(1e-12)
-        gx = (intrinsics[0, 0] * local[..., 0] / safe + intrinsics[0, 2]) * (2 / width) - 1
-        gy = (intrinsics[1, 1] * local[..., 1] / safe + intrinsics[1, 2]) * (2 / height) - 1
+        gx = (intrinsics[0, 0] * x / safe + intrinsics[0, 2]) * (2 / width) - 1
+        gy = (intrinsics[1, 1] * y / safe + intrinsics[1, 2]) * (2 / height) - 1
         visible = (z > 0) & (gx.abs() < 1) & (gy.abs() < 1)
         sampled = F.grid_sample(grey[other][None].expand(len(factors), -1, -1, -1), torch.stack([gx, gy], dim=-1),
                                 mode="bilinear", align_corners=False, padding_mode="border")  # [J, 1, h, w]
@@ -104,6 +105,24 @@ def _scores(grey: torch.Tensor, mean: torch.Tensor, deviation: torch.Tensor, cam
         whole = moments[:, 3] > 1 - 1e-3
         scores.append(torch.where(whole, ncc, torch.full_like(ncc, -torch.inf)))
     return torch.stack(scores)
+
+
+def _mean_of_best(scores: torch.Tensor, count: int, middle: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """scores [N, J, h, w] (-inf: not seen) -> (the mean of the `count` highest seen scores per
+    hypothesis [J, h, w], -1 where none is seen; [h, w] whether any neighbour sees the
+    hypothesis `middle`). The highest taken one at a time: for the few neighbours here, faster
+    than a top-k across the first dimension."""
+    remaining = scores.clone()
+    total = torch.zeros(scores.shape[1:], dtype=scores.dtype, device=scores.device)
+    seen = torch.zeros(scores.shape[1:], dtype=scores.dtype, device=scores.device)
+    for _ in range(count):
+        highest, which = remaining.max(0)
+        finite = torch.isfinite(highest)
+        total += torch.where(finite, highest, torch.zeros_like(highest))
+        seen += finite
+        remaining.scatter_(0, which[None], -torch.inf)
+    mean = torch.where(seen > 0, total / seen.clamp_min(1), torch.full_like(total, -1.0))
+    return mean, seen[middle] > 0
 
 
 def sweep_depth(
@@ -151,10 +170,7 @@ def sweep_depth(
                          factors, settings.radius)
         # the mean of the best neighbours that see the window: a neighbour that does not is left
         # out, not scored -1 (else a wrong depth that brings a second neighbour in would win)
-        top = scores.topk(min(settings.best, len(others)), dim=0).values
-        seen = torch.isfinite(top)
-        score = torch.where(seen, top, torch.zeros_like(top)).sum(0) / seen.sum(0).clamp_min(1)
-        score = torch.where(seen.any(0), score, torch.full_like(score, -1.0))  # [J, h, w]
+        score, seen_middle = _mean_of_best(scores, min(settings.best, len(others)), middle)  # [J, h, w]
         best_score, best = score.max(0)
         inner = best.clamp(1, settings.hypotheses - 2)
         below, at, above = (score.gather(0, (inner + shift)[None])[0] for shift in (-1, 0, 1))
@@ -165,7 +181,7 @@ def sweep_depth(
         factor = factors[best] + vertex * step
         # only where a neighbour sees the window at the current depth: at the edge of the overlap
         # a depth that moves the window into a neighbour's photo has nothing to be compared with
-        accept = ((best_score >= settings.min_score) & (best_score > score[middle]) & seen[:, middle].any(0)
+        accept = ((best_score >= settings.min_score) & (best_score > score[middle]) & seen_middle
                   & (best > 0) & (best < settings.hypotheses - 1))
         refined[view] = torch.where(accept, depth[view] * (1 + factor.to(depth.dtype)), depth[view])
         changed[view] = accept
