@@ -77,6 +77,17 @@ def test_flat_black_and_clipped_photos_change_nothing(fill):
     assert torch.equal(swept.depth, biased) and swept.share == 0.0
 
 
+@pytest.mark.parametrize("level", [0.02, 0.98])
+def test_near_flat_dark_and_clipped_photos_with_faint_noise_change_nothing(level):
+    """Windows of a dark or clipped photo with noise far under a grey level have no texture: the
+    float32 window sums must not turn their rounding into matches (at the network's grid size)."""
+    cameras = plane_cameras(5, 224, 168)
+    depth = plane_depth(cameras)
+    noise = torch.rand(5, 3, 168, 224, generator=torch.Generator().manual_seed(3)) - 0.5
+    swept = sweep_depth(depth, cameras, level + 1e-3 * noise)
+    assert swept.share == 0.0 and torch.equal(swept.depth, depth)
+
+
 def test_noise_the_neighbours_do_not_share_changes_little():
     cameras, truth, _ = _scene()
     noise = torch.rand(5, 3, HEIGHT, WIDTH, generator=torch.Generator().manual_seed(1))
@@ -94,6 +105,8 @@ def test_held_out_views_are_never_compared_with():
     again = sweep_depth(biased, cameras, scrambled, neighbour_views=allowed)
     others = [0, 1, 3, 4]
     assert torch.equal(swept.depth[others], again.depth[others])
+    assert torch.equal(swept.depth[2], biased[2])  # the held-out view itself is not swept
+    assert swept.share > 0.5  # of the views that take part
     # a view whose only allowed neighbour is missing keeps its depth
     alone = sweep_depth(biased, cameras, images, neighbour_views=[True, False, False, False, False])
     assert torch.equal(alone.depth[0], biased[0])

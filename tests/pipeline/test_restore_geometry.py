@@ -140,11 +140,15 @@ def test_the_depth_sweep_never_compares_with_held_out_views(buu, monkeypatch):
     monkeypatch.setattr(scene_geometry, "sweep_depth", recording_sweep)
     photos = load_images([buu / "low" / name for name in FRAMES]).images
     model = build_model("tiny-operator", seed=0).eval()
-    fused = [True, True, False, True, True]
+    fused = [True, False, False, True, True]
     job = build_scene(photos, FRAMES, model, get_restore_preset("best", refine_steps=0), geometry="sfm",
-                      required_views=[2], fuse_views=fused)
-    assert job.geometry.source == "sfm" and job.selected == [0, 1, 2, 3, 4]
-    assert seen["views"] == fused
+                      max_views=3, required_views=[2], fuse_views=fused)
+    assert job.geometry.source == "sfm" and job.selected == [0, 2, 4]
+    assert seen["views"] == [fused[i] for i in job.selected]  # the network's views, in its order
     assert torch.equal(seen["images"], job.restored_photos[job.selected])
     assert torch.equal(seen["depth"], job.geometry.depth)
     assert job.geometry.report["depth_sweep"]["neighbours"] == 4
+    seen.clear()
+    plain = build_scene(photos, FRAMES, model, get_restore_preset("best", refine_steps=0, depth_sweep=False),
+                        geometry="sfm", max_views=3, required_views=[2], fuse_views=fused)
+    assert not seen and plain.geometry.report["depth_sweep"] is None

@@ -31,8 +31,12 @@ from lumos3d_cli.checks import require_finite
 from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
 from lumos3d_cli.io.cameras import Cameras
 
-# Variance floor of a window (grey levels in [0, 1], squared): a flat window scores 0 against anything.
-_VARIANCE_FLOOR = 1e-6
+# Variance floor of a window (grey levels in [0, 1], squared): a window flatter than a standard
+# deviation of 0.005 (about 1.3 levels of 255) has no texture to match, and with both deviations
+# clamped here its score stays near 0. It also keeps the float32 rounding of the running sums
+# (up to about 1e-6 in a window's variance at these sizes) from scoring near-flat dark or clipped
+# windows with faint noise as matches.
+_VARIANCE_FLOOR = 0.005 ** 2
 
 
 @dataclass
@@ -131,8 +135,9 @@ def sweep_depth(
 ) -> DepthSweep:
     """depth [V, h, w] (positive, one frame), cameras [V] with intrinsics in pixels of the depth
     maps, images [V, 3, H, W] in [0, 1] (any size: area-resized to the depth maps) -> DepthSweep
-    (module docstring). neighbour_views [V] bool: the views that may serve as neighbours (None:
-    all; evaluation's held-out views must not). A view with no allowed neighbour keeps its depth.
+    (module docstring). neighbour_views [V] bool: the views that take part (None: all):
+    evaluation's held-out views are neither compared with nor swept (their Gaussians are not
+    fused). A view with no neighbour that takes part keeps its depth.
     Runs in float32 on the depth's device."""
     settings = settings or DepthSweepSettings()
     started = time.perf_counter()
@@ -161,7 +166,7 @@ def sweep_depth(
     changed = torch.zeros(depth.shape, dtype=torch.bool, device=device)
     neighbours = _neighbours(cameras, settings.neighbours, allowed)
     for view, others in enumerate(neighbours):
-        if not others:
+        if not others or not bool(allowed[view]):  # a held-out view's Gaussians are not fused
             continue
         intrinsics = cameras.intrinsics[view]
         rays = torch.stack([(xs - intrinsics[0, 2]) / intrinsics[0, 0], (ys - intrinsics[1, 2]) / intrinsics[1, 1],
@@ -185,6 +190,6 @@ def sweep_depth(
                   & (best > 0) & (best < settings.hypotheses - 1))
         refined[view] = torch.where(accept, depth[view] * (1 + factor.to(depth.dtype)), depth[view])
         changed[view] = accept
-    compared = [view for view, others in enumerate(neighbours) if others]
+    compared = [view for view, others in enumerate(neighbours) if others and bool(allowed[view])]
     share = float(changed[compared].float().mean()) if compared else 0.0
     return DepthSweep(refined, changed, share, time.perf_counter() - started)

@@ -49,7 +49,7 @@ DENSIFY = DensifySettings()
 # 0.682 and shrub's over-exposed row lower; 7x7 with 15 depths, 2 % apart (the parabola between),
 # 21.00 / 0.681 in half the time: about 2 s for 32 views of 224x168 on 2 cores. 3 neighbours
 # instead of 4 lost 0.03 dB. `fast` gains as much (buu +0.33 dB in both modes, shrub's low light
-# +0.46) for 0.6 s of its 12.
+# +0.46) for about 1 s of its 13.5. The sweep runs on the CPU, also with --device cuda.
 DEPTH_SWEEP = DepthSweepSettings()
 
 SFM_BRIGHTENINGS = ("restoration", "tone curve")  # RestorePreset.sfm_brightening

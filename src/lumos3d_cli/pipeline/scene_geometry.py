@@ -200,7 +200,7 @@ def _network_geometry(registration: ViewRegistration, network: NetworkPass, sele
                       names: list[str]) -> SceneGeometry:
     cameras = _photo_cameras(network, names, [registration.sizes[i] for i in selected])
     prediction = network.prediction
-    report = {"requested": registration.requested, "registered_views": 0, "brightening": None}
+    report = {"requested": registration.requested, "registered_views": 0, "brightening": None, "depth_sweep": None}
     if registration.sfm is not None:
         report["sfm_attempt"] = registration.sfm.describe()
     return SceneGeometry("network", cameras, prediction.extrinsics[0].double().cpu(),
