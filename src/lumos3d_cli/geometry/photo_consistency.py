@@ -30,6 +30,7 @@ import torch.nn.functional as F
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
 from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.model.geometry import unproject_depth
 
 # Variance floor of a window (grey levels in [0, 1], squared): a window flatter than a standard
 # deviation of 0.005 (about 1.3 levels of 255) has no texture to match, and with both deviations
@@ -80,8 +81,8 @@ def _scores(grey: torch.Tensor, mean: torch.Tensor, deviation: torch.Tensor, cam
             others: list[int], points: torch.Tensor, factors: torch.Tensor, radius: int) -> torch.Tensor:
     """[N, J, h, w] NCC of `view`'s windows with each neighbour's photo sampled at the J depth
     hypotheses; -inf where a hypothesis takes part of the window out of a neighbour's photo or
-    behind it. points
-    [h, w, 3]: the view's pixels in its camera frame at the current depth (a hypothesis scales them)."""
+    behind it. points [h, w, 3]: the view's pixels in its camera frame at the current depth (a
+    hypothesis scales them)."""
     height, width = grey.shape[-2:]
     rotation, translation = cameras.extrinsics[view, :, :3], cameras.extrinsics[view, :, 3]
     scores = []
@@ -161,19 +162,17 @@ def sweep_depth(
     factors = torch.linspace(-settings.span, settings.span, settings.hypotheses, device=device)
     step = float(factors[1] - factors[0])
     middle = settings.hypotheses // 2
-    ys, xs = torch.meshgrid(torch.arange(height, device=device) + 0.5, torch.arange(width, device=device) + 0.5,
-                            indexing="ij")
+    # each view's pixels in its own camera frame at the current depth (identity extrinsics)
+    identity = torch.eye(3, 4, device=device).expand(views, 3, 4)
+    points = unproject_depth(working, identity, cameras.intrinsics)  # [V, h, w, 3]
     refined = depth.clone()
     changed = torch.zeros(depth.shape, dtype=torch.bool, device=device)
     neighbours = _neighbours(cameras, settings.neighbours, allowed)
     for view, others in enumerate(neighbours):
         if not others or not bool(allowed[view]):  # a held-out view's Gaussians are not fused
             continue
-        intrinsics = cameras.intrinsics[view]
-        rays = torch.stack([(xs - intrinsics[0, 2]) / intrinsics[0, 0], (ys - intrinsics[1, 2]) / intrinsics[1, 1],
-                            torch.ones_like(xs)], dim=-1)
-        scores = _scores(grey[:, 0], mean[:, 0], deviation[:, 0], cameras, view, others, rays * working[view][..., None],
-                         factors, settings.radius)
+        scores = _scores(grey[:, 0], mean[:, 0], deviation[:, 0], cameras, view, others, points[view], factors,
+                         settings.radius)
         # the mean of the best neighbours that see the window: a neighbour that does not is left
         # out, not scored -1 (else a wrong depth that brings a second neighbour in would win)
         score, seen_middle = _mean_of_best(scores, min(settings.best, len(others)), middle)  # [J, h, w]

@@ -277,8 +277,8 @@ def place_views(
     is aligned to the sparse points. With `sweep` and `images` [S, 3, H, W] (the selected views'
     photos, restored or not: the sweep's score ignores gain and offset), registered depth is then
     refined where the neighbouring photos agree (`geometry.photo_consistency`), comparing each
-    view only with the views `fused` [S] marks (None: all; evaluation's held-out views are never
-    compared with). Network geometry keeps the network's depth."""
+    view only with the views `fused` [S] marks, and sweeping only those (None: all; evaluation's
+    held-out views are neither compared with nor swept). Network geometry keeps the network's depth."""
     selected_names = [names[i] for i in selected]
     if registration.source == "network":
         return _network_geometry(registration, network, selected, selected_names)

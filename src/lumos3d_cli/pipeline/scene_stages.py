@@ -175,8 +175,9 @@ def photo_restoration_of_views(job: SceneJob) -> SceneJob:
 
 def fusion(job: SceneJob) -> SceneJob:
     """Every view placed in one frame (`place_views`; the preset's depth sweep compares the
-    operator's restoration of the photos, or the photos themselves for a model without one), the pixel Gaussians on the preset's grid
-    with the operator's colours from the full-resolution photos, fused into voxels that follow
+    operator's restoration of the photos, or the photos themselves for a model without one), the
+    pixel Gaussians on the preset's grid with the operator's colours from the full-resolution
+    photos, fused into voxels that follow
     each point's pixel footprint, and the network grid baked into their size (sampling filter).
     The Gaussians stay on the model's device."""
     preset = job.preset
