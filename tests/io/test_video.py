@@ -1,3 +1,6 @@
+import subprocess
+import sys
+
 import imageio_ffmpeg
 import numpy as np
 import pytest
@@ -79,7 +82,6 @@ def test_a_writer_stopped_while_ffmpeg_starts_ends_ffmpeg(monkeypatch, tmp_path)
     ffmpeg running to write its file again after the cleanup removed it: the writer closes
     imageio-ffmpeg's generator, whose cleanup ends ffmpeg."""
     from lumos3d_cli.errors import Interrupted
-    from lumos3d_cli.io import video
 
     class StoppedWhileStarting:
         closed = False
@@ -91,7 +93,24 @@ def test_a_writer_stopped_while_ffmpeg_starts_ends_ffmpeg(monkeypatch, tmp_path)
             self.closed = True
 
     started = StoppedWhileStarting()
-    monkeypatch.setattr(video.imageio_ffmpeg, "write_frames", lambda *args, **kwargs: started)
+    monkeypatch.setattr(imageio_ffmpeg, "write_frames", lambda *args, **kwargs: started)
     with pytest.raises(Interrupted):
         VideoWriter(tmp_path / "a.mp4", 16, 16, 5)
     assert started.closed
+
+
+def test_a_restore_that_writes_no_video_runs_without_imageio_ffmpeg():
+    # The ffmpeg wheel is 68 MB and machines without a package index (a GPU box) may lack it:
+    # the modules a photo restore imports, and naming a video file, must not need it.
+    code = (
+        "import sys; sys.modules['imageio_ffmpeg'] = None\n"
+        "import lumos3d_cli.cli.restore, lumos3d_cli.cli.render, lumos3d_cli.pipeline.restore_outputs\n"
+        "from lumos3d_cli.io.video import VideoWriter, video_kind\n"
+        "print(video_kind('orbit.gif'))\n"
+        "try:\n"
+        "    VideoWriter('x.mp4', 4, 4, 1.0)\n"
+        "except ImportError:\n"
+        "    print('needed to write')\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert result.stdout.split() == ["gif", "needed", "to", "write"]

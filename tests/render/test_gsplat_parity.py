@@ -20,6 +20,7 @@ from factories import random_scene
 
 gsplat = pytest.importorskip("gsplat")
 pytestmark = [
+    pytest.mark.cuda,
     pytest.mark.skipif(not torch.cuda.is_available(), reason="gsplat's kernels need a CUDA device"),
     pytest.mark.skipif(
         "opacities" not in inspect.signature(gsplat.fully_fused_projection).parameters,
@@ -111,7 +112,6 @@ def test_rasterization_and_gradients_match_gsplat(antialiased):
         assert cosine > 0.999 and relative < 2e-2, f"{name}: cosine {cosine:.5f}, relative L2 error {relative:.2e}"
 
 
-@pytest.mark.cuda
 def test_gsplat_weights_equal_the_cpu_kernels():
     """render(weights=True) on CUDA takes each Gaussian's weight from gsplat's backward
     (render/gsplat_backend.py); the CPU kernel counts the same sums in its forward pass."""
@@ -119,7 +119,7 @@ def test_gsplat_weights_equal_the_cpu_kernels():
     from lumos3d_cli.render.render import render
 
     gaussians, viewmat = _scene(3)
-    cameras = Cameras(viewmat[None], make_intrinsics(*INTRINSICS)[None], [(WIDTH, HEIGHT)])
+    cameras = Cameras(viewmat[None], make_intrinsics(*INTRINSICS), [(WIDTH, HEIGHT)])
     cpu = render(gaussians, cameras, weights=True, eps2d=EPS2D).weights
     gpu = render(gaussians.to(device="cuda"), cameras, weights=True, eps2d=EPS2D, backend="gsplat").weights
     # float32 sums over a few hundred pixels of one view: 1e-3 px absolute, 1e-3 relative

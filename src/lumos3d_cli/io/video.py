@@ -8,7 +8,6 @@ import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
-import imageio_ffmpeg
 import numpy as np
 
 from lumos3d_cli.errors import InputError
@@ -79,6 +78,10 @@ class VideoWriter:
             options = {"codec": "gif", "pix_fmt_out": "pal8", "output_params": ["-filter_complex", _GIF_FILTER, "-f", "gif"]}
         # quality=None: the rate control is in output_params; macro_block_size=1: H.264 frames are
         # padded to even sides here rather than rescaled by imageio-ffmpeg.
+        # Imported here, not at the top: a restore or render that writes no video must run where the
+        # 68 MB wheel with ffmpeg is not installed (a GPU machine without an index, say).
+        import imageio_ffmpeg
+
         self._generator = imageio_ffmpeg.write_frames(
             str(self.path), padded, fps=fps, quality=None, macro_block_size=1, ffmpeg_log_level="error", **options
         )
@@ -149,6 +152,8 @@ def probe_video(path: Path | str) -> VideoStream:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such video file")
+    import imageio_ffmpeg  # see VideoWriter
+
     # `ffmpeg -i` without an output prints the stream table on stderr and exits 1 by design.
     result = subprocess.run(
         [imageio_ffmpeg.get_ffmpeg_exe(), "-hide_banner", "-i", str(path)], capture_output=True, text=True, check=False
