@@ -28,7 +28,8 @@ def scene_extent(means: torch.Tensor, centres: torch.Tensor) -> float:
     if means.shape[0] == 0:
         return 1.0
     sample = means[torch.linspace(0, means.shape[0] - 1, min(means.shape[0], 4096)).long()].double()
-    distance = torch.cdist(centres.double(), sample).median().item()
+    # The cameras stay on the CPU while the Gaussians may be on the GPU (refinement's working views).
+    distance = torch.cdist(centres.to(sample), sample).median().item()
     return distance if math.isfinite(distance) and distance > 0 else 1.0
 
 
