@@ -247,6 +247,7 @@ def test_covering_shapes_propagate_a_non_finite_member_as_nan():
     assert torch.isfinite(covered.scales[others]).all() and torch.isfinite(covered.quats[others]).all()
 
 
+@pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_on_cuda_a_large_batch_matches_cpu_eigh(dtype):
