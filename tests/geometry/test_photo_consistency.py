@@ -7,6 +7,7 @@ import torch.nn.functional as F
 from lumos3d_cli.errors import NonFiniteError
 from lumos3d_cli.geometry.photo_consistency import box_mean, sweep_depth
 from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
+from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.geometry import unproject_depth
 
 from synthetic_scene import plane_cameras, plane_depth
@@ -55,6 +56,9 @@ def test_the_sweep_moves_biased_depth_onto_the_textured_plane():
     assert swept.depth.dtype == truth.dtype and swept.depth.shape == truth.shape
     assert float(before.median()) > 0.04
     assert float(after.median()) < 0.005  # a step of the sweep is 2 %: the parabola lands within a fraction of it
+    # the edge of the overlap and windows that leave a neighbour's photo keep the bias (11 %
+    # here; a rule asking 0.1 above the old depth's score instead of contrast left 26 %)
+    assert float((after > 0.02).float().mean()) < 0.15
     assert swept.share > 0.6
     # what did not change is exactly the input
     assert torch.equal(swept.depth[~swept.changed], biased[~swept.changed])
@@ -67,6 +71,26 @@ def test_depth_already_right_stays_within_a_fraction_of_a_step():
     assert float(error.median()) < 0.002
     # a wrong depth wins only where a window leaves a neighbour's photo and the periodic texture repeats
     assert float((error > 0.015).float().mean()) < 0.005
+
+
+@pytest.mark.parametrize("shrink", [0.1, 0.03, 0.01])
+def test_views_too_close_together_for_the_depth_change_nothing(shrink):
+    """The same cameras moved towards each other (centres x shrink): a 15 % depth change then moves
+    a window by a pixel or less, the score is nearly the same at every depth, and its best is
+    the photos' noise. The sweep must leave the depth as it was, right or biased; without the
+    contrast rule it moves most pixels (the test's own check that the case is the hard one)."""
+    spread = plane_cameras(5, WIDTH, HEIGHT)
+    extrinsics = spread.extrinsics.clone()
+    extrinsics[:, :, 3] *= shrink  # t = -R c: the centres scale with it
+    cameras = Cameras(extrinsics, spread.intrinsics, spread.sizes, spread.names)
+    truth = plane_depth(cameras)
+    world = unproject_depth(truth, cameras.extrinsics, cameras.intrinsics)
+    noise = 0.01 * torch.randn(5, 3, HEIGHT, WIDTH, generator=torch.Generator().manual_seed(1))
+    images = (_texture(world).permute(0, 3, 1, 2).float() + noise).clamp(0, 1)
+    for start in (truth, _biased(truth)):
+        swept = sweep_depth(start, cameras, images)
+        assert torch.equal(swept.depth, start) and swept.share == 0.0
+    assert sweep_depth(truth, cameras, images, DepthSweepSettings(min_contrast=0.0)).share > 0.5
 
 
 @pytest.mark.parametrize("fill", [0.0, 1.0, 0.37])
@@ -141,6 +165,6 @@ def test_bad_inputs_are_refused():
         sweep_depth(truth, cameras, bad)
     with pytest.raises(ValueError, match="must match"):
         sweep_depth(truth, cameras, images[:3])
-    for settings in (dict(hypotheses=4), dict(span=1.5), dict(best=5, neighbours=4), dict(radius=0)):
+    for settings in (dict(hypotheses=4), dict(span=1.5), dict(best=5, neighbours=4), dict(radius=0), dict(min_contrast=-0.1)):
         with pytest.raises(ValueError):
             DepthSweepSettings(**settings)

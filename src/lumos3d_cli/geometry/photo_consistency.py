@@ -13,9 +13,11 @@ there, and the hypothesis is scored by the NCC of a (2 radius + 1)² window arou
 (invariant to each photo's gain and offset, so over- and under-exposed photos compare alike).
 Each hypothesis keeps the mean of its `best` neighbours' scores (a neighbour whose photo does
 not hold the whole window drops out; an occluded one scores low and is not among the best). The best hypothesis, refined by a parabola
-through its neighbours, replaces the depth where its score is at least `min_score`, at least `min_gain` above the
-score of the depth as it was (which a neighbour must see), and inside the swept range; elsewhere (no texture, clipped or black
-photos, noise the neighbours do not share) the depth stays as it was.
+through its neighbours, replaces the depth where its score is at least `min_score`, at least `min_contrast`
+above the lowest score of the swept depths (a score that hardly changes with depth comes from a
+baseline too short for the depth, and its best is noise), where a neighbour sees the window at the
+depth as it was, and inside the swept range; elsewhere (no texture, clipped or black photos, noise
+the neighbours do not share, views close together) the depth stays as it was.
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ class DepthSweep:
         return {"changed_pixels": round(self.share, 4), "seconds": round(self.seconds, 3),
                 "neighbours": settings.neighbours, "span": settings.span, "hypotheses": settings.hypotheses,
                 "window_px": 2 * settings.radius + 1, "min_score": settings.min_score,
-                "min_gain": settings.min_gain}
+                "min_contrast": settings.min_contrast}
 
 
 def box_mean(values: torch.Tensor, radius: int) -> torch.Tensor:
@@ -186,7 +188,9 @@ def sweep_depth(
         factor = factors[best] + vertex * step
         # only where a neighbour sees the window at the current depth: at the edge of the overlap
         # a depth that moves the window into a neighbour's photo has nothing to be compared with
-        accept = ((best_score >= settings.min_score) & (best_score >= score[middle] + settings.min_gain) & seen_middle
+        # the contrast over the swept depths that some neighbour sees (-1 marks none)
+        lowest = torch.where(score > -1, score, torch.full_like(score, torch.inf)).amin(0)
+        accept = ((best_score >= settings.min_score) & (best_score >= lowest + settings.min_contrast) & seen_middle
                   & (best > 0) & (best < settings.hypotheses - 1))
         refined[view] = torch.where(accept, depth[view] * (1 + factor.to(depth.dtype)), depth[view])
         changed[view] = accept

@@ -11,9 +11,10 @@ class DepthSweepSettings:
     """neighbours: the nearest cameras (by centre) each view is compared with; span: the largest
     relative depth change tried; hypotheses: depths tried per pixel (odd: the current depth is
     one); radius: the NCC window's half size in depth-map pixels; best: the neighbours whose
-    scores are averaged per hypothesis; min_score: the NCC a new depth needs; min_gain: how much
-    higher than the current depth's its score must be (a flat score, as between nearby views,
-    says nothing about the depth). Defaults chosen on
+    scores are averaged per hypothesis; min_score: the NCC a new depth needs; min_contrast: how
+    much higher its score must be than the lowest of the swept depths (a score that hardly
+    changes with depth, as between views close together for the depth they see, says nothing
+    about the depth). Defaults chosen on
     the development scenes (pipeline.presets.DEPTH_SWEEP says how)."""
 
     neighbours: int = 4
@@ -22,7 +23,7 @@ class DepthSweepSettings:
     radius: int = 3
     best: int = 2
     min_score: float = 0.5
-    min_gain: float = 0.1
+    min_contrast: float = 0.5
 
     def __post_init__(self) -> None:
         if self.neighbours < 1 or not 1 <= self.best <= self.neighbours:
@@ -33,7 +34,7 @@ class DepthSweepSettings:
             raise ValueError(f"hypotheses={self.hypotheses} must be odd and >= 3 (the current depth is the middle one)")
         if self.radius < 1:
             raise ValueError(f"radius={self.radius} must be >= 1")
-        if not 0 <= self.min_gain <= 2:
-            raise ValueError(f"min_gain={self.min_gain} must be in [0, 2]")
+        if not 0 <= self.min_contrast <= 2:
+            raise ValueError(f"min_contrast={self.min_contrast} must be in [0, 2]")
         if not -1 <= self.min_score <= 1:
             raise ValueError(f"min_score={self.min_score} must be in [-1, 1]")
