@@ -59,8 +59,8 @@ DENSIFY = DensifySettings()
 # 11 % with the contrast). Development mean (PSNR / SSIM / sharpness): no rule 21.00 / 0.682 /
 # 0.82 with streaks; 0.1 gain 20.84 / 0.669 / 0.80; contrast 0.3 20.98 / 0.680 / 0.815 and 0.4
 # 20.95 / 0.677 / 0.81, both with view 22's top row of patches smeared; 0.5 20.92 / 0.674 / 0.81,
-# every one of the four rows above the 0.1 gain's, view 22 as clean as with the gain (20.63 /
-# 0.649 without the sweep).
+# every one of the four rows above the 0.1 gain's, view 22 nearly as clean as with the gain (its
+# top row's orange patch a little broken). Without the sweep: 20.63 / 0.649 / 0.78.
 DEPTH_SWEEP = DepthSweepSettings()
 
 SFM_BRIGHTENINGS = ("restoration", "tone curve")  # RestorePreset.sfm_brightening
