@@ -60,7 +60,10 @@ DENSIFY = DensifySettings()
 # 0.82 with streaks; 0.1 gain 20.84 / 0.669 / 0.80; contrast 0.3 20.98 / 0.680 / 0.815 and 0.4
 # 20.95 / 0.677 / 0.81, both with view 22's top row of patches smeared; 0.5 20.92 / 0.674 / 0.81,
 # every one of the four rows above the 0.1 gain's, view 22 nearly as clean as with the gain (its
-# top row's orange patch a little broken). Without the sweep: 20.63 / 0.649 / 0.78.
+# top row's orange patch a little broken). Without the sweep: 20.63 / 0.649 / 0.78. `best`, whose
+# 200 steps might have smoothed what a looser rule places, scored 20.99 / 0.722 / 0.885 at 0.3
+# against 20.94 / 0.718 / 0.88 at 0.5, but its view 22 then showed the chart's left edge ragged
+# with orange specks (clean at 0.5): one setting for every preset.
 DEPTH_SWEEP = DepthSweepSettings()
 
 SFM_BRIGHTENINGS = ("restoration", "tone curve")  # RestorePreset.sfm_brightening
