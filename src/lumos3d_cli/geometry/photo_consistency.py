@@ -115,11 +115,11 @@ def _scores(grey: torch.Tensor, mean: torch.Tensor, deviation: torch.Tensor, cam
     return torch.stack(scores)
 
 
-def _mean_of_best(scores: torch.Tensor, count: int, middle: int) -> tuple[torch.Tensor, torch.Tensor]:
+def _mean_of_best(scores: torch.Tensor, count: int) -> tuple[torch.Tensor, torch.Tensor]:
     """scores [N, J, h, w] (-inf: not seen) -> (the mean of the `count` highest seen scores per
-    hypothesis [J, h, w], -1 where none is seen; [h, w] whether any neighbour sees the
-    hypothesis `middle`). The highest taken one at a time: for the few neighbours here, faster
-    than a top-k across the first dimension."""
+    hypothesis [J, h, w], -1 where none is seen; [J, h, w] whether any neighbour sees the
+    hypothesis). The highest taken one at a time: for the few neighbours here, faster than a
+    top-k across the first dimension."""
     remaining = scores.clone()
     total = torch.zeros(scores.shape[1:], dtype=scores.dtype, device=scores.device)
     seen = torch.zeros(scores.shape[1:], dtype=scores.dtype, device=scores.device)
@@ -130,7 +130,7 @@ def _mean_of_best(scores: torch.Tensor, count: int, middle: int) -> tuple[torch.
         seen += finite
         remaining.scatter_(0, which[None], -torch.inf)
     mean = torch.where(seen > 0, total / seen.clamp_min(1), torch.full_like(total, -1.0))
-    return mean, seen[middle] > 0
+    return mean, seen > 0
 
 
 def sweep_depth(
@@ -177,7 +177,7 @@ def sweep_depth(
                          settings.radius)
         # the mean of the best neighbours that see the window: a neighbour that does not is left
         # out, not scored -1 (else a wrong depth that brings a second neighbour in would win)
-        score, seen_middle = _mean_of_best(scores, min(settings.best, len(others)), middle)  # [J, h, w]
+        score, seen = _mean_of_best(scores, min(settings.best, len(others)))  # [J, h, w] each
         best_score, best = score.max(0)
         inner = best.clamp(1, settings.hypotheses - 2)
         below, at, above = (score.gather(0, (inner + shift)[None])[0] for shift in (-1, 0, 1))
@@ -188,9 +188,9 @@ def sweep_depth(
         factor = factors[best] + vertex * step
         # only where a neighbour sees the window at the current depth: at the edge of the overlap
         # a depth that moves the window into a neighbour's photo has nothing to be compared with
-        # the contrast over the swept depths that some neighbour sees (-1 marks none)
-        lowest = torch.where(score > -1, score, torch.full_like(score, torch.inf)).amin(0)
-        accept = ((best_score >= settings.min_score) & (best_score >= lowest + settings.min_contrast) & seen_middle
+        # the contrast over the swept depths that some neighbour sees
+        lowest = torch.where(seen, score, torch.full_like(score, torch.inf)).amin(0)
+        accept = ((best_score >= settings.min_score) & (best_score >= lowest + settings.min_contrast) & seen[middle]
                   & (best > 0) & (best < settings.hypotheses - 1))
         refined[view] = torch.where(accept, depth[view] * (1 + factor.to(depth.dtype)), depth[view])
         changed[view] = accept
