@@ -59,12 +59,14 @@ def through_grid(images: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
 
 
 def scores(images: torch.Tensor, references: torch.Tensor) -> dict[str, float]:
-    """Mean PSNR, SSIM, sharpness and chroma ratio of images [V, 3, H, W] against references."""
+    """Mean PSNR, SSIM and sharpness of images [V, 3, H, W] against references, and the chroma
+    ratio as the development benchmark's (benchmarks/appearance_dev.py): the mean output chroma
+    over the mean reference chroma."""
     stats = appearance_stats(images, references)
     return {
         "psnr": float(psnr(images, references).mean()), "ssim": float(ssim(images, references).mean()),
         "sharpness": float(sharpness(images, references).mean()),
-        "chroma_ratio": sum(row["chroma_ratio"] for row in stats) / len(stats),
+        "chroma_ratio": sum(row["chroma"] for row in stats) / sum(row["chroma_reference"] for row in stats),
     }
 
 
