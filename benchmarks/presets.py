@@ -93,7 +93,15 @@ DEV_REASON = (
     "/ 0.79 (new Gaussians need steps to settle); the Gaussian grid of 2 19.97 / 0.637 / 20.98 / 0.84 (2.2x "
     "the Gaussians); a sampling filter of a quarter of the network pixel 20.20 / 0.642 / 21.30 / 0.77 (1.6x "
     "the Gaussians); five times the scale learning rate 20.16 / 0.648 / 21.27 / 0.77; 100 steps without "
-    "densification 20.11 / 0.676 / 21.41 / 0.82 (about 25 s more)."
+    "densification 20.11 / 0.676 / 21.41 / 0.82 (about 25 s more). "
+    "Measured since (2026-11-26, evening, the shipped settings, a faster host; not in the tables): `best` "
+    "with the Gaussian grid of 2 scored 17.79 / 0.560 on shrub's over-exposed holdout against 18.21 / "
+    "0.632, in 2.1x the time; `fast` with 12 views instead of 16 20.24 / 0.604 / 21.02 / 0.65 against "
+    "20.53 / 0.612 / 21.28 / 0.70, for about 0.7 s less; on that host buu's restore took 9.8 s with "
+    "`fast` and 19.0 s with `balanced` (0.51x): what every preset pays alike (importing torch, the "
+    "network beside structure-from-motion, rendering and writing the outputs, about 5.5 s of `fast`'s "
+    "9.8) is a larger share of a faster host's time. Wider depth-sweep spans and other SSIM weights: "
+    "pipeline/presets.py and refine/settings.py."
 )
 COLOURS = {"fast": (40, 160, 40), "balanced": (200, 120, 20), "best": (40, 40, 200)}  # BGR
 
