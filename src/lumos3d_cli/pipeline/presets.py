@@ -71,8 +71,8 @@ DENSIFY = DensifySettings()
 # scores 20.92 / 0.686 / 0.85 (nothing gained). As with a lower contrast, buu's novel views then
 # carry dark specks off the chart's edge (+-70 % and more) and view 22 of `make demo` breaks (its
 # chart in specks and streaks at +-50 %, its yellow patch broken already at +-25 %); a wide first
-# pass that must also gain 0.05-0.2 over the current depth's score (then the +-15 % pass) scored
-# 20.94-20.97 and still broke view 22. So +-15 %.
+# pass that must also gain 0.05 or 0.1 over the current depth's score (then the +-15 % pass)
+# scored 20.97 and 20.96 and still broke view 22 (0.2: 20.94). So +-15 %.
 DEPTH_SWEEP = DepthSweepSettings()
 
 SFM_BRIGHTENINGS = ("restoration", "tone curve")  # RestorePreset.sfm_brightening

@@ -73,14 +73,15 @@ class RefineSettings:
     darkest photos (its low-light row 24.90, 24.81, 24.74, 24.66 dB), so 2e-2, where the mean's
     PSNR holds; `fast` 20.52 / 0.606 / 0.65 -> 20.52 / 0.612 / 0.70 there. The SSIM weight
     stays 3DGS's 0.2: there (`balanced`, 20.92 / 0.684 / 0.847 at 0.2) 0.3 scored 20.91 / 0.685 /
-    0.858 and 0.4 20.89 / 0.685 / 0.865, buu's low light up 0.04 dB and shrub's rows down 0.04,
-    the same trade of PSNR for sharpness as a faster colour rate (`best` on shrub's over-exposed
-    holdout -0.05 dB at 0.3). Adam's first step moves every colour by its rate whatever the
-    residual, so a view fitted once takes one such step; a colour fitted by least squares to every
-    view instead (the residuals accumulated over the views through the rendered weights, before
-    or after refinement) scored 20.47-20.18 and sharpness 0.79-0.81 (the views' copies of a point
-    disagree on where it is, and their mean blurs it), regularised towards the current colour
-    20.92 / 0.684 / 0.839: nothing to gain."""
+    0.858 and 0.4 20.89 / 0.685 / 0.865, buu's low light up 0.04 dB and shrub's rows down
+    0.04-0.05, the same trade of PSNR for sharpness as a faster colour rate (`best` on shrub's
+    over-exposed holdout -0.05 dB at 0.3). Adam's first step moves every colour by its rate
+    whatever the residual, so a view fitted once takes one such step; a colour fitted by least
+    squares to every view instead (the residuals accumulated over the views through the rendered
+    weights) scored, after refinement, 20.47 / 0.679 / 0.81 (one pass) and 20.19 / 0.676 / 0.79
+    (three: the views' copies of a point disagree on where it is, and their mean blurs it), before
+    it 20.18 / 0.695 / 0.85, and regularised towards the current colour 20.92 / 0.684 / 0.839:
+    nothing to gain."""
 
     steps: int = 100
     max_side: int = 256
