@@ -5,7 +5,7 @@ import torch
 import torch.nn.functional as F
 
 from lumos3d_cli.errors import NonFiniteError
-from lumos3d_cli.geometry.photo_consistency import box_mean, sweep_depth
+from lumos3d_cli.geometry.photo_consistency import box_mean, sweep_depth, triangulation_angles
 from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.geometry import unproject_depth
@@ -77,8 +77,9 @@ def test_depth_already_right_stays_within_a_fraction_of_a_step():
 def test_views_too_close_together_for_the_depth_change_nothing(shrink):
     """The same cameras moved towards each other (centres x shrink): a 15 % depth change then moves
     a window by a pixel or less, the score is nearly the same at every depth, and its best is
-    the photos' noise. The sweep must leave the depth as it was, right or biased; without the
-    contrast rule it moves most pixels (the test's own check that the case is the hard one)."""
+    the photos' noise. The sweep must leave the depth as it was, right or biased: the angle rule
+    finds no neighbour (under 3 degrees), and without it the contrast rule still holds; with
+    neither it moves most pixels (the test's own check that the case is the hard one)."""
     spread = plane_cameras(5, WIDTH, HEIGHT)
     extrinsics = spread.extrinsics.clone()
     extrinsics[:, :, 3] *= shrink  # t = -R c: the centres scale with it
@@ -89,8 +90,53 @@ def test_views_too_close_together_for_the_depth_change_nothing(shrink):
     images = (_texture(world).permute(0, 3, 1, 2).float() + noise).clamp(0, 1)
     for start in (truth, _biased(truth)):
         swept = sweep_depth(start, cameras, images)
-        assert torch.equal(swept.depth, start) and swept.share == 0.0
-    assert sweep_depth(truth, cameras, images, DepthSweepSettings(min_contrast=0.0)).share > 0.5
+        assert torch.equal(swept.depth, start) and swept.share == 0.0 and swept.views_without_neighbours == 5
+        contrast_only = sweep_depth(start, cameras, images, DepthSweepSettings(min_angle=0.0))
+        assert torch.equal(contrast_only.depth, start) and contrast_only.views_without_neighbours == 0
+    assert sweep_depth(truth, cameras, images, DepthSweepSettings(min_contrast=0.0, min_angle=0.0)).share > 0.5
+
+
+def test_triangulation_angles_match_the_geometry():
+    """Three cameras along a line before a plane: each pair's angle at the point on the row view's
+    axis at its median depth, against the angle between the two rays computed here on its own;
+    0 for a view with itself; the same for a scene 10^4 times larger."""
+    cameras = plane_cameras(3, WIDTH, HEIGHT)
+    depth = plane_depth(cameras)
+    angles = triangulation_angles(cameras, depth)
+    centres = cameras.centers()
+    rotation = cameras.extrinsics[:, :, :3]
+    for view in range(3):
+        point = centres[view] + depth[view].flatten().median() * rotation[view, 2]
+        for other in set(range(3)) - {view}:  # arccos, the oracle, is inexact near 0 degrees
+            own, seen = point - centres[view], point - centres[other]
+            expected = math.degrees(math.acos(max(-1.0, min(1.0, float((own @ seen) / (own.norm() * seen.norm()))))))
+            assert float(angles[view, other]) == pytest.approx(expected, abs=1e-5)
+    assert torch.all(angles.diagonal() < 1e-12)
+    scaled = cameras.to(torch.float64)
+    extrinsics = scaled.extrinsics.clone()
+    extrinsics[:, :, 3] *= 1e4
+    huge = Cameras(extrinsics, scaled.intrinsics, list(cameras.sizes), list(cameras.names))
+    assert torch.allclose(triangulation_angles(huge, depth * 1e4), angles, atol=1e-6)
+
+
+def test_a_view_seen_only_at_wide_angles_keeps_its_depth():
+    """A sixth camera far to the side of the five (30 degrees and more from each at its scene):
+    square windows there no longer cover the same surface, so it takes no neighbour, keeps its
+    depth and is counted; the five are swept as before, never compared with it."""
+    cameras, truth, images = _scene()
+    extrinsics = cameras.extrinsics.clone()
+    far = torch.cat([extrinsics, extrinsics[-1:]])
+    far[-1, :, 3] = -(far[-1, :, :3] @ torch.tensor([6.0, 0.0, 0.0], dtype=far.dtype))
+    wide = Cameras(far, torch.cat([cameras.intrinsics, cameras.intrinsics[-1:]]), [*cameras.sizes, cameras.sizes[-1]],
+                   [*cameras.names, "far.png"])
+    wide_truth = plane_depth(wide)
+    world = unproject_depth(wide_truth, wide.extrinsics, wide.intrinsics)
+    wide_images = _texture(world).permute(0, 3, 1, 2).float()
+    assert float(triangulation_angles(wide, wide_truth)[5, :5].min()) > DepthSweepSettings().max_angle
+    biased = _biased(wide_truth)
+    swept = sweep_depth(biased, wide, wide_images)
+    assert torch.equal(swept.depth[5], biased[5]) and swept.views_without_neighbours == 1
+    assert torch.equal(swept.depth[:5], sweep_depth(biased[:5], cameras, images).depth)
 
 
 @pytest.mark.parametrize("fill", [0.0, 1.0, 0.37])
@@ -165,6 +211,7 @@ def test_bad_inputs_are_refused():
         sweep_depth(truth, cameras, bad)
     with pytest.raises(ValueError, match="must match"):
         sweep_depth(truth, cameras, images[:3])
-    for settings in (dict(hypotheses=4), dict(span=1.5), dict(best=5, neighbours=4), dict(radius=0), dict(min_contrast=-0.1)):
+    for settings in (dict(hypotheses=4), dict(span=1.5), dict(best=5, neighbours=4), dict(radius=0), dict(min_contrast=-0.1),
+                     dict(min_angle=-1.0), dict(min_angle=20.0, max_angle=15.0), dict(max_angle=200.0)):
         with pytest.raises(ValueError):
             DepthSweepSettings(**settings)

@@ -9,7 +9,11 @@ score depth hypotheses by photo-consistency; COLMAP's runs only on CUDA):
 
 for every pixel of a view, depths d (1 + f) for `hypotheses` factors f evenly in [-span, span]
 are each projected into the view's nearest fused neighbours, the neighbour's photo is sampled
-there, and the hypothesis is scored by the NCC of a (2 radius + 1)² window around the pixel
+there (a neighbour counts when it sees the view's scene, the point on its axis at its median
+depth, at a triangulation angle within [`min_angle`, `max_angle`]: under a few degrees a depth
+change hardly moves the window, so its best score is noise, and beyond about 15 degrees the
+windows, taken square in each photo, no longer cover the same surface; a view with no such
+neighbour keeps its depth, as multi-view stereo selects its source views by that angle), and the hypothesis is scored by the NCC of a (2 radius + 1)² window around the pixel
 (invariant to each photo's gain and offset, so over- and under-exposed photos compare alike).
 Each hypothesis keeps the mean of its `best` neighbours' scores (a neighbour whose photo does
 not hold the whole window drops out; an occluded one scores low and is not among the best). The best hypothesis, refined by a parabola
@@ -45,18 +49,22 @@ _VARIANCE_FLOOR = 0.005 ** 2
 @dataclass
 class DepthSweep:
     """depth [V, h, w] (the input's dtype); changed [V, h, w] bool: the pixels whose depth the
-    sweep replaced; share: their fraction over the views that had neighbours; seconds."""
+    sweep replaced; share: their fraction over the views that had neighbours; seconds;
+    views_without_neighbours: the views that take part but kept their depth because no other
+    camera triangulates them within the angles."""
 
     depth: torch.Tensor
     changed: torch.Tensor
     share: float
     seconds: float
+    views_without_neighbours: int = 0
 
     def summary(self, settings: DepthSweepSettings) -> dict:
         return {"changed_pixels": round(self.share, 4), "seconds": round(self.seconds, 3),
                 "neighbours": settings.neighbours, "span": settings.span, "hypotheses": settings.hypotheses,
                 "window_px": 2 * settings.radius + 1, "min_score": settings.min_score,
-                "min_contrast": settings.min_contrast}
+                "min_contrast": settings.min_contrast, "angles_deg": [settings.min_angle, settings.max_angle],
+                "views_without_neighbours": self.views_without_neighbours}
 
 
 def box_mean(values: torch.Tensor, radius: int) -> torch.Tensor:
@@ -69,14 +77,35 @@ def box_mean(values: torch.Tensor, radius: int) -> torch.Tensor:
     return (columns[..., size:, :] - columns[..., :-size, :]) / (size * size)
 
 
-def _neighbours(cameras: Cameras, count: int, allowed: torch.Tensor) -> list[list[int]]:
-    """For each view, up to `count` nearest other cameras (by centre) among the `allowed` ones."""
+def triangulation_angles(cameras: Cameras, depth: torch.Tensor) -> torch.Tensor:
+    """[V, V] degrees: for each view v (row), the angle at the point on v's optical axis at v's
+    median depth between the rays from v's centre and from each other camera's centre to it (the
+    angle the two photos triangulate v's scene at; 0 on the diagonal). depth [V, h, w] in the
+    cameras' units. In float64: the angles do not depend on the scene's scale."""
+    rotation = cameras.extrinsics[:, :, :3].double()
+    centres = cameras.centers().double()
+    axes = rotation[:, 2, :]  # each camera's +z (viewing direction) in world coordinates
+    seen = centres + depth.double().flatten(1).median(dim=1).values[:, None] * axes  # [V, 3]
+    own = (seen - centres)[:, None, :].expand(-1, len(centres), -1)  # [V (point), V (camera), 3]
+    other = seen[:, None, :] - centres[None, :, :]
+    # atan2 of the cross and dot products: exact near 0 degrees, where arccos of the cosine is not
+    return torch.rad2deg(torch.atan2(torch.linalg.cross(own, other).norm(dim=-1), (own * other).sum(-1)))
+
+
+def _neighbours(cameras: Cameras, depth: torch.Tensor, settings: DepthSweepSettings,
+                allowed: torch.Tensor) -> list[list[int]]:
+    """For each view, up to `settings.neighbours` nearest other cameras (by centre) among the
+    `allowed` ones whose triangulation angle at the view's median depth lies within
+    [`settings.min_angle`, `settings.max_angle`] degrees."""
     centres = cameras.centers().double()
     distances = torch.cdist(centres, centres)
-    distances[:, ~allowed] = float("inf")
+    angles = triangulation_angles(cameras, depth)
+    usable = allowed.to(angles.device)[None, :] & (angles >= settings.min_angle) & (angles <= settings.max_angle)
+    distances[~usable] = float("inf")
     distances.fill_diagonal_(float("inf"))
     order = distances.argsort(dim=1)
-    return [[int(o) for o in order[view] if torch.isfinite(distances[view, o])][:count] for view in range(len(cameras))]
+    return [[int(o) for o in order[view] if torch.isfinite(distances[view, o])][:settings.neighbours]
+            for view in range(len(cameras))]
 
 
 def _scores(grey: torch.Tensor, mean: torch.Tensor, deviation: torch.Tensor, cameras: Cameras, view: int,
@@ -169,7 +198,7 @@ def sweep_depth(
     points = unproject_depth(working, identity, cameras.intrinsics)  # [V, h, w, 3]
     refined = depth.clone()
     changed = torch.zeros(depth.shape, dtype=torch.bool, device=device)
-    neighbours = _neighbours(cameras, settings.neighbours, allowed)
+    neighbours = _neighbours(cameras, working, settings, allowed)
     for view, others in enumerate(neighbours):
         if not others or not bool(allowed[view]):  # a held-out view's Gaussians are not fused
             continue
@@ -196,4 +225,5 @@ def sweep_depth(
         changed[view] = accept
     compared = [view for view, others in enumerate(neighbours) if others and bool(allowed[view])]
     share = float(changed[compared].float().mean()) if compared else 0.0
-    return DepthSweep(refined, changed, share, time.perf_counter() - started)
+    lonely = sum(1 for view, others in enumerate(neighbours) if not others and bool(allowed[view]))
+    return DepthSweep(refined, changed, share, time.perf_counter() - started, lonely)

@@ -14,7 +14,8 @@ class DepthSweepSettings:
     scores are averaged per hypothesis; min_score: the NCC a new depth needs; min_contrast: how
     much higher its score must be than the lowest of the swept depths (a score that hardly
     changes with depth, as between views close together for the depth they see, says nothing
-    about the depth). Defaults chosen on
+    about the depth); min_angle, max_angle: the triangulation angles (degrees, at the view's
+    median depth) a neighbour must see the view's scene at. Defaults chosen on
     the development scenes (pipeline.presets.DEPTH_SWEEP says how)."""
 
     neighbours: int = 4
@@ -24,6 +25,8 @@ class DepthSweepSettings:
     best: int = 2
     min_score: float = 0.5
     min_contrast: float = 0.5
+    min_angle: float = 3.0
+    max_angle: float = 15.0
 
     def __post_init__(self) -> None:
         if self.neighbours < 1 or not 1 <= self.best <= self.neighbours:
@@ -36,5 +39,7 @@ class DepthSweepSettings:
             raise ValueError(f"radius={self.radius} must be >= 1")
         if not 0 <= self.min_contrast <= 2:
             raise ValueError(f"min_contrast={self.min_contrast} must be in [0, 2]")
+        if not 0 <= self.min_angle < self.max_angle <= 180:
+            raise ValueError(f"min_angle={self.min_angle}, max_angle={self.max_angle}: use 0 <= min_angle < max_angle <= 180")
         if not -1 <= self.min_score <= 1:
             raise ValueError(f"min_score={self.min_score} must be in [-1, 1]")
