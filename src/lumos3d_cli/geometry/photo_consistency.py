@@ -13,7 +13,8 @@ there (a neighbour counts when it sees the view's scene, the point on its axis a
 depth, at a triangulation angle within [`min_angle`, `max_angle`]: under a few degrees a depth
 change hardly moves the window, so its best score is noise, and beyond about 15 degrees the
 windows, taken square in each photo, no longer cover the same surface; a view with no such
-neighbour keeps its depth, as multi-view stereo selects its source views by that angle), and the hypothesis is scored by the NCC of a (2 radius + 1)² window around the pixel
+neighbour keeps its depth, as multi-view stereo selects its source views by that angle), and
+the hypothesis is scored by the NCC of a (2 radius + 1)² window around the pixel
 (invariant to each photo's gain and offset, so over- and under-exposed photos compare alike).
 Each hypothesis keeps the mean of its `best` neighbours' scores (a neighbour whose photo does
 not hold the whole window drops out; an occluded one scores low and is not among the best). The best hypothesis, refined by a parabola
