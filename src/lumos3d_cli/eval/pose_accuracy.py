@@ -14,6 +14,8 @@ from dataclasses import asdict, dataclass
 
 import torch
 
+from lumos3d_cli.geometry.vector_angles import angle_between
+
 _EPS = 1e-12
 
 
@@ -30,13 +32,6 @@ class PoseAccuracy:
 
     def as_dict(self) -> dict[str, float]:
         return asdict(self)
-
-
-def _angle_between(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """Angle in degrees between vectors [P, 3] (atan2: accurate near 0 and 180 degrees)."""
-    cross = torch.linalg.cross(a, b).norm(dim=-1)
-    dot = (a * b).sum(dim=-1)
-    return torch.rad2deg(torch.atan2(cross, dot))
 
 
 def _rotation_angle(rotations: torch.Tensor) -> torch.Tensor:
@@ -62,7 +57,7 @@ def relative_pose_errors(predicted: torch.Tensor, reference: torch.Tensor) -> tu
         errors.append((relative, direction))
     (predicted_rotation, predicted_direction), (reference_rotation, reference_direction) = errors
     rotation_error = _rotation_angle(predicted_rotation.transpose(-1, -2) @ reference_rotation)
-    angle = _angle_between(predicted_direction, reference_direction)
+    angle = angle_between(predicted_direction, reference_direction)
     translation_error = torch.minimum(angle, 180 - angle)
     degenerate = (predicted_direction.norm(dim=-1) < _EPS) | (reference_direction.norm(dim=-1) < _EPS)
     translation_error = torch.where(degenerate, torch.full_like(translation_error, 90.0), translation_error)

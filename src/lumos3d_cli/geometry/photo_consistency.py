@@ -36,6 +36,7 @@ import torch.nn.functional as F
 
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
+from lumos3d_cli.geometry.vector_angles import angle_between
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.geometry import unproject_depth
 
@@ -87,10 +88,8 @@ def triangulation_angles(cameras: Cameras, depth: torch.Tensor) -> torch.Tensor:
     centres = cameras.centers().double()
     axes = rotation[:, 2, :]  # each camera's +z (viewing direction) in world coordinates
     seen = centres + depth.double().flatten(1).median(dim=1).values[:, None] * axes  # [V, 3]
-    own = (seen - centres)[:, None, :].expand(-1, len(centres), -1)  # [V (point), V (camera), 3]
-    other = seen[:, None, :] - centres[None, :, :]
-    # atan2 of the cross and dot products: exact near 0 degrees, where arccos of the cosine is not
-    return torch.rad2deg(torch.atan2(torch.linalg.cross(own, other).norm(dim=-1), (own * other).sum(-1)))
+    # [V (point), 1, 3] against [V (point), V (camera), 3]
+    return angle_between((seen - centres)[:, None, :], seen[:, None, :] - centres[None, :, :])
 
 
 def _neighbours(cameras: Cameras, depth: torch.Tensor, settings: DepthSweepSettings,
@@ -226,5 +225,4 @@ def sweep_depth(
         changed[view] = accept
     compared = [view for view, others in enumerate(neighbours) if others and bool(allowed[view])]
     share = float(changed[compared].float().mean()) if compared else 0.0
-    lonely = sum(1 for view, others in enumerate(neighbours) if not others and bool(allowed[view]))
-    return DepthSweep(refined, changed, share, time.perf_counter() - started, lonely)
+    return DepthSweep(refined, changed, share, time.perf_counter() - started, int(allowed.sum()) - len(compared))
