@@ -21,8 +21,12 @@ not hold the whole window drops out; an occluded one scores low and is not among
 through its neighbours, replaces the depth where its score is at least `min_score`, at least `min_contrast`
 above the lowest score of the swept depths (a score that hardly changes with depth comes from a
 baseline too short for the depth, and its best is noise), where a neighbour sees the window at the
-depth as it was, and inside the swept range; elsewhere (no texture, clipped or black photos, noise
-the neighbours do not share, views close together) the depth stays as it was.
+depth as it was, and inside the swept range. A new depth is then kept only where it lands within
+`max_disagreement` (relative) of some neighbour's own swept depth, as multi-view stereo's fusion
+checks geometric consistency: a repeated pattern or a single neighbour can make a wrong depth score
+best in one view, but the neighbour that swept the same surface does not put it there. Elsewhere
+(no texture, clipped or black photos, noise the neighbours do not share, views close together)
+the depth stays as it was.
 """
 
 from __future__ import annotations
@@ -66,6 +70,7 @@ class DepthSweep:
                 "neighbours": settings.neighbours, "span": settings.span, "hypotheses": settings.hypotheses,
                 "window_px": 2 * settings.radius + 1, "min_score": settings.min_score,
                 "min_contrast": settings.min_contrast, "angles_deg": [settings.min_angle, settings.max_angle],
+                "max_disagreement": settings.max_disagreement,
                 "views_without_neighbours": self.views_without_neighbours}
 
 
@@ -108,27 +113,57 @@ def _neighbours(cameras: Cameras, depth: torch.Tensor, settings: DepthSweepSetti
             for view in range(len(cameras))]
 
 
+def _in_neighbour(cameras: Cameras, view: int, other: int, points: torch.Tensor, factors: torch.Tensor,
+                  size: tuple[int, int]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Where `view`'s points land in `other`'s depth map: points [h, w, 3] in the view's camera
+    frame, each scaled by (1 + f) for the J factors [J]; size (h, w) of the depth maps ->
+    (x, y) in grid_sample's [-1, 1] and the depth z in `other`'s frame, [J, h, w] each."""
+    height, width = size
+    rotation, translation = cameras.extrinsics[view, :, :3], cameras.extrinsics[view, :, 3]
+    other_rotation, other_translation = cameras.extrinsics[other, :, :3], cameras.extrinsics[other, :, 3]
+    relative = other_rotation @ rotation.T  # view's camera frame -> other's
+    offset = other_translation - relative @ translation
+    # a depth factor scales the point in the view's frame, so it scales its rotated copy too
+    rotated = (points @ relative.T).unbind(-1)  # 3 x [h, w]
+    scale = (1 + factors)[:, None, None]
+    x, y, z = (scale * rotated[axis] + offset[axis] for axis in range(3))  # [J, h, w] each
+    intrinsics = cameras.intrinsics[other]
+    safe = z.clamp_min(1e-12)
+    gx = (intrinsics[0, 0] * x / safe + intrinsics[0, 2]) * (2 / width) - 1
+    gy = (intrinsics[1, 1] * y / safe + intrinsics[1, 2]) * (2 / height) - 1
+    return gx, gy, z
+
+
+def depth_agreement(depth: torch.Tensor, changed: torch.Tensor, cameras: Cameras, neighbours: list[list[int]],
+            tolerance: float) -> torch.Tensor:
+    """[V, h, w] bool: the changed pixels whose new depth (depth [V, h, w], after the sweep) lands
+    in at least one of the view's neighbours within `tolerance` (relative) of that neighbour's own
+    depth there (its nearest pixel: no blend across a depth edge)."""
+    views, height, width = depth.shape
+    identity = torch.eye(3, 4, device=depth.device).expand(views, 3, 4)
+    points = unproject_depth(depth, identity, cameras.intrinsics)  # [V, h, w, 3]
+    no_factor = torch.zeros(1, device=depth.device)
+    agreed = torch.zeros_like(changed)
+    for view, others in enumerate(neighbours):
+        if not bool(changed[view].any()):
+            continue
+        for other in others:
+            gx, gy, z = (c[0] for c in _in_neighbour(cameras, view, other, points[view], no_factor, (height, width)))
+            theirs = F.grid_sample(depth[other][None, None], torch.stack([gx, gy], dim=-1)[None], mode="nearest",
+                                   align_corners=False, padding_mode="border")[0, 0]
+            agreed[view] |= (z > 0) & (gx.abs() < 1) & (gy.abs() < 1) & ((z - theirs).abs() <= tolerance * theirs)
+    return agreed & changed
+
+
 def _scores(grey: torch.Tensor, mean: torch.Tensor, deviation: torch.Tensor, cameras: Cameras, view: int,
             others: list[int], points: torch.Tensor, factors: torch.Tensor, radius: int) -> torch.Tensor:
     """[N, J, h, w] NCC of `view`'s windows with each neighbour's photo sampled at the J depth
     hypotheses; -inf where a hypothesis takes part of the window out of a neighbour's photo or
     behind it. points [h, w, 3]: the view's pixels in its camera frame at the current depth (a
     hypothesis scales them)."""
-    height, width = grey.shape[-2:]
-    rotation, translation = cameras.extrinsics[view, :, :3], cameras.extrinsics[view, :, 3]
     scores = []
     for other in others:
-        other_rotation, other_translation = cameras.extrinsics[other, :, :3], cameras.extrinsics[other, :, 3]
-        relative = other_rotation @ rotation.T  # view's camera frame -> other's
-        offset = other_translation - relative @ translation
-        # a depth factor scales the point in the view's frame, so it scales its rotated copy too
-        rotated = (points @ relative.T).unbind(-1)  # 3 x [h, w]
-        scale = (1 + factors)[:, None, None]
-        x, y, z = (scale * rotated[axis] + offset[axis] for axis in range(3))  # [J, h, w] each
-        intrinsics = cameras.intrinsics[other]
-        safe = z.clamp_min(1e-12)
-        gx = (intrinsics[0, 0] * x / safe + intrinsics[0, 2]) * (2 / width) - 1
-        gy = (intrinsics[1, 1] * y / safe + intrinsics[1, 2]) * (2 / height) - 1
+        gx, gy, z = _in_neighbour(cameras, view, other, points, factors, grey.shape[-2:])  # [J, h, w] each
         visible = (z > 0) & (gx.abs() < 1) & (gy.abs() < 1)
         sampled = F.grid_sample(grey[other][None].expand(len(factors), -1, -1, -1), torch.stack([gx, gy], dim=-1),
                                 mode="bilinear", align_corners=False, padding_mode="border")  # [J, 1, h, w]
@@ -223,6 +258,12 @@ def sweep_depth(
                   & (best > 0) & (best < settings.hypotheses - 1))
         refined[view] = torch.where(accept, depth[view] * (1 + factor.to(depth.dtype)), depth[view])
         changed[view] = accept
+    if settings.max_disagreement > 0:
+        # a wrong depth that one neighbour's photo happens to match (a repeated pattern, few
+        # views) lands where no neighbour's own sweep put the surface; a right one agrees with
+        # the neighbour that swept the same surface
+        changed = depth_agreement(refined.float(), changed, cameras, neighbours, settings.max_disagreement)
+        refined = torch.where(changed, refined, depth)
     compared = [view for view, others in enumerate(neighbours) if others and bool(allowed[view])]
     share = float(changed[compared].float().mean()) if compared else 0.0
     return DepthSweep(refined, changed, share, time.perf_counter() - started, int(allowed.sum()) - len(compared))

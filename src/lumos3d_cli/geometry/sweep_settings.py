@@ -15,18 +15,21 @@ class DepthSweepSettings:
     much higher its score must be than the lowest of the swept depths (a score that hardly
     changes with depth, as between views close together for the depth they see, says nothing
     about the depth); min_angle, max_angle: the triangulation angles (degrees, at the view's
-    median depth) a neighbour must see the view's scene at. Defaults chosen on
+    median depth) a neighbour must see the view's scene at; max_disagreement: how far (relative)
+    a new depth may lie from the swept depth of some neighbour where it lands in that neighbour
+    (0: no such check). Defaults chosen on
     the development scenes (pipeline.presets.DEPTH_SWEEP says how)."""
 
     neighbours: int = 4
-    span: float = 0.15
-    hypotheses: int = 15
+    span: float = 0.25
+    hypotheses: int = 17
     radius: int = 3
     best: int = 2
     min_score: float = 0.5
     min_contrast: float = 0.5
     min_angle: float = 3.0
     max_angle: float = 15.0
+    max_disagreement: float = 0.02
 
     def __post_init__(self) -> None:
         if self.neighbours < 1 or not 1 <= self.best <= self.neighbours:
@@ -41,5 +44,7 @@ class DepthSweepSettings:
             raise ValueError(f"min_contrast={self.min_contrast} must be in [0, 2]")
         if not 0 <= self.min_angle < self.max_angle <= 180:
             raise ValueError(f"min_angle={self.min_angle}, max_angle={self.max_angle}: use 0 <= min_angle < max_angle <= 180")
+        if not 0 <= self.max_disagreement < 1:
+            raise ValueError(f"max_disagreement={self.max_disagreement} must be in [0, 1)")
         if not -1 <= self.min_score <= 1:
             raise ValueError(f"min_score={self.min_score} must be in [-1, 1]")
