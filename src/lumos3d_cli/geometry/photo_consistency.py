@@ -135,10 +135,11 @@ def _in_neighbour(cameras: Cameras, view: int, other: int, points: torch.Tensor,
 
 
 def depth_agreement(depth: torch.Tensor, changed: torch.Tensor, cameras: Cameras, neighbours: list[list[int]],
-            tolerance: float) -> torch.Tensor:
-    """[V, h, w] bool: the changed pixels whose new depth (depth [V, h, w], after the sweep) lands
-    in at least one of the view's neighbours within `tolerance` (relative) of that neighbour's own
-    depth there (its nearest pixel: no blend across a depth edge)."""
+                    tolerance: float) -> torch.Tensor:
+    """[V, h, w] bool: the changed pixels ([V, h, w] bool) whose new depth (depth [V, h, w], after
+    the sweep) lands in at least one of the view's `neighbours` within `tolerance` (relative) of
+    that neighbour's own depth there (its nearest pixel: no blend across a depth edge). cameras
+    [V] in the depth's dtype, intrinsics in pixels of the depth maps."""
     views, height, width = depth.shape
     identity = torch.eye(3, 4, device=depth.device).expand(views, 3, 4)
     points = unproject_depth(depth, identity, cameras.intrinsics)  # [V, h, w, 3]
