@@ -33,7 +33,7 @@ def neighbours_by_distance(cameras: Cameras, count: int) -> torch.Tensor:
     return distances.argsort(dim=1)[:, : min(count, len(cameras) - 1)]
 
 
-def _compare(world: torch.Tensor, depth: torch.Tensor, cameras: Cameras, other: int, tolerance: float):
+def compare_with_neighbour(world: torch.Tensor, depth: torch.Tensor, cameras: Cameras, other: int, tolerance: float):
     """(confirmed [h, w], contradicted [h, w]) of one view's pixels, unprojected to world [h, w, 3],
     against `other`'s depth."""
     height, width = depth.shape[-2:]
@@ -69,7 +69,7 @@ def confirmed_pixels(
         confirmed = torch.zeros(depth.shape[1:], dtype=torch.bool)
         contradicted = torch.zeros(depth.shape[1:], dtype=torch.bool)
         for other in nearest[view].tolist():
-            yes, no = _compare(world[view], depth, cameras, other, tolerance)
+            yes, no = compare_with_neighbour(world[view], depth, cameras, other, tolerance)
             confirmed |= yes
             contradicted |= no
         keep[view] = confirmed | ~contradicted

@@ -39,6 +39,7 @@ import torch
 import torch.nn.functional as F
 
 from lumos3d_cli.checks import require_finite
+from lumos3d_cli.geometry.confirmed_depth import compare_with_neighbour
 from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
 from lumos3d_cli.geometry.vector_angles import angle_between
 from lumos3d_cli.io.cameras import Cameras
@@ -113,46 +114,20 @@ def _neighbours(cameras: Cameras, depth: torch.Tensor, settings: DepthSweepSetti
             for view in range(len(cameras))]
 
 
-def _in_neighbour(cameras: Cameras, view: int, other: int, points: torch.Tensor, factors: torch.Tensor,
-                  size: tuple[int, int]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Where `view`'s points land in `other`'s depth map: points [h, w, 3] in the view's camera
-    frame, each scaled by (1 + f) for the J factors [J]; size (h, w) of the depth maps ->
-    (x, y) in grid_sample's [-1, 1] and the depth z in `other`'s frame, [J, h, w] each."""
-    height, width = size
-    rotation, translation = cameras.extrinsics[view, :, :3], cameras.extrinsics[view, :, 3]
-    other_rotation, other_translation = cameras.extrinsics[other, :, :3], cameras.extrinsics[other, :, 3]
-    relative = other_rotation @ rotation.T  # view's camera frame -> other's
-    offset = other_translation - relative @ translation
-    # a depth factor scales the point in the view's frame, so it scales its rotated copy too
-    rotated = (points @ relative.T).unbind(-1)  # 3 x [h, w]
-    scale = (1 + factors)[:, None, None]
-    x, y, z = (scale * rotated[axis] + offset[axis] for axis in range(3))  # [J, h, w] each
-    intrinsics = cameras.intrinsics[other]
-    safe = z.clamp_min(1e-12)
-    gx = (intrinsics[0, 0] * x / safe + intrinsics[0, 2]) * (2 / width) - 1
-    gy = (intrinsics[1, 1] * y / safe + intrinsics[1, 2]) * (2 / height) - 1
-    return gx, gy, z
-
-
 def depth_agreement(depth: torch.Tensor, changed: torch.Tensor, cameras: Cameras, neighbours: list[list[int]],
                     tolerance: float) -> torch.Tensor:
     """[V, h, w] bool: the changed pixels ([V, h, w] bool) whose new depth (depth [V, h, w], after
     the sweep) lands in at least one of the view's `neighbours` within `tolerance` (relative) of
-    that neighbour's own depth there (its nearest pixel: no blend across a depth edge). cameras
-    [V] in the depth's dtype, intrinsics in pixels of the depth maps."""
-    views, height, width = depth.shape
-    identity = torch.eye(3, 4, device=depth.device).expand(views, 3, 4)
-    points = unproject_depth(depth, identity, cameras.intrinsics)  # [V, h, w, 3]
-    no_factor = torch.zeros(1, device=depth.device)
+    that neighbour's own depth there (its nearest pixel: no blend across a depth edge; fusion's
+    check, `geometry.confirmed_depth`, confirms a pixel the same way). cameras [V] in the
+    depth's dtype, intrinsics in pixels of the depth maps."""
+    world = unproject_depth(depth, cameras.extrinsics, cameras.intrinsics)  # [V, h, w, 3]
     agreed = torch.zeros_like(changed)
     for view, others in enumerate(neighbours):
         if not bool(changed[view].any()):
             continue
         for other in others:
-            gx, gy, z = (c[0] for c in _in_neighbour(cameras, view, other, points[view], no_factor, (height, width)))
-            theirs = F.grid_sample(depth[other][None, None], torch.stack([gx, gy], dim=-1)[None], mode="nearest",
-                                   align_corners=False, padding_mode="border")[0, 0]
-            agreed[view] |= (z > 0) & (gx.abs() < 1) & (gy.abs() < 1) & ((z - theirs).abs() <= tolerance * theirs)
+            agreed[view] |= compare_with_neighbour(world[view], depth, cameras, other, tolerance)[0]
     return agreed & changed
 
 
@@ -162,9 +137,21 @@ def _scores(grey: torch.Tensor, mean: torch.Tensor, deviation: torch.Tensor, cam
     hypotheses; -inf where a hypothesis takes part of the window out of a neighbour's photo or
     behind it. points [h, w, 3]: the view's pixels in its camera frame at the current depth (a
     hypothesis scales them)."""
+    height, width = grey.shape[-2:]
+    rotation, translation = cameras.extrinsics[view, :, :3], cameras.extrinsics[view, :, 3]
     scores = []
     for other in others:
-        gx, gy, z = _in_neighbour(cameras, view, other, points, factors, grey.shape[-2:])  # [J, h, w] each
+        other_rotation, other_translation = cameras.extrinsics[other, :, :3], cameras.extrinsics[other, :, 3]
+        relative = other_rotation @ rotation.T  # view's camera frame -> other's
+        offset = other_translation - relative @ translation
+        # a depth factor scales the point in the view's frame, so it scales its rotated copy too
+        rotated = (points @ relative.T).unbind(-1)  # 3 x [h, w]
+        scale = (1 + factors)[:, None, None]
+        x, y, z = (scale * rotated[axis] + offset[axis] for axis in range(3))  # [J, h, w] each
+        intrinsics = cameras.intrinsics[other]
+        safe = z.clamp_min(1e-12)
+        gx = (intrinsics[0, 0] * x / safe + intrinsics[0, 2]) * (2 / width) - 1
+        gy = (intrinsics[1, 1] * y / safe + intrinsics[1, 2]) * (2 / height) - 1
         visible = (z > 0) & (gx.abs() < 1) & (gy.abs() < 1)
         sampled = F.grid_sample(grey[other][None].expand(len(factors), -1, -1, -1), torch.stack([gx, gy], dim=-1),
                                 mode="bilinear", align_corners=False, padding_mode="border")  # [J, 1, h, w]
