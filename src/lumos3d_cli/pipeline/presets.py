@@ -168,11 +168,11 @@ class RestorePreset:
 # sharpness 0.55 to about 0.85. On the development scenes (buu and shrub, both modes, holdout, the
 # mean of the four; PSNR / SSIM / PSNR at mean grey / sharpness) 25 steps scored 21.11 / 0.700 /
 # 22.01 / 0.873, 30 21.10 / 0.699 / 22.00 / 0.872, 35 21.12 / 0.707 / 22.06 / 0.878 (buu low
-# light +0.02 dB, shrub low light +0.01, buu over-exposed +0.003, shrub over-exposed -0.002), 40 21.10 / 0.709 / 22.06 / 0.882, 50
-# 21.09 / 0.714 / 22.12 / 0.886 (buu's low light 25.16 dB against 25.22): SSIM and sharpness keep
-# rising while PSNR stays within the runs' noise (about 0.02 dB). 35 steps cost about 2.5 s of a
-# restore of buu's 25 photos (about 0.25 s a step), within the 30 s the issue on speed sets.
-# Voxels of two footprints merge neighbouring pixels of one view into
+# light +0.02 dB, shrub low light +0.01, buu over-exposed +0.003, shrub over-exposed -0.002), 40
+# 21.10 / 0.709 / 22.06 / 0.882, 50 21.09 / 0.714 / 22.12 / 0.886 (buu's low light 25.16 dB against
+# 25.22): SSIM and sharpness keep rising while PSNR stays within the runs' noise (about 0.02 dB).
+# 35 steps cost about 2.5 s of a restore of buu's 25 photos (about 0.25 s a step), within the 30 s
+# the issue on speed sets. Voxels of two footprints merge neighbouring pixels of one view into
 # Gaussians that do not cover their seams: where only that view sees the scene (the borders of
 # `make demo`'s views, the corner of buu's frame 19) the black background showed through as dark
 # streaks. The network keeps the model's resolution: at 0.75x it misplaced the 8 photos of 250 px
