@@ -213,7 +213,10 @@ RESTORE_PRESETS = {
     # modes, holdout, the mean of the four) 200 steps without densification scored 20.09 dB /
     # 0.683 / sharpness 0.83 and with it 20.17 / 0.694 / 0.86 (shrub's foliage gains the most:
     # over-exposed 17.12 / 0.536 / 0.85 -> 17.44 / 0.563 / 0.89). See docs/performance.md for
-    # the measured trade. Structure-from-motion at 512 px, for the most accurate cameras.
+    # the measured trade. Structure-from-motion at 512 px, for the most accurate cameras. Longer
+    # runs on shrub's over-exposed holdout (every step run, the rates falling to a tenth over the
+    # run): 300 steps 18.09 / 0.656, 600 steps 18.26 / 0.690, against 18.09 / 0.632 at 200, in 1.4x
+    # and 2.8x the refinement's time (docs/model-card.md): 200.
     "best": replace(_BALANCED, name="best", refine_steps=200, densify=DENSIFY, sfm_long_side=SFM_LONG_SIDE),
 }
 
