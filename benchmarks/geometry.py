@@ -17,6 +17,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cli_runs import LOM, evaluate_buu, run_lumos3d_json  # noqa: E402
 from report import machine_description, markdown_table, write_section  # noqa: E402
 
+from lumos3d_cli.pipeline.presets import get_restore_preset  # noqa: E402
+
 SOURCES = ("network", "sfm")
 STAGES = ("load_model", "sfm", "network", "fuse", "render", "write")
 
@@ -58,14 +60,15 @@ def main() -> None:
         folder = Path(scratch)
         evaluation = _evaluation_rows(folder)
         restore = _restore_rows(folder)
+    views = get_restore_preset("balanced").max_views
     load = f"load average {load_before:.1f} at the start, {os.getloadavg()[0]:.1f} at the end"
     markdown = "\n".join([
         "## Geometry sources (LOM buu)",
         "",
         f"Machine: {machine_description()}; {load} (seconds are only comparable at a load near 0). "
         "Script: `benchmarks/geometry.py`. Bundled models, default preset "
-        "(`balanced`: 16 views through the network). Camera accuracy over all view pairs the source placed "
-        "(network: the 16 views it saw; sfm: all 25) against buu's transforms.",
+        f"(`balanced`: up to {views} views through the network). Camera accuracy over all view pairs the source "
+        "placed (network: the views it saw; sfm: all 25) against buu's transforms.",
         "",
         markdown_table(
             ["mode", "geometry", "camera AUC@30", "rotation error ° (median)", "translation direction ° (median)",
