@@ -53,7 +53,7 @@ DENSIFY = DensifySettings()
 # 0.682 and shrub's over-exposed row lower; 7x7 with 15 depths, 2 % apart (the parabola between),
 # 21.00 / 0.681 in half the time: about 2 s for 32 views of 224x168 on 2 cores. 3 neighbours
 # instead of 4 lost 0.03 dB. `fast` gains as much (buu +0.33 dB in both modes, shrub's low light
-# +0.46) for about 1 s of its 13.5. The sweep runs on the CPU, also with --device cuda.
+# +0.46) for about 1 s of its 13.5 s then. The sweep runs on the CPU, also with --device cuda.
 # A new depth must also score 0.5 above the lowest of the swept depths: where views are close
 # together for the depth they see, the score hardly changes with depth and its best is noise.
 # `make demo`'s 8 photos (buu's every third) place view 22 far from a cluster of four: with no
