@@ -171,6 +171,20 @@ def test_gaussian_grid_densifies_the_pixel_gaussians(run_cli, buu, tmp_path, ran
     assert not (tmp_path / "bad").exists()
 
 
+def test_refinement_fits_the_views_as_they_are_shown(run_cli, buu, tmp_path, random_checkpoint):
+    """Filled views: refinement fits the renders divided by their alpha (what the fill shows);
+    black views: the render over black."""
+    photos = _copy(buu, tmp_path, ["1.JPG", "2.JPG"])
+    fitted = {}
+    for flag in ("--fill-unobserved", "--black-unobserved"):
+        out = tmp_path / flag.strip("-") / "scene.ply"
+        result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "network",
+                         "--preset", "fast", "--refine-steps", 2, flag, "--json")
+        assert result.code == 0, result.err
+        fitted[flag] = json.loads((out.parent / "summary.json").read_text())["refinement"]["fitted"]
+    assert fitted == {"--fill-unobserved": "splat colours", "--black-unobserved": "over black"}
+
+
 def test_uncovered_pixels_are_filled_unless_asked_to_stay_black(run_cli, buu, tmp_path, random_checkpoint):
     photos = _copy(buu, tmp_path, ["1.JPG", "2.JPG"])
     views = {}

@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from lumos3d_cli.errors import NonFiniteError
-from lumos3d_cli.render.hole_filling import FILL_SIDE, OBSERVED_ALPHA, fill_unobserved
+from lumos3d_cli.render.hole_filling import FILL_SIDE, OBSERVED_ALPHA, fill_unobserved, splat_colours
 from lumos3d_cli.render.render import render
 
 from factories import camera_at_origin, random_scene
@@ -98,3 +98,18 @@ def test_a_render_with_an_empty_half_is_filled_from_the_covered_half():
     first = covered.float().argmax(dim=1)
     edge = filled.image[:, rows, first[rows]]
     assert np.abs((left[:, rows, 0] - edge).numpy()).mean() < 0.15
+
+
+def test_splat_colours_are_what_the_fill_shows_where_covered():
+    """The differentiable colour refinement fits (refine.settings.splat_colours) equals the filled
+    view wherever the alpha reaches OBSERVED_ALPHA, and its gradient reaches the alpha."""
+    colour = torch.rand(3, 10, 12) * 0.8
+    alpha = torch.linspace(0.1, 1, 12).expand(10, 12).clone()
+    rendered = colour * alpha
+    filled = fill_unobserved(rendered, alpha).image
+    covered = alpha >= OBSERVED_ALPHA
+    splats = splat_colours(rendered[None], alpha[None])[0]
+    torch.testing.assert_close(splats[:, covered], filled[:, covered], atol=1e-6, rtol=0)
+    torch.testing.assert_close(splats[:, covered], colour[:, covered], atol=1e-6, rtol=0)
+    alpha_leaf = alpha.clone().double().requires_grad_(True)
+    torch.autograd.gradcheck(lambda a: splat_colours(rendered.double(), a), (alpha_leaf,))

@@ -137,7 +137,9 @@ class RestorePreset:
     # the key the prior pulls towards: "content" (predicted from what the scene shows,
     # model.appearance.exposure_key) or "fixed" (mean sRGB 0.45 for every scene)
     exposure_key: str = "content"
-    fill_unobserved: bool = True  # fill the rendered views' pixels no Gaussian covers (render.hole_filling)
+    # fill the rendered views' pixels no Gaussian covers (render.hole_filling); refinement then fits
+    # the views as filled (RefineSettings.splat_colours)
+    fill_unobserved: bool = True
     denoise_photo: bool = True  # a one-photo restore's amplified noise removed (model.appearance.amplified_noise)
     densify: DensifySettings | None = None  # refinement's densification schedule (None: the Gaussians it starts from)
     # what structure-from-motion sees: "restoration" (the model's operator: the network runs

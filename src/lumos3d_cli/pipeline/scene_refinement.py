@@ -58,15 +58,16 @@ def refinement_targets(
 def refine_scene(
     gaussians: Gaussians, targets: torch.Tensor, cameras: Cameras, steps: int, progress: JobProgress,
     max_side: int = RefineSettings.max_side, lr_decay_per_100_steps: float = RefineSettings.lr_decay_per_100_steps,
-    densify: DensifySettings | None = None,
+    densify: DensifySettings | None = None, splat_colours: bool = False,
 ) -> RefinementResult:
     """`steps` of refinement (fewer when the loss stops falling) against targets downsampled to a
     longer side of at most `max_side`, the learning rates falling by `lr_decay_per_100_steps`
     every 100 steps, densified on `densify`'s schedule (None: never), otherwise with the default
-    settings, shown as a "refine" progress bar."""
+    settings, shown as a "refine" progress bar. `splat_colours`: fit the renders as the hole fill
+    shows them (RefineSettings.splat_colours; the preset's `fill_unobserved`)."""
     progress.start("refine", steps)
     settings = RefineSettings(steps=steps, max_side=max_side, lr_decay_per_100_steps=lr_decay_per_100_steps,
-                              densify=densify)
+                              densify=densify, splat_colours=splat_colours)
     result = refine_gaussians(gaussians, cameras, targets, settings,
                               on_step=lambda step, loss: progress.advance("refine"))
     logger.info("refinement: %d steps (%s), loss %.4f -> %.4f, SH degree %d, %d Gaussians -> %d", result.steps_run,

@@ -21,6 +21,7 @@ from lumos3d_cli.refine.parameters import GaussianParameters, scene_extent
 from lumos3d_cli.refine.photometric import photometric_loss, working_views
 from lumos3d_cli.refine.settings import RefineSettings
 from lumos3d_cli.refine.sh_degree import choose_sh_degree
+from lumos3d_cli.render.hole_filling import splat_colours
 from lumos3d_cli.render.render import render
 
 logger = logging.getLogger(__name__)
@@ -37,7 +38,8 @@ class RefinementResult:
     (settings.patience, settings.tolerance); sh_degree: the degree kept; working_size: (width,
     height) of the images fitted; seconds: wall time; lr_decay_per_100_steps: the factor the
     learning rates fell by every 100 steps (settings.lr_decay_per_100_steps); densification:
-    (step, what it did) for each densification (settings.densify)."""
+    (step, what it did) for each densification (settings.densify); splat_colours: the renders were
+    fitted divided by their alpha (settings.splat_colours), else over black."""
 
     gaussians: Gaussians
     cameras: Cameras
@@ -49,12 +51,14 @@ class RefinementResult:
     seconds: float
     lr_decay_per_100_steps: float = 1.0
     densification: list[tuple[int, DensificationStep]] = field(default_factory=list)
+    splat_colours: bool = False
 
     def summary(self) -> dict:
         """The refinement's entry of summary.json."""
         return {
             "steps": self.steps_run, "stopped_early": self.stopped_early, "sh_degree": self.sh_degree,
             "working_size": list(self.working_size), "lr_decay_per_100_steps": self.lr_decay_per_100_steps,
+            "fitted": "splat colours" if self.splat_colours else "over black",
             "seconds": round(self.seconds, 3), "loss_curve": [round(value, 6) for value in self.loss_curve],
             "densification": [{"step": step} | asdict(done) for step, done in self.densification],
         }
@@ -114,6 +118,8 @@ def refine_gaussians(
 ) -> RefinementResult:
     """Fit `gaussians` to `targets` [V, 3, H, W] (sRGB in [0, 1], the restored input views) seen
     by `cameras` [V] (any sizes: they describe the targets' images and are rescaled to them).
+    With `settings.splat_colours` each render is divided by its alpha before it is compared (what
+    the hole fill shows of it), otherwise it is the render over black.
 
     Only the given views are fitted (a held-out view must not be among them). Every step renders
     `settings.views_per_step` views at the working resolution (the longer side at most
@@ -165,7 +171,8 @@ def refine_gaussians(
                 output = render(current, single_views[view], sh_degree=degree)
             else:
                 output = render(corrections.moved_gaussians(view, current, degree), single_views[view])
-            losses.append(photometric_loss(output.images, images[view : view + 1], settings.ssim_weight))
+            fitted = splat_colours(output.images, output.alphas) if settings.splat_colours else output.images
+            losses.append(photometric_loss(fitted, images[view : view + 1], settings.ssim_weight))
         loss = torch.stack(losses).mean()
         require_finite(f"refinement loss at step {step + 1}", loss.detach())
         optimizer.zero_grad(set_to_none=True)
@@ -201,7 +208,7 @@ def refine_gaussians(
     return RefinementResult(
         refined, Cameras(extrinsics, cameras.intrinsics.clone(), list(cameras.sizes), list(cameras.names)),
         curve, len(curve), stop.should_stop, degree, (images.shape[-1], images.shape[-2]), time.perf_counter() - started,
-        settings.lr_decay_per_100_steps, densifications,
+        settings.lr_decay_per_100_steps, densifications, settings.splat_colours,
     )
 
 

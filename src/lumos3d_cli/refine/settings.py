@@ -50,7 +50,9 @@ class RefineSettings:
     the units of each parameter (log scale, opacity logit, SH coefficient, radians) or, for
     positions and camera translations, relative to the scene's extent; early stop: when the
     running loss over all views has not fallen by `tolerance` (relative) for `patience` steps;
-    ssim_weight: loss = (1 - w) L1 + w (1 - SSIM); choose_sh_degree: drop the SH bands that do
+    ssim_weight: loss = (1 - w) L1 + w (1 - SSIM); splat_colours: fit each view's render divided
+    by its alpha (render.hole_filling.splat_colours), which is what a filled view shows, instead of
+    the render over black; choose_sh_degree: drop the SH bands that do
     not lower the loss (`sh_degree.choose_sh_degree`); seed: the view order;
     lr_decay_per_100_steps: every learning rate decays exponentially, by this factor every 100
     steps (1: constant rates, as 3DGS's but for positions, which it decays by 0.01 over its 30,000
@@ -100,6 +102,7 @@ class RefineSettings:
     patience: int = 20
     tolerance: float = 1e-2
     ssim_weight: float = 0.3
+    splat_colours: bool = False
     choose_sh_degree: bool = True
     sh_tolerance: float = 1e-3
     seed: int = 0

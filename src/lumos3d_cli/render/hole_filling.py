@@ -15,6 +15,8 @@ hatching and black wedges. Filling them makes the view a restoration of the whol
   unchanged and partly covered ones keep their splats' share.
 
 Only the render itself is used: no photo, so a held-out view's own photo never leaks into it.
+Test-time refinement fits `splat_colours` of its renders (refine.settings), so a fitted view's
+covered pixels show exactly what was fitted.
 """
 
 from __future__ import annotations
@@ -39,6 +41,13 @@ class FilledView:
 
     image: torch.Tensor
     unobserved: float
+
+
+def splat_colours(images: torch.Tensor, alphas: torch.Tensor) -> torch.Tensor:
+    """images [..., 3, H, W] rendered over black, alphas [..., H, W] -> what a filled view shows
+    where the alpha is at least OBSERVED_ALPHA: the render divided by its alpha (differentiable;
+    below OBSERVED_ALPHA divided by it, where the fill paints instead)."""
+    return images / alphas.clamp_min(OBSERVED_ALPHA).unsqueeze(-3)
 
 
 def _inpaint(colour: np.ndarray, unobserved: np.ndarray) -> np.ndarray:
@@ -74,7 +83,8 @@ def fill_unobserved(image: torch.Tensor, alpha: torch.Tensor) -> FilledView:
     fraction = float(unobserved.mean())
     if unobserved.all():
         return FilledView(image, fraction)
-    colour = np.where(unobserved[..., None], 0.0, rendered / np.maximum(coverage, OBSERVED_ALPHA)[..., None])
+    splats = splat_colours(image.detach().float().cpu(), alpha.detach().float().cpu().clamp(0, 1))
+    colour = np.where(unobserved[..., None], 0.0, splats.permute(1, 2, 0).numpy())
     colour = colour.astype(np.float32)
     if unobserved.any():
         colour = _inpaint(colour, unobserved)
