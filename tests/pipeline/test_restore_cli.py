@@ -171,17 +171,22 @@ def test_gaussian_grid_densifies_the_pixel_gaussians(run_cli, buu, tmp_path, ran
     assert not (tmp_path / "bad").exists()
 
 
+def _restore_filled_or_black(run_cli, photos, tmp_path, checkpoint, flag: str, steps: int) -> tuple[dict, np.ndarray]:
+    """`restore` of `photos` (`fast`, the network's cameras, `steps` refinement steps) with `flag`
+    (--fill-unobserved or --black-unobserved) -> (its summary, restored view 1.png as int BGR)."""
+    out = tmp_path / flag.strip("-") / "scene.ply"
+    result = run_cli("restore", photos, "-o", out, "--checkpoint", checkpoint, "--geometry", "network",
+                     "--preset", "fast", "--refine-steps", steps, flag, "--json")
+    assert result.code == 0, result.err
+    return json.loads(result.out), cv2.imread(str(out.parent / "restored" / "1.png")).astype(int)
+
+
 def test_refinement_fits_the_views_as_they_are_shown(run_cli, buu, tmp_path, random_checkpoint):
     """Filled views: refinement fits the renders divided by their alpha (what the fill shows);
     black views: the render over black."""
     photos = _copy(buu, tmp_path, ["1.JPG", "2.JPG"])
-    fitted = {}
-    for flag in ("--fill-unobserved", "--black-unobserved"):
-        out = tmp_path / flag.strip("-") / "scene.ply"
-        result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "network",
-                         "--preset", "fast", "--refine-steps", 2, flag, "--json")
-        assert result.code == 0, result.err
-        fitted[flag] = json.loads((out.parent / "summary.json").read_text())["refinement"]["fitted"]
+    fitted = {flag: _restore_filled_or_black(run_cli, photos, tmp_path, random_checkpoint, flag, 2)[0]["refinement"]["fitted"]
+              for flag in ("--fill-unobserved", "--black-unobserved")}
     assert fitted == {"--fill-unobserved": "splat colours", "--black-unobserved": "over black"}
 
 
@@ -189,11 +194,8 @@ def test_uncovered_pixels_are_filled_unless_asked_to_stay_black(run_cli, buu, tm
     photos = _copy(buu, tmp_path, ["1.JPG", "2.JPG"])
     views = {}
     for flag in ("--fill-unobserved", "--black-unobserved"):
-        out = tmp_path / flag.strip("-") / "scene.ply"
-        result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "network",
-                         "--preset", "fast", "--refine-steps", 0, flag, "--json")
-        assert result.code == 0, result.err
-        views[flag] = (json.loads(result.out)["uncovered"], cv2.imread(str(out.parent / "restored" / "1.png")).astype(int))
+        summary, view = _restore_filled_or_black(run_cli, photos, tmp_path, random_checkpoint, flag, 0)
+        views[flag] = (summary["uncovered"], view)
     (filled, filled_view), (black, black_view) = views["--fill-unobserved"], views["--black-unobserved"]
     assert filled["filled"] and not black["filled"]
     assert filled["unobserved_fraction"] == black["unobserved_fraction"]  # the same scene, only the compositing differs
