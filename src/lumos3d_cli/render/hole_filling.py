@@ -46,7 +46,7 @@ class FilledView:
 def splat_colours(images: torch.Tensor, alphas: torch.Tensor) -> torch.Tensor:
     """images [..., 3, H, W] rendered over black, alphas [..., H, W] -> what a filled view shows
     where the alpha is at least OBSERVED_ALPHA: the render divided by its alpha (differentiable;
-    below OBSERVED_ALPHA divided by it, where the fill paints instead)."""
+    lower alphas are divided by OBSERVED_ALPHA, as the fill paints those pixels instead)."""
     return images / alphas.clamp_min(OBSERVED_ALPHA).unsqueeze(-3)
 
 
@@ -77,14 +77,15 @@ def fill_unobserved(image: torch.Tensor, alpha: torch.Tensor) -> FilledView:
     with no observed pixel has nothing to extrapolate from and is returned as it is."""
     require_finite("rendered image", image)
     require_finite("rendered alpha", alpha)
-    rendered = image.detach().float().cpu().permute(1, 2, 0).numpy()  # [H, W, 3]
-    coverage = alpha.detach().float().cpu().clamp(0, 1).numpy()  # [H, W]
+    image_cpu = image.detach().float().cpu()  # [3, H, W]
+    alpha_cpu = alpha.detach().float().cpu().clamp(0, 1)  # [H, W]
+    rendered = image_cpu.permute(1, 2, 0).numpy()  # [H, W, 3]
+    coverage = alpha_cpu.numpy()
     unobserved = coverage < OBSERVED_ALPHA
     fraction = float(unobserved.mean())
     if unobserved.all():
         return FilledView(image, fraction)
-    splats = splat_colours(image.detach().float().cpu(), alpha.detach().float().cpu().clamp(0, 1))
-    colour = np.where(unobserved[..., None], 0.0, splats.permute(1, 2, 0).numpy())
+    colour = np.where(unobserved[..., None], 0.0, splat_colours(image_cpu, alpha_cpu).permute(1, 2, 0).numpy())
     colour = colour.astype(np.float32)
     if unobserved.any():
         colour = _inpaint(colour, unobserved)
