@@ -93,9 +93,9 @@ def test_balanced_fits_every_view_at_least_once_unless_told_the_steps(buu):
     once), up to twice the preset's steps; `--refine-steps N` (get_restore_preset's refine_steps)
     means exactly N."""
     assert get_restore_preset("balanced").refine_each_view and not get_restore_preset("fast").refine_each_view
-    assert not get_restore_preset("balanced", refine_steps=35).refine_each_view
+    assert not get_restore_preset("balanced", refine_steps=45).refine_each_view
     balanced = get_restore_preset("balanced")
-    assert [balanced.refinement_steps(views) for views in (3, 35, 50, 90)] == [35, 35, 50, 70]  # capped at twice
+    assert [balanced.refinement_steps(views) for views in (3, 45, 60, 120)] == [45, 45, 60, 90]  # capped at twice
     assert get_restore_preset("fast").refinement_steps(64) == 15
     names = ["1.JPG", "2.JPG", "3.JPG", "4.JPG", "5.JPG"]
     photos = torch.stack([load_images([buu / "low" / name]).images[0] for name in names])

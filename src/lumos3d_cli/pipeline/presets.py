@@ -166,15 +166,18 @@ class RestorePreset:
 
 
 # balanced: best's scene (all views up to 32, voxels of one footprint, refinement against the
-# photos at their own size) stopped at 35 refinement steps: the first 25 steps take the views from
+# photos at their own size) stopped at 45 refinement steps: the first 25 steps take the views from
 # sharpness 0.55 to about 0.85. On the development scenes (buu and shrub, both modes, holdout, the
-# mean of the four; PSNR / SSIM / PSNR at mean grey / sharpness) 25 steps scored 21.11 / 0.700 /
-# 22.01 / 0.873, 30 21.10 / 0.699 / 22.00 / 0.872, 35 21.12 / 0.707 / 22.06 / 0.878 (buu low
-# light +0.02 dB, shrub low light +0.01, buu over-exposed +0.003, shrub over-exposed -0.002), 40
-# 21.10 / 0.709 / 22.06 / 0.882, 50 21.09 / 0.714 / 22.12 / 0.886 (buu's low light 25.16 dB against
-# 25.22): SSIM and sharpness keep rising while PSNR stays within the runs' noise (about 0.02 dB).
-# 35 steps cost about 2.5 s of a restore of buu's 25 photos (about 0.25 s a step), within the 30 s
-# the issue on speed sets. Voxels of two footprints merge neighbouring pixels of one view into
+# mean of the four; PSNR / SSIM / PSNR at mean grey / sharpness), with refinement fitting the
+# colours the hole fill shows (one evaluation each, 2026-11-27): 35 steps 21.45 / 0.732 / 22.37 /
+# 0.93, 45 21.50 / 0.740 / 22.45 / 0.94 (buu low light 25.24 dB against 25.23, shrub low light
+# +0.05, buu over-exposed +0.04, shrub over-exposed +0.10), 50 21.54 / 0.744 / 22.50 / 0.95 (buu's
+# low light 25.17). The steps cost about 0.25 s each on buu's 25 photos: warm restores of buu
+# took 24.8 s at 35 steps and 28.0-29.0 s at 50 (interleaved, one host), and the issue on speed
+# sets 30 s; 45 keeps about 2 s for the hosts' spread (docs/performance.md). Before that change
+# the steps bought SSIM and sharpness only (25 steps 21.11 / 0.700, 35 21.12 / 0.707, 50 21.09 /
+# 0.714): fitted over black, the longer fits moved the views away from what the fill shows.
+# Voxels of two footprints merge neighbouring pixels of one view into
 # Gaussians that do not cover their seams: where only that view sees the scene (the borders of
 # `make demo`'s views, the corner of buu's frame 19) the black background showed through as dark
 # streaks. The network keeps the model's resolution: at 0.75x it misplaced the 8 photos of 250 px
@@ -184,11 +187,11 @@ class RestorePreset:
 # 0.770 against 20.59 / 0.641 / 0.772 at 512 px, every view registered, and each evaluation about
 # 4 s shorter; the cameras' median rotation error against the scenes' reference rises from about
 # 0.25 to 0.35 degrees (buu and shrub), which `best` keeps at 512 px.
-# Every fitted view gets at least one step, up to 70 (`refine_each_view`): with 25 steps, one view each, 5 of
+# Every fitted view gets at least one step, up to 90 (`refine_each_view`): with 25 steps, one view each, 5 of
 # shrub's 30 fitted views (10 of 35 in the context protocol) stayed as the fusion made them; with
 # one step per view all four of shrub's rows rose by 0.03-0.05 dB and 0.012-0.024 SSIM (the mean of
 # the four 20.61 / 0.642 / 0.77 -> 20.63 / 0.649 / 0.78; measured at 25 steps).
-_BALANCED = RestorePreset("balanced", max_views=32, resolution=1.0, sh_degree=None, voxel_scale=1.0, refine_steps=35,
+_BALANCED = RestorePreset("balanced", max_views=32, resolution=1.0, sh_degree=None, voxel_scale=1.0, refine_steps=45,
                           refine_each_view=True, refine_side=512, sfm_long_side=384, depth_sweep=DEPTH_SWEEP)
 
 RESTORE_PRESETS = {
