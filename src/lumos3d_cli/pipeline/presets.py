@@ -173,8 +173,9 @@ class RestorePreset:
 # 0.93, 45 21.50 / 0.740 / 22.45 / 0.94 (buu low light 25.24 dB against 25.23, shrub low light
 # +0.05, buu over-exposed +0.04, shrub over-exposed +0.10), 50 21.54 / 0.744 / 22.50 / 0.95 (buu's
 # low light 25.17). The steps cost about 0.25 s each on buu's 25 photos: warm restores of buu
-# took 24.8 s at 35 steps and 28.0-29.0 s at 50 (interleaved, one host), and the issue on speed
-# sets 30 s; 45 keeps about 2 s for the hosts' spread (docs/performance.md). Before that change
+# took 24.8 s at 35 steps and 28.0-29.0 s at 50 (interleaved, one host), and in one run of
+# benchmarks/presets.py 28.5 s at 45 and 27.7 s at 50 (docs/performance.md): the issue on speed
+# sets 30 s, and 45 keeps about 1-2 s for the hosts' spread. Before that change
 # the steps bought SSIM and sharpness only (25 steps 21.11 / 0.700, 35 21.12 / 0.707, 50 21.09 /
 # 0.714): fitted over black, the longer fits moved the views away from what the fill shows.
 # Voxels of two footprints merge neighbouring pixels of one view into
