@@ -35,7 +35,7 @@ REFINE_LR_DECAY = 0.1 ** 0.5  # per 100 steps
 # On the development scenes (buu and shrub, both modes, holdout, the mean of the four), 200 steps:
 # up to step 80 20.16 dB / 0.692 / sharpness 0.86, up to step 150 20.15 / 0.693 / 0.89 with 1.4x
 # the Gaussians and more specks of the colour chart's black border around it in buu's low-light
-# novel views (23.51 dB there against 23.70), so 80. At 25 steps (`balanced`), densifying every 8
+# novel views (23.51 dB there against 23.70), so 80. At 25 steps (`balanced`'s then), densifying every 8
 # steps lost 0.17 dB and 0.008 SSIM for sharpness 0.77 -> 0.79: the new Gaussians need steps to settle.
 # 10 % every 10 steps instead of 5 % (`best`, the sweep over +-25 % with its check; one evaluation):
 # 21.23 / 0.741 / 22.31 / 0.93 against 21.18 / 0.742 / 22.33 / 0.92, all of it shrub's (over-exposed
@@ -197,8 +197,9 @@ _BALANCED = RestorePreset("balanced", max_views=32, resolution=1.0, sh_degree=No
 
 RESTORE_PRESETS = {
     # fast: a smaller network image without view-dependent colour, 15 refinement steps against
-    # the photos at 256 px (on buu's holdout frames 22.26 dB without refinement, 23.10 with 15
-    # steps, 23.08 with 25 at 10 % more time; the first steps are what sharpen the views),
+    # the photos at 256 px (on buu's holdout frames, the first measurement with the fixed key: 22.26 dB
+    # without refinement, 23.10 with 15 steps, 23.08 with 25 at 10 % more time; in the presets run of
+    # 2026-11-27 23.97, 24.73 and 24.60: the first steps are what sharpen the views),
     # structure-from-motion on photos of at most 384 px (on buu and Strecha 0.4 degrees median
     # rotation error against 0.3 at 512, in 40-60 % of the time) and the budget's weights at half
     # resolution (up to 0.08 dB lost). 8 views left buu's holdout scene to 5 photos whose
