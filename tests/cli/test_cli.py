@@ -179,6 +179,8 @@ def test_degrade_bad_values(run_cli, buu, tmp_path):
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o.jpg", "--bit-depth", "16"), "JPEG holds 8 bits only")
     expect_input_error(run_cli("degrade", buu / "high", "-o", tmp_path / "one.png"), "names one file but there are 25 inputs")
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--colour-cast", "0.5"), "--colour-cast 0.5", "at least 1")
+    for infinite in ("inf", "nan"):
+        expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--colour-cast", infinite), "--colour-cast", "finite")
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--jpeg-quality", "0"), "--jpeg-quality 0", "1 to 100")
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--exposure", "0.5", "0.1"), "--exposure 0.5 0.1", "0 < low <= high")
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--gamma", "0", "1"), "--gamma 0.0 1.0", "0 < low <= high")

@@ -354,19 +354,40 @@ def test_a_file_elsewhere_gets_the_umask_and_never_goes_inside_a_folder_of_lumos
         _restore_like(out, ["1.png"], video=out / "views" / "orbit.mp4")
 
 
-def test_another_commands_outputs_inside_a_folder_of_lumos3ds_own_count_as_lumos3ds(tmp_path):
+def test_another_runs_outputs_inside_a_folder_of_lumos3ds_own_refuse_the_run_and_survive(tmp_path):
     """`render -o out/views` puts frames and their manifest inside restore's own folder: they are
-    lumos3d's, so the next restore replaces the folder instead of refusing it; a user's file
-    beside them still refuses."""
+    lumos3d's, but another run's, so the next restore, which replaces the folder whole, refuses
+    instead of deleting them; once they are moved away it runs."""
     out = tmp_path / "out"
     _restore_like(out, ["1.png"])
     frames = OutputSet(out / "views", "render", "render").add_file("00000.png")
     with frames.staged() as staging:
         (staging.root / "00000.png").write_text("a frame")
+    before = snapshot(out)
+    with pytest.raises(InputError, match=r"views/00000.png: an output of another lumos3d run \(render\)"):
+        _restore_like(out, ["2.png"], text="second")
+    assert snapshot(out) == before
+    (out / "views" / "00000.png").unlink()
     _restore_like(out, ["2.png"], text="second")
     assert _tree(out / "views") == ["2.png"]
-    with OutputSet(out / "views", "render", "render").add_file("00000.png").staged() as staging:
-        (staging.root / "00000.png").write_text("a frame")
-    (out / "views" / "notes.txt").write_text("the user's")
-    with pytest.raises(InputError, match=r"views/notes.txt: exists and was not written by lumos3d"):
-        _restore_like(out, ["3.png"])
+
+
+def test_a_scene_of_another_name_never_takes_over_an_earlier_scenes_side_files(tmp_path):
+    """Two restores into one folder under different scene names would share summary.json and
+    views/: the second is refused while the first scene's file is there, so no scene is left with
+    another's side files; with it moved away the second replaces them."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], text="first")
+    second = OutputSet(out, "restore", "restore other.ply").add_file("other.ply").add_file("summary.json")
+    second.add_folder("views")
+    before = snapshot(out)
+    with pytest.raises(InputError, match=r"holds the outputs of restore scene.ply \(scene.ply and"):
+        second.check()
+    assert snapshot(out) == before
+    (out / "scene.ply").rename(tmp_path / "kept.ply")
+    second.check()
+    with second.staged() as staging:
+        for name in ("other.ply", "summary.json"):
+            (staging.root / name).write_text("second")
+        (staging.root / "views").mkdir()
+    assert _tree(out) == [MANIFEST_NAME, "other.ply", "summary.json", "views"]

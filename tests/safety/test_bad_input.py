@@ -5,6 +5,7 @@ import errno
 import json
 import shutil
 
+import cv2
 import numpy as np
 import pycolmap
 import pytest
@@ -151,6 +152,20 @@ def test_row12_black_and_white_photos_are_named_once(tmp_path, buu, random_check
     assert result.code == 0, result.err
     assert result.err.count("entirely black") == 1 and "black.png is entirely black" in result.err
     assert result.err.count("entirely saturated") == 1 and "white.png is entirely saturated" in result.err
+
+
+def test_row12_a_white_photo_stays_white_in_the_over_exposure_model(tmp_path, run_cli):
+    """The bundled over-exposure operator darkens what it sees; an all-saturated photo records
+    nothing to darken, so its restoration is the photo itself, with no exposure gain."""
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    write_image(photos / "white.png", np.ones((120, 160, 3), np.float32))
+    output = tmp_path / "out" / "scene.ply"
+    result = run_cli("restore", photos, "-o", output, "--mode", "over-exposure", "--preset", "fast", "--json")
+    assert result.code == 0, result.err
+    assert json.loads(result.out)["exposure_prior"]["stops"] == 0.0
+    restored = cv2.imread(str(output.parent / "restored" / "white.png"))
+    assert restored.min() == 255
 
 
 def test_row12_photo_names_with_spaces_stay_whole_for_pycolmap(tmp_path):

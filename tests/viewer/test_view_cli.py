@@ -7,6 +7,8 @@ import threading
 import time
 import urllib.request
 
+import cv2
+import numpy as np
 import pytest
 
 from assertions import expect_input_error
@@ -80,3 +82,18 @@ def test_view_bad_inputs(run_cli, restore_folder, tmp_path):
         started = time.perf_counter()
         expect_input_error(run_cli("view", restore_folder, "--port", port), f"--port {port}: already in use", "--port")
         assert time.perf_counter() - started < 30
+
+
+def test_restore_with_view_refuses_a_bad_port_before_restoring(run_cli, tmp_path):
+    """`restore --view` checks the port first: a port it cannot serve on writes no scene at all."""
+    photos = tmp_path / "one-photo"
+    photos.mkdir()
+    cv2.imwrite(str(photos / "0.png"), np.random.default_rng(0).integers(0, 255, (96, 128, 3), dtype=np.uint8))
+    output = tmp_path / "refused" / "scene.ply"
+    expect_input_error(run_cli("restore", photos, "-o", output, "--view", "--port", "99999"), "--port 99999", "between 1 and 65535")
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        expect_input_error(run_cli("restore", photos, "-o", output, "--view", "--port", port), f"--port {port}: already in use")
+    assert not output.parent.exists()

@@ -19,6 +19,7 @@ from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, GEOMETRY_SOURCES
 from lumos3d_cli.pipeline.restore_paths import check_view_format, list_photos, restore_outputs
 from lumos3d_cli.viewer.defaults import DEFAULT_HOST, DEFAULT_PORT
+from lumos3d_cli.viewer.port import require_free_port
 
 if TYPE_CHECKING:
     from lumos3d_cli.pipeline.restore import RestoredScene
@@ -65,6 +66,8 @@ def restore_command(
     check_output_path(output, "output")
     check_output_path(video, "video")
     check_view_format(output_format)
+    if view:  # refused before the restore, not after it has written a scene no viewer can show
+        require_free_port(DEFAULT_HOST, port)
     # Everything the outputs must stay clear of; checked, with what is already in the way, before any
     # work (and before the libraries load: a refusal ends at once), and again while the output
     # folder is held against other runs (io/output_set.py).

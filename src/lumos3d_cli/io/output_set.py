@@ -248,13 +248,31 @@ class OutputSet:
                 if inner.is_dir() and not inner.is_symlink():
                     raise InputError(f"{inner}: a folder lumos3d did not make, inside its output folder {path}; move it "
                                      "away or choose another output")
-                # lumos3d's own file there: the output folder's manifest lists it, or (another
-                # command's output put there) the manifest beside it, which is then lumos3d's too
                 if inner.name == MANIFEST_NAME and Manifest.is_manifest(inner):
                     continue
+                # another run's output put there (`render -o out/restored`), listed by the manifest
+                # beside it: lumos3d's, but not this run's to delete with the folder
                 if inner.parent != self.folder and manifest(inner.parent).owns(inner):
-                    continue
+                    entry = manifest(inner.parent).files[manifest(inner.parent).relative(inner)]
+                    raise InputError(f"{inner}: an output of another lumos3d run ({entry.output_set}) inside {path}, "
+                                     "which this run replaces whole; move it away or choose another output")
                 _refuse_unless_ours(manifest(self.folder), inner)
+        self._check_no_set_left_incomplete(manifest(self.folder))
+
+    def _check_no_set_left_incomplete(self, manifest: Manifest) -> None:
+        """InputError when this run would replace files of another output set of its folder while
+        that set keeps others: `restore -o out/b.ply` after `restore -o out/a.ply` would give a.ply
+        b's cameras.json, restored/ and summary.json."""
+        ours = {*self._files, *self._folders}
+        replaced = {entry.output_set for name, entry in manifest.files.items()
+                    if name.split("/")[0] in ours and entry.output_set != self.output_set and manifest.owns(self.folder / name)}
+        for other in sorted(replaced):
+            kept = sorted({name.split("/")[0] for name, entry in manifest.files.items()
+                           if entry.output_set == other and name.split("/")[0] not in ours and (self.folder / name).exists()})
+            if kept:
+                raise InputError(f"{self.folder}: holds the outputs of {other} ({', '.join(kept)} and the files this run "
+                                 "writes too); this run would replace those and leave the others unmatched: write to "
+                                 "another folder, or move them away first", parameter=self.parameter)
 
     # -- writing --------------------------------------------------------------------------------
 

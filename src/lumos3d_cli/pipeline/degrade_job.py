@@ -4,6 +4,7 @@ with degradation.json, or one file), all or nothing."""
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -38,8 +39,9 @@ def degrade_files(
     outputs = degrade_outputs(paths, output, bit_depth, given)
     outputs.check()
     single_file = is_single_file(output)
-    if colour_cast < 1:
-        raise InputError(f"{colour_cast}: the largest colour-cast gain must be at least 1 (1: no cast)", parameter="colour_cast")
+    if not (math.isfinite(colour_cast) and colour_cast >= 1):
+        raise InputError(f"{colour_cast}: the largest colour-cast gain must be finite and at least 1 (1: no cast)",
+                         parameter="colour_cast")
     if jpeg_quality is not None and not 1 <= jpeg_quality <= 100:
         raise InputError(f"{jpeg_quality}: use a JPEG quality from 1 to 100", parameter="jpeg_quality")
     for name, bounds in (("exposure", exposure), ("gamma", gamma)):

@@ -189,7 +189,8 @@ def check_photo_contents(batch: ImageBatch, patch_size: int) -> None:
     black, saturated = frames_without_content(batch.images)
     for kind, indices in (("black", black), ("saturated", saturated)):
         if indices:
-            logger.warning("%s %s entirely %s: nothing to restore there (it stays %s)", ", ".join(names[i] for i in indices),
+            logger.warning("%s %s entirely %s: nothing to restore there (its pixels stay %s and the scene's exposure is "
+                           "metered without it)", ", ".join(names[i] for i in indices),
                            "is" if len(indices) == 1 else "are", kind, "black" if kind == "black" else "white")
 
 

@@ -6,11 +6,9 @@ viser serves its prebuilt web client from inside its wheel, so the viewer works 
 from __future__ import annotations
 
 import contextlib
-import errno
 import io
 import logging
 import math
-import socket
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -23,6 +21,7 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.viewer.defaults import DEFAULT_HOST, DEFAULT_PORT
 from lumos3d_cli.viewer.framing import VIEWER_RADIUS, ViewerFrame, frame_scene, view_position_showing
 from lumos3d_cli.viewer.panel import panel_markdown
+from lumos3d_cli.viewer.port import require_free_port
 from lumos3d_cli.viewer.scene_folder import ViewerScene, load_viewer_scene
 from lumos3d_cli.viewer.splats import DEFAULT_MAX_SPLATS, splat_arrays
 
@@ -57,27 +56,6 @@ def viser_output_to_log() -> Iterator[None]:
     for line in captured.getvalue().splitlines():
         if line.strip():
             logger.debug("viser: %s", line)
-
-
-def require_free_port(host: str, port: int) -> None:
-    """InputError naming the port when something already listens there (viser itself would
-    silently move to the next port, and the printed URL would lie)."""
-    if not 0 <= port <= 65535:
-        raise InputError(f"--port {port}: use a port between 1 and 65535 (0 picks a free one)")
-    try:
-        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
-    except socket.gaierror as error:
-        raise InputError(f"--host {host}: not an address of this machine ({error.strerror}); use 127.0.0.1 or 0.0.0.0") from error
-    family, _, _, _, address = infos[0]
-    with socket.socket(family, socket.SOCK_STREAM) as probe:
-        # The same option the server sets: a port left in TIME_WAIT by a stopped viewer is free.
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            probe.bind(address)
-        except OSError as error:
-            if error.errno == errno.EADDRINUSE:
-                raise InputError(f"--port {port}: already in use on {host}; pick another with --port (0 picks a free one)") from error
-            raise InputError(f"--host {host} --port {port}: cannot listen there ({error.strerror})") from error
 
 
 def _frustum_scale(positions: np.ndarray) -> float:

@@ -134,3 +134,18 @@ def test_a_non_finite_operator_is_named_not_passed_on():
     operator.curve_slopes[0, 0, 3] = float("nan")
     with pytest.raises(NonFiniteError, match="exposure prior"):
         exposure_prior_stops(operator, torch.full((1, 1, 3, 8, 8), 0.3), 0.75)
+
+
+def test_black_and_saturated_photos_are_not_metered():
+    """One black frame among real ones would pull the mean down and brighten every view; the
+    gain is the real frames' own, and a scene of only black or white frames gets none."""
+    operator = _operator(batch=1, views=4)
+    real = 0.3 * torch.rand(1, 4, 3, 16, 20, generator=torch.Generator().manual_seed(7))
+    alone = exposure_prior_stops(AppearanceOperator.identity(1), real[:, :3], 0.75)
+    mixed = real.clone()
+    mixed[0, 3] = 0.0
+    assert exposure_prior_stops(AppearanceOperator.identity(1), mixed, 0.75).item() == pytest.approx(alone.item(), abs=1e-6)
+    mixed[0, 3] = 1.0
+    assert exposure_prior_stops(AppearanceOperator.identity(1), mixed, 0.75).item() == pytest.approx(alone.item(), abs=1e-6)
+    blank = torch.cat([torch.zeros(1, 2, 3, 16, 20), torch.ones(1, 2, 3, 16, 20)], dim=1)
+    assert exposure_prior_stops(operator, blank, 1.0).tolist() == [0.0]

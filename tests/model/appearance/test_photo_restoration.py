@@ -30,7 +30,11 @@ def test_black_and_saturated_frames_are_found_and_restore_to_finite_values():
     photos[2] = 1.0
     assert frames_without_content(photos) == ([0], [2])
     assert frames_without_content(torch.rand(2, 3, 16, 16) * 0.05) == ([], [])
-    assert bool(torch.isfinite(restore_photos(photos, _operator())).all())
+    restored = restore_photos(photos, _operator())
+    assert bool(torch.isfinite(restored).all())
+    # nothing recorded, nothing restored: the operator's curve would turn the white frame grey
+    assert torch.equal(restored[0], photos[0]) and torch.equal(restored[2], photos[2])
+    torch.testing.assert_close(restored[1], _operator().apply(photos[None])[0, 1])
 
 
 def test_refuses_mismatched_inputs():

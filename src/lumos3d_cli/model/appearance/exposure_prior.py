@@ -29,7 +29,7 @@ from lumos3d_cli.checks import require_finite
 from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
 from lumos3d_cli.model.appearance.exposure_key import ExposureKeyModel, key_features
 from lumos3d_cli.model.appearance.operator import AppearanceOperator
-from lumos3d_cli.model.appearance.photo_restoration import BLACK_LEVEL, WHITE_LEVEL
+from lumos3d_cli.model.appearance.photo_restoration import BLACK_LEVEL, WHITE_LEVEL, frames_without_content
 
 EXPOSURE_KEY = 0.45  # mean sRGB of a well-exposed frame (data.brackets.WELL_EXPOSED_MEAN)
 # The strength of each mode, chosen on the mean over the development sources (benchmarks/
@@ -124,9 +124,20 @@ def exposure_prior_stops(operator: AppearanceOperator, images: torch.Tensor, str
         restored = operator.apply_linear(srgb_to_linear(images.float().clamp(0.0, 1.0)))
         require_finite("restored images the exposure prior meters", restored,
                        "the restoration operator produced NaN/Inf (corrupt weights or an unstable input?)")
-        to_key = stops_to_key(restored, key) if key_model is None else stops_to_content_key(restored, key_model, key)
-        stops = strength * to_key
-        return torch.where(stops > 0, torch.minimum(stops, highlight_headroom(restored)), stops)
+        gains = []
+        for scene, photos in zip(restored, images):
+            # a black or saturated photo records nothing of the scene's brightness: metered with
+            # the others it would pull the whole scene's gain (one black frame among five lifted
+            # them by a quarter stop); a scene of nothing else gets no gain
+            black, saturated = frames_without_content(photos)
+            metered = scene[[view for view in range(len(scene)) if view not in {*black, *saturated}]][None]
+            if metered.shape[1] == 0:
+                gains.append(torch.zeros(1, device=scene.device))
+                continue
+            to_key = stops_to_key(metered, key) if key_model is None else stops_to_content_key(metered, key_model, key)
+            stops = strength * to_key
+            gains.append(torch.where(stops > 0, torch.minimum(stops, highlight_headroom(metered)), stops))
+        return torch.cat(gains)
 
 
 def apply_exposure_prior(operator: AppearanceOperator, images: torch.Tensor, strength: float,

@@ -39,6 +39,10 @@ def restore_photos(photos: torch.Tensor, operator: AppearanceOperator) -> torch.
     if operator.local_log2_gain is not None and operator.local_log2_gain.shape[1] != views:
         raise InputError(f"operator has local grids for {operator.local_log2_gain.shape[1]} views, but {views} photos were given")
     restored = torch.empty(photos.shape, dtype=torch.float32, device=photos.device)
+    black, saturated = frames_without_content(photos)
     for view in range(views):
+        if view in black or view in saturated:  # the operator's curve would turn white grey
+            restored[view] = photos[view]
+            continue
         restored[view] = operator.views(slice(view, view + 1)).apply(photos[view][None, None])[0, 0]
     return restored
