@@ -3,6 +3,7 @@ import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -182,6 +183,8 @@ def test_degrade_bad_values(run_cli, buu, tmp_path):
     for infinite in ("inf", "nan"):
         expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--colour-cast", infinite), "--colour-cast", "finite")
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--jpeg-quality", "0"), "--jpeg-quality 0", "1 to 100")
+    expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--jpeg-quality", "85", "--bit-depth", "16"),
+                       "--jpeg-quality 85", "8 bits")
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--exposure", "0.5", "0.1"), "--exposure 0.5 0.1", "0 < low <= high")
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--gamma", "0", "1"), "--gamma 0.0 1.0", "0 < low <= high")
     assert not (tmp_path / "o").exists()
@@ -223,6 +226,15 @@ def test_info_on_cameras_images_and_scene_folders(run_cli, shared_data, buu):
     scene = json.loads(run_cli("info", shared_data / "scenes" / "kitchen", "--json").out)
     kinds = [s["kind"] for s in scene["summaries"]]
     assert kinds == ["images", "cameras"] and scene["summaries"][1]["count"] == 17
+    lom = json.loads(run_cli("info", buu, "--json").out)  # a LOM scene: the photos of each lighting
+    assert [(Path(s["path"]).name, s["count"]) for s in lom["summaries"]] == [("high", 25), ("low", 25), ("over_exp", 25)]
+
+
+def test_info_on_a_restore_output_folder_shows_its_scene(run_cli, tmp_path):
+    write_ply(tmp_path / "scene.ply", random_gaussians(50, 0))
+    cv2.imwrite(str(tmp_path / "contact_sheet.png"), np.zeros((8, 8, 3), np.uint8))
+    summary = json.loads(run_cli("info", tmp_path, "--json").out)
+    assert summary["kind"] == "gaussians" and summary["count"] == 50  # the contact sheet is no image folder
 
 
 def test_info_bad_inputs(run_cli, tmp_path):

@@ -50,7 +50,9 @@ def test_values_beyond_float16_are_refused(tmp_path, run_cli):
 def test_bad_arguments(tmp_path, run_cli):
     source = _random_checkpoint(tmp_path / "full.safetensors")
     expect_input_error(run_cli("convert", str(source), "-o", str(tmp_path / "x.safetensors"), "--dtype", "int8"), "int8", "float16")
-    expect_input_error(run_cli("convert", str(source), "-o", str(tmp_path / "x.pt")), "x.pt", ".safetensors")
+    result = run_cli("convert", str(source), "-o", str(tmp_path / "x.pt"))
+    expect_input_error(result, f"{tmp_path / 'x.pt'}: checkpoints are written as .safetensors files")
+    assert ".staging" not in result.err and not (tmp_path / "x.pt").exists()
     expect_input_error(run_cli("convert", str(tmp_path / "none.pt"), "-o", str(tmp_path / "x.safetensors")), "none.pt")
 
 

@@ -63,6 +63,12 @@ def test_missing_and_ambiguous_views(mixed_case_scene):
     _write(mixed_case_scene / "transforms_test.json", [_frame("high/img_3.png", 3.0)])
     with pytest.raises(InputError, match="test frame 'img_3' has no photo in over_exp/"):
         read_lom_scene(mixed_case_scene, "over-exposure")
+    for frames, message in (([], "transforms_test.json: lists no test frames"),
+                            ([{"transform_matrix": np.eye(4).tolist()}], "transforms_test.json: a frame without a file_path")):
+        _write(mixed_case_scene / "transforms_test.json", frames)
+        with pytest.raises(InputError, match=message):
+            read_lom_scene(mixed_case_scene, "low-light")
+    _write(mixed_case_scene / "transforms_test.json", [_frame("high/img_2.jpg", 2.0)])
     cv2.imwrite(str(mixed_case_scene / "low" / "IMG_1.png"), np.zeros((12, 16, 3), np.uint8))
     with pytest.raises(InputError, match="IMG_1.png and img_1.jpg are the same view"):
         read_lom_scene(mixed_case_scene, "low-light")

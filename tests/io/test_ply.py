@@ -132,3 +132,5 @@ def test_bad_files(tmp_path):
         read_ply(tmp_path / "odd.ply")
     with pytest.raises(InputError, match="no such file"):
         read_ply(tmp_path / "missing.ply")
+    with pytest.raises(InputError, match="is a folder; give the scene's .ply file"):
+        read_ply(tmp_path)

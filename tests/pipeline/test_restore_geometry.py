@@ -96,7 +96,7 @@ def test_photos_sfm_cannot_place(run_cli, buu, shared_data, tmp_path, random_che
         cv2.imwrite(str(blank / f"{index}.png"), np.full((120, 160, 3), 40 + index, np.uint8))
     out = tmp_path / "out" / "scene.ply"
     expect_input_error(run_cli("restore", blank, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "sfm"),
-                       "--geometry sfm: structure-from-motion registered 0 of 4 photos", "use geometry network")
+                       "--geometry sfm: structure-from-motion registered 0 of 4 photos", "use the network's cameras (geometry network)")
     result = run_cli("restore", blank, "-o", out, "--checkpoint", random_checkpoint, "--refine-steps", 0, "--json")
     assert result.code == 0, result.err
     assert json.loads(result.out)["geometry"]["source"] == "network"

@@ -129,7 +129,7 @@ def test_row10_a_photo_too_small_for_one_network_patch_is_refused_by_name(tmp_pa
     photos = copy_photos(buu, tmp_path / "photos", SIX[:2])
     write_image(photos / "tiny.png", np.full((1, 1, 3), 0.5, np.float32))
     expect_input_error(run_cli(*restore_args(photos, tmp_path / "out" / "scene.ply", random_checkpoint)),
-                       "tiny.png: is 1x1 pixels, too small for the network (at least 14 pixels a side)")
+                       f"{photos / 'tiny.png'}: is 1x1 pixels, too small for the network (at least 14 pixels a side)")
     assert not (tmp_path / "out").exists()
 
 
@@ -142,6 +142,16 @@ def test_row11_references_that_do_not_match_are_refused_before_the_work(tmp_path
     expect_input_error(run_cli(*restore_args(photos, tmp_path / "out" / "scene.ply", garbage_checkpoint,
                                                  "--reference", references)),
                        f"--reference {references}: no image named 3.* for input 3.JPG")
+
+
+def test_row11_lpips_weights_without_references_are_refused_not_ignored(tmp_path, buu, random_checkpoint, run_cli):
+    photos = copy_photos(buu, tmp_path / "photos", SIX[:2])
+    weights = tmp_path / "lpips.pth"
+    weights.write_bytes(b"")
+    expect_input_error(run_cli(*restore_args(photos, tmp_path / "out" / "scene.ply", random_checkpoint,
+                                             "--lpips-weights", weights)),
+                       f"--lpips-weights {weights}: LPIPS is scored against --reference images")
+    assert not (tmp_path / "out").exists()
 
 
 def test_row12_black_and_white_photos_are_named_once(tmp_path, buu, random_checkpoint):

@@ -80,3 +80,10 @@ def test_held_out_crops_do_not_depend_on_the_run_seed(brackets):
             assert torch.equal(one[index]["targets"], other[index]["targets"])
     # training crops do follow the seed
     assert not torch.equal(first.train[0][0]["images"], second.train[0][0]["images"])
+
+
+def test_an_unknown_model_in_the_config_is_named_as_the_configs_key(tiny_config):
+    """`model: huge` is the config's, not a --checkpoint the user never passed."""
+    with pytest.raises(InputError, match=r"^the config's model huge: no such file or folder.*nor an architecture \(tiny") as caught:
+        _trainer(tiny_config(optim__steps=1, model="huge"))
+    assert caught.value.parameter is None

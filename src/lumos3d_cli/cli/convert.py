@@ -32,6 +32,8 @@ def _converts_a_scene(source: Path, output: Path, dtype: str, architecture: str 
         raise InputError(f"{source}: only a Gaussian scene (.ply) converts to .splat")
     if scene_in and (dtype != "float32" or architecture is not None):
         raise InputError("--dtype and --architecture apply to checkpoints, not to a .ply scene")
+    if not scene_in and output.suffix != ".safetensors":
+        raise InputError(f"{output}: checkpoints are written as .safetensors files; name the output *.safetensors")
     return scene_in
 
 

@@ -12,6 +12,8 @@ from lumos3d_cli.cli.interrupts import library_imports
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.image_files import IMAGE_SUFFIXES, list_images
 
+LOM_FOLDERS = ("high", "low", "over_exp")  # data.lom's layout (not imported: it loads torch)
+
 EXAMPLES = """
   lumos3d info out/scene.ply
   lumos3d info scenes/kitchen            [dim]# images/ and sparse/0 of a scene folder[/dim]
@@ -82,11 +84,16 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
         if find_camera_source(path) is not None:
             return [summarize_camera_file(path)]
         raise InputError(f"{path}: cannot summarise '{path.suffix}' files; pass a .ply, checkpoint, camera file, image or folder")
-    summaries = []
-    if _has_images(path):
-        summaries.append(_image_summary(list_images(path), deep))
-    elif (path / "images").is_dir() and _has_images(path / "images"):
-        summaries.append(_image_summary(list_images(path / "images"), deep))
+    # a restore's output folder: its scene (its PNGs are the contact sheet; restored/ holds the views)
+    scenes = sorted(p for p in path.glob("*.ply") if p.is_file() and not p.name.startswith("."))
+    summaries = [summarize_gaussian_file(scene) for scene in scenes]
+    image_folders = [path] if _has_images(path) and not scenes else []
+    if not image_folders and (path / "images").is_dir() and _has_images(path / "images"):
+        image_folders = [path / "images"]
+    if not image_folders and (path / "high").is_dir():  # a LOM scene: the photos of each lighting
+        image_folders = [path / name for name in LOM_FOLDERS if (path / name).is_dir() and _has_images(path / name)]
+    for folder in image_folders:
+        summaries.append({**_image_summary(list_images(folder), deep), "path": str(folder)})
     if find_camera_source(path) is not None:
         summaries.append(summarize_camera_file(path))
     if not summaries:

@@ -66,6 +66,9 @@ def restore_command(
     check_output_path(output, "output")
     check_output_path(video, "video")
     check_view_format(output_format)
+    if lpips_weights is not None and reference is None:
+        raise InputError(f"{lpips_weights}: LPIPS is scored against --reference images; give --reference or leave this "
+                         "out", parameter="lpips_weights")
     if view:  # refused before the restore, not after it has written a scene no viewer can show
         require_free_port(DEFAULT_HOST, port)
     # Everything the outputs must stay clear of; checked, with what is already in the way, before any

@@ -66,7 +66,12 @@ def read_lom_scene(folder: Path, mode: str) -> LomScene:
         frames = json.loads((folder / "transforms_test.json").read_text())["frames"]
     except (OSError, json.JSONDecodeError, KeyError, TypeError) as error:
         raise InputError(f"{folder / 'transforms_test.json'}: cannot read its frames ({error})") from error
-    test_keys = [Path(frame["file_path"]).stem for frame in frames]
+    try:
+        test_keys = [Path(frame["file_path"]).stem for frame in frames]
+    except (KeyError, TypeError) as error:
+        raise InputError(f"{folder / 'transforms_test.json'}: a frame without a file_path ({error})") from error
+    if not test_keys:
+        raise InputError(f"{folder / 'transforms_test.json'}: lists no test frames; eval scores the frames it lists")
     for frame in test_keys:
         if frame.casefold() not in reference:
             raise InputError(f"{folder}: test frame {frame!r} has no normal-light photo in high/")

@@ -144,6 +144,8 @@ def read_ply_fields(path: Path | str) -> tuple[np.ndarray, int]:
     an InputError that lists them.
     """
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder; give the scene's .ply file (e.g. {path / 'scene.ply'})")
     if not path.is_file():
         raise InputError(f"{path}: no such file")
     with open(path, "rb") as handle:

@@ -44,6 +44,9 @@ def degrade_files(
                          parameter="colour_cast")
     if jpeg_quality is not None and not 1 <= jpeg_quality <= 100:
         raise InputError(f"{jpeg_quality}: use a JPEG quality from 1 to 100", parameter="jpeg_quality")
+    if jpeg_quality is not None and bit_depth != 8:
+        raise InputError(f"{jpeg_quality}: JPEG compression leaves 8 bits a channel; use it with 8-bit output",
+                         parameter="jpeg_quality")
     for name, bounds in (("exposure", exposure), ("gamma", gamma)):
         if bounds is not None and not is_valid_range(bounds):
             raise InputError(f"{bounds[0]} {bounds[1]}: the {name} range needs 0 < low <= high (finite)", parameter=name)

@@ -182,9 +182,9 @@ def check_photo_contents(batch: ImageBatch, patch_size: int) -> None:
     """InputError naming a photo too small to hold one network patch (`patch_size` pixels a side);
     a warning naming the photos that are all black or all saturated (nothing to restore there)."""
     names = [path.name for path in batch.paths]
-    for name, (width, height) in zip(names, batch.original_sizes):
+    for path, (width, height) in zip(batch.paths, batch.original_sizes):
         if min(width, height) < patch_size:
-            raise InputError(f"{name}: is {width}x{height} pixels, too small for the network (at least {patch_size} "
+            raise InputError(f"{path}: is {width}x{height} pixels, too small for the network (at least {patch_size} "
                              "pixels a side); leave it out")
     black, saturated = frames_without_content(batch.images)
     for kind, indices in (("black", black), ("saturated", saturated)):

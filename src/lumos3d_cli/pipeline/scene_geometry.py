@@ -144,7 +144,7 @@ def register_views(
         return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, None)
     if count < 2:
         if geometry == "sfm":
-            raise InputError("sfm: structure-from-motion needs at least two photos; use geometry network",
+            raise InputError("sfm: structure-from-motion needs at least two photos; use the network's cameras (geometry network)",
                              parameter="geometry")
         return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, None)
     run = blind_run() if blind_run is not None and brightened.method == BRIGHTENING else None
@@ -154,7 +154,7 @@ def register_views(
         return ViewRegistration(geometry, sizes, "sfm", registration.registered.clone(), registration.cameras,
                                 registration, seconds, brightened.method)
     if geometry == "sfm":
-        raise InputError(f"sfm: structure-from-motion {registration.describe()}; use geometry network or give poses",
+        raise InputError(f"sfm: structure-from-motion {registration.describe()}; use the network's cameras (geometry network) or give poses",
                          parameter="geometry")
     logger.warning("structure-from-motion %s; using the network's cameras instead", registration.describe())
     return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, registration,

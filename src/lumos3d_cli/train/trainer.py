@@ -145,7 +145,12 @@ class Trainer:
         if source in ARCHITECTURES:
             model = build_model(source, seed=self.config.seed)
         else:
-            model = load_model(source)
+            try:
+                model = load_model(source)
+            except InputError as error:  # the config's key, not a --checkpoint the user never passed
+                if error.parameter is None:
+                    raise
+                raise InputError(f"the config's model {error.detail}, nor an architecture ({', '.join(ARCHITECTURES)})") from error
         if self.config.appearance is not None:
             model = with_appearance(model, self.config.appearance, self.config.local_correction_channels)
         patch = model.architecture.patch_size
@@ -158,7 +163,12 @@ class Trainer:
     def _teacher(self) -> Lumos3D | None:
         if self.config.stage != "student" or not self.config.multiview or self.config.multiview_loss != "objective":
             return None
-        teacher = load_model(self.config.teacher, device=self.device)
+        try:
+            teacher = load_model(self.config.teacher, device=self.device)
+        except InputError as error:
+            if error.parameter is None:
+                raise
+            raise InputError(f"the config's teacher {error.detail}") from error
         return teacher.eval().requires_grad_(False)
 
     def _brackets(self) -> BracketSamples | None:
