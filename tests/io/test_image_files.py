@@ -1,4 +1,7 @@
-"""io/image_files.py: the same photo twice is refused, naming both."""
+"""io/image_files.py: the same photo twice is refused, naming both; what a folder listing skips."""
+
+import logging
+import os
 
 import cv2
 import numpy as np
@@ -30,3 +33,16 @@ def test_two_files_with_one_name_are_refused(folders):
     with pytest.raises(InputError, match=r"two photos named 'IMG_1'"):  # a camera's RAW+JPEG pair, say
         list_images(folders / "c")
     assert [p.name for p in list_images([folders / "a", folders / "c" / "IMG_1.png"])] == ["1.jpg", "2.jpg", "IMG_1.png"]
+
+
+def test_entries_named_as_images_that_are_not_files_are_skipped_by_name(tmp_path, caplog):
+    (tmp_path / "1.jpg").write_bytes(b"x")
+    (tmp_path / "2.jpg").symlink_to(tmp_path / "gone.jpg")  # a broken link
+    os.mkfifo(tmp_path / "3.png")
+    with caplog.at_level(logging.WARNING, logger="lumos3d_cli.io.image_files"):
+        assert list_images(tmp_path) == [tmp_path / "1.jpg"]
+    assert "skipped 2.jpg, 3.png" in caplog.text
+    with pytest.raises(InputError, match="3.png: is not a file"):
+        list_images(tmp_path / "3.png")
+    with pytest.raises(InputError, match="2.jpg: no such file or folder"):
+        list_images(tmp_path / "2.jpg")

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import logging
 import re
 from collections.abc import Sequence
 from pathlib import Path
 
 from lumos3d_cli.errors import InputError
+
+logger = logging.getLogger(__name__)
 
 PHOTO_SUFFIXES = frozenset({".jpg", ".jpeg", ".png", ".tif", ".tiff", ".webp", ".bmp"})
 HDR_SUFFIXES = frozenset({".exr", ".hdr"})
@@ -55,16 +58,20 @@ def list_images(inputs: Path | str | Sequence[Path | str]) -> list[Path]:
     for item in items:
         path = Path(item)
         if path.is_dir():
-            found = [
-                p for p in path.iterdir()
-                if p.is_file() and not p.name.startswith(".") and p.suffix.lower() in IMAGE_SUFFIXES
-            ]
+            named = [p for p in path.iterdir() if not p.name.startswith(".") and p.suffix.lower() in IMAGE_SUFFIXES]
+            found = [p for p in named if p.is_file()]
+            unreadable = sorted(p.name for p in named if not p.is_file() and not p.is_dir())
+            if unreadable:
+                logger.warning("%s: skipped %s: named as images but not files (a broken link, a pipe or a device)",
+                               path, ", ".join(unreadable))
             if not found:
                 raise InputError(f"{path}: folder holds no images ({', '.join(sorted(IMAGE_SUFFIXES))})")
             paths.extend(sorted(found, key=natural_sort_key))
         elif path.is_file():
             image_kind(path)
             paths.append(path)
+        elif path.exists():
+            raise InputError(f"{path}: is not a file (a pipe, a device or a socket); pass an image file or a folder")
         else:
             raise InputError(f"{path}: no such file or folder")
     check_distinct(paths)
