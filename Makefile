@@ -8,8 +8,10 @@ STAMP := $(VENV)/.installed
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	# torch first and pinned: an unpinned torch pulls the multi-GB CUDA build.
-	$(BIN)/pip install --quiet torch==2.13.0
+	# torch first and pinned: an unpinned torch pulls the multi-GB CUDA build. TORCH_INDEX picks
+	# the index it comes from (e.g. https://download.pytorch.org/whl/cpu for the CPU-only wheel on
+	# Linux, where PyPI's torch is the CUDA build).
+	$(BIN)/pip install --quiet torch==2.13.0 $(if $(TORCH_INDEX),--index-url $(TORCH_INDEX))
 	$(BIN)/pip install --quiet -e '.[test]'
 	# LPIPS linear weights ship in the lpips package; its torchvision dependency has no CPU build.
 	$(BIN)/pip install --quiet --no-deps lpips==0.1.4

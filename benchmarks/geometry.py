@@ -8,6 +8,7 @@ its stages from summary.json.
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 import tempfile
@@ -55,6 +56,9 @@ def _restore_rows(folder: Path) -> list[list[object]]:
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--no-doc", action="store_true", help="print the tables only; leave docs/performance.md")
+    args = parser.parse_args()
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as scratch:
         folder = Path(scratch)
@@ -85,7 +89,8 @@ def main() -> None:
         ),
     ])
     print(markdown)
-    write_section("geometry", markdown)
+    if not args.no_doc:
+        write_section("geometry", markdown)
 
 
 if __name__ == "__main__":

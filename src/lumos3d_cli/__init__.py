@@ -8,7 +8,15 @@ first use, so that importing the package (and `lumos3d --help`) stays fast:
     lumos3d_cli.write_restored_scene(scene, "out/scene.ply")
 """
 
+import os
 from importlib import import_module
+
+# OpenMP worker threads (torch's and numba's) spin while they wait by default; where other
+# programs share the cores that spinning made refinement steps 2-4x slower on a laptop (and a
+# restore 17x slower beside a busy process; no difference on idle cores), so they sleep instead
+# unless the user chose otherwise. It takes effect only if set before torch is first imported:
+# the command line and `import lumos3d_cli` before torch both do.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 # public name -> module that defines it (the package's one export table)
 _LAZY = {

@@ -123,3 +123,17 @@ def test_a_signal_during_the_imports_is_held_for_the_clis_handler():
     done = subprocess.run([sys.executable, "-c", _SIGNAL_DURING_IMPORTS], capture_output=True, text=True, timeout=120)
     assert (done.returncode, done.stdout.split()) == (0, ["imports", "went", "on", "SIGTERM"]), done.stderr[-3000:]
     assert "stack trace" not in done.stderr and "Aborted" not in done.stderr
+
+
+@pytest.mark.parametrize("chosen", [None, "ACTIVE"])
+def test_importing_the_package_asks_openmp_to_sleep_unless_the_user_chose(chosen):
+    """OpenMP's wait policy is read when torch starts its threads: importing lumos3d_cli (before
+    torch, as the command line and the README's snippets do) sets it, and leaves a choice alone."""
+    import os
+
+    environment = {key: value for key, value in os.environ.items() if key != "OMP_WAIT_POLICY"}
+    if chosen is not None:
+        environment["OMP_WAIT_POLICY"] = chosen
+    code = "import lumos3d_cli, os; print(os.environ['OMP_WAIT_POLICY'])"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=environment, check=True)
+    assert done.stdout.strip() == (chosen or "PASSIVE")

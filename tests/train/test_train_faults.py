@@ -82,3 +82,20 @@ def test_max_steps_below_one_is_refused(tiny_config):
     config = tiny_config(name="zero")
     expect_input_error(run_lumos3d("train", config, "--max-steps", 0), "--max-steps 0: give the number of steps")
     assert not _output(config).exists()
+
+
+def test_cuda_on_a_machine_without_it_is_refused_naming_the_setting(tiny_config, monkeypatch):
+    import pytest
+    import torch
+
+    from lumos3d_cli.errors import InputError
+
+    machine_has_cuda = torch.cuda.is_available()
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    with pytest.raises(InputError, match="device cuda: CUDA is not available on this machine; train with device=cpu"):
+        setup_distributed("cuda")
+    assert setup_distributed("auto").device.type == "cpu"
+    config = tiny_config(name="nocuda")
+    if not machine_has_cuda:  # the command line, end to end, where the machine really has none
+        expect_input_error(run_lumos3d("train", config, "device=cuda"), "device cuda: CUDA is not available")
+        assert not _output(config).exists()

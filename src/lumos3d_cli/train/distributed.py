@@ -8,6 +8,8 @@ from dataclasses import dataclass
 import torch
 import torch.distributed as dist
 
+from lumos3d_cli.errors import InputError
+
 
 @dataclass(frozen=True)
 class DistributedContext:
@@ -28,7 +30,7 @@ class DistributedContext:
 def resolve_device(preference: str, local_rank: int = 0) -> torch.device:
     if preference == "cuda" or (preference == "auto" and torch.cuda.is_available()):
         if not torch.cuda.is_available():
-            raise RuntimeError("device 'cuda' requested but CUDA is not available")
+            raise InputError("device cuda: CUDA is not available on this machine; train with device=cpu (or auto)")
         return torch.device("cuda", local_rank)
     return torch.device("cpu")
 
