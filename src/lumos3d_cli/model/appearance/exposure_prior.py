@@ -127,7 +127,7 @@ def exposure_prior_stops(operator: AppearanceOperator, images: torch.Tensor, str
         gains = []
         for scene, photos in zip(restored, images):
             # a black or saturated photo records nothing of the scene's brightness: metered with
-            # the others it would pull the whole scene's gain (one black frame among five lifted
+            # the others it would pull the whole scene's gain (one black frame beside three photos lifted
             # them by a quarter stop); a scene of nothing else gets no gain
             black, saturated = frames_without_content(photos)
             metered = scene[[view for view in range(len(scene)) if view not in {*black, *saturated}]][None]
