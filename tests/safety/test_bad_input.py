@@ -150,7 +150,7 @@ def test_row11_lpips_weights_without_references_are_refused_not_ignored(tmp_path
     weights.write_bytes(b"")
     expect_input_error(run_cli(*restore_args(photos, tmp_path / "out" / "scene.ply", random_checkpoint,
                                              "--lpips-weights", weights)),
-                       f"--lpips-weights {weights}: LPIPS is scored against --reference images")
+                       f"--lpips-weights {weights}: LPIPS is scored against reference images")
     assert not (tmp_path / "out").exists()
 
 

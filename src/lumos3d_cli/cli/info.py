@@ -9,10 +9,9 @@ from rich.table import Table
 
 from lumos3d_cli.cli.console import print_json, progress_bar, stdout_console
 from lumos3d_cli.cli.interrupts import library_imports
+from lumos3d_cli.data.lom_layout import DEGRADED_FOLDERS, REFERENCE_FOLDER, is_lom_scene
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.image_files import IMAGE_SUFFIXES, list_images
-
-LOM_FOLDERS = ("high", "low", "over_exp")  # data.lom's layout (not imported: it loads torch)
 
 EXAMPLES = """
   lumos3d info out/scene.ply
@@ -90,8 +89,9 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
     image_folders = [path] if _has_images(path) and not scenes else []
     if not image_folders and (path / "images").is_dir() and _has_images(path / "images"):
         image_folders = [path / "images"]
-    if not image_folders and (path / "high").is_dir():  # a LOM scene: the photos of each lighting
-        image_folders = [path / name for name in LOM_FOLDERS if (path / name).is_dir() and _has_images(path / name)]
+    if not image_folders and is_lom_scene(path):  # the photos of each lighting
+        image_folders = [path / name for name in (REFERENCE_FOLDER, *DEGRADED_FOLDERS.values())
+                         if (path / name).is_dir() and _has_images(path / name)]
     for folder in image_folders:
         summaries.append({**_image_summary(list_images(folder), deep), "path": str(folder)})
     if find_camera_source(path) is not None:

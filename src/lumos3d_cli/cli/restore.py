@@ -17,7 +17,7 @@ from lumos3d_cli.data.modes import MODES
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, GEOMETRY_SOURCES
-from lumos3d_cli.pipeline.restore_paths import check_view_format, list_photos, restore_outputs
+from lumos3d_cli.pipeline.restore_paths import check_lpips_weights, check_view_format, list_photos, restore_outputs
 from lumos3d_cli.viewer.defaults import DEFAULT_HOST, DEFAULT_PORT
 from lumos3d_cli.viewer.port import require_free_port
 
@@ -66,9 +66,7 @@ def restore_command(
     check_output_path(output, "output")
     check_output_path(video, "video")
     check_view_format(output_format)
-    if lpips_weights is not None and reference is None:
-        raise InputError(f"{lpips_weights}: LPIPS is scored against --reference images; give --reference or leave this "
-                         "out", parameter="lpips_weights")
+    check_lpips_weights(lpips_weights, reference)
     if view:  # refused before the restore, not after it has written a scene no viewer can show
         require_free_port(DEFAULT_HOST, port)
     # Everything the outputs must stay clear of; checked, with what is already in the way, before any

@@ -12,11 +12,11 @@ from pathlib import Path
 
 import torch
 
+from lumos3d_cli.data.lom_layout import DEGRADED_FOLDERS, is_lom_scene
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.image_files import IMAGE_SUFFIXES, natural_sort_key
 from lumos3d_cli.io.transforms_json import read_transforms_json
 
-DEGRADED_FOLDERS = {"low-light": "low", "over-exposure": "over_exp"}
 CAMERA_FILES = ("transforms_train.json", "transforms_val.json", "transforms_test.json")
 
 
@@ -45,12 +45,6 @@ def _by_stem(folder: Path) -> dict[str, Path]:
             raise InputError(f"{folder}: {photos[key].name} and {path.name} are the same view; keep one of them")
         photos[key] = path
     return photos
-
-
-def is_lom_scene(folder: Path) -> bool:
-    return (folder / "high").is_dir() and (folder / "transforms_test.json").is_file() and any(
-        (folder / f).is_dir() for f in DEGRADED_FOLDERS.values()
-    )
 
 
 def read_lom_scene(folder: Path, mode: str) -> LomScene:

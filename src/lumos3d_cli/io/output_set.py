@@ -265,7 +265,7 @@ class OutputSet:
         b's cameras.json, restored/ and summary.json."""
         ours = {*self._files, *self._folders}
         replaced = {entry.output_set for name, entry in manifest.files.items()
-                    if name.split("/")[0] in ours and entry.output_set != self.output_set and manifest.owns(self.folder / name)}
+                    if name.split("/")[0] in ours and entry.output_set != self.output_set and (self.folder / name).exists()}
         for other in sorted(replaced):
             kept = sorted({name.split("/")[0] for name, entry in manifest.files.items()
                            if entry.output_set == other and name.split("/")[0] not in ours and (self.folder / name).exists()})

@@ -31,7 +31,7 @@ from lumos3d_cli.pipeline.model_loading import load_restoration_model
 from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, RestorePreset, get_restore_preset
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
 from lumos3d_cli.pipeline.quality import QualityMeter, load_references, mean_metrics
-from lumos3d_cli.pipeline.restore_paths import list_photos
+from lumos3d_cli.pipeline.restore_paths import check_lpips_weights, list_photos
 from lumos3d_cli.pipeline.scene_geometry import SceneGeometry, check_geometry_source
 from lumos3d_cli.pipeline.scene_stages import build_scene
 from lumos3d_cli.render.hole_filling import OBSERVED_ALPHA, fill_unobserved
@@ -228,6 +228,7 @@ neighbouring photos (`geometry.photo_consistency`). `early_registration`: the ph
     settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior, fill_unobserved,
                                   denoise_photo, densify, exposure_key, depth_sweep)
     check_geometry_source(geometry)
+    check_lpips_weights(lpips_weights, reference)
     weights = resolve_checkpoint(checkpoint, mode)
     meter = QualityMeter.create(lpips_weights) if reference is not None else None
     timings: dict[str, float] = {}

@@ -24,6 +24,14 @@ def check_view_format(output_format: str) -> None:
         raise InputError(f"{output_format!r}: use one of {', '.join(VIEW_FORMATS)}", parameter="output_format")
 
 
+def check_lpips_weights(lpips_weights: Path | str | None, reference: Path | str | None) -> None:
+    """LPIPS weights score the restored views against references: without them they would be
+    ignored, so they are refused instead."""
+    if lpips_weights is not None and reference is None:
+        raise InputError(f"{lpips_weights}: LPIPS is scored against reference images; give references or leave the "
+                         "weights out", parameter="lpips_weights")
+
+
 def list_photos(photos: Path | str | Sequence[Path | str]) -> list[Path]:
     """The photos of a restore (`io.image_files.list_images`), less the images an earlier restore
     wrote among them (its contact sheet, when its output folder was the photo folder): the

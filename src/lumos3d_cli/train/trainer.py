@@ -84,6 +84,17 @@ def check_max_steps(max_steps: int | None) -> None:
         raise InputError(f"{max_steps}: give the number of steps to train to in total (1 or more)", parameter="max_steps")
 
 
+def _configured_model(key: str, source: str, device: str | torch.device, alternatives: str = "") -> Lumos3D:
+    """The checkpoint the config's `key` names, loaded onto `device`; a bad one is named as that
+    key (with `alternatives` to it), not as a --checkpoint the user never passed."""
+    try:
+        return load_model(source, device=device)
+    except InputError as error:
+        if error.parameter is None:
+            raise
+        raise InputError(f"the config's {key} {error.detail}{alternatives}") from error
+
+
 class Trainer:
     def __init__(self, config: TrainConfig, context: DistributedContext, on_step: Callable[[StepReport], None] | None = None,
                  on_resume: Callable[[int, Path], None] | None = None):
@@ -145,12 +156,7 @@ class Trainer:
         if source in ARCHITECTURES:
             model = build_model(source, seed=self.config.seed)
         else:
-            try:
-                model = load_model(source)
-            except InputError as error:  # the config's key, not a --checkpoint the user never passed
-                if error.parameter is None:
-                    raise
-                raise InputError(f"the config's model {error.detail}, nor an architecture ({', '.join(ARCHITECTURES)})") from error
+            model = _configured_model("model", source, "cpu", f", nor an architecture ({', '.join(ARCHITECTURES)})")
         if self.config.appearance is not None:
             model = with_appearance(model, self.config.appearance, self.config.local_correction_channels)
         patch = model.architecture.patch_size
@@ -163,12 +169,7 @@ class Trainer:
     def _teacher(self) -> Lumos3D | None:
         if self.config.stage != "student" or not self.config.multiview or self.config.multiview_loss != "objective":
             return None
-        try:
-            teacher = load_model(self.config.teacher, device=self.device)
-        except InputError as error:
-            if error.parameter is None:
-                raise
-            raise InputError(f"the config's teacher {error.detail}") from error
+        teacher = _configured_model("teacher", self.config.teacher, self.device)
         return teacher.eval().requires_grad_(False)
 
     def _brackets(self) -> BracketSamples | None:

@@ -1,0 +1,17 @@
+"""The LOM layout's names (data.lom reads the scenes): a module without torch, so that `info`
+can recognise a LOM scene without importing it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+REFERENCE_FOLDER = "high"  # the normal-light photos
+DEGRADED_FOLDERS = {"low-light": "low", "over-exposure": "over_exp"}
+TEST_CAMERAS = "transforms_test.json"
+
+
+def is_lom_scene(folder: Path) -> bool:
+    """`folder` holds high/, a degraded folder and transforms_test.json."""
+    return (folder / REFERENCE_FOLDER).is_dir() and (folder / TEST_CAMERAS).is_file() and any(
+        (folder / name).is_dir() for name in DEGRADED_FOLDERS.values()
+    )
