@@ -200,13 +200,15 @@ def test_info_deep_names_the_images_that_will_not_load(tmp_path, buu, run_cli):
     data = (folder / "2.JPG").read_bytes()
     (folder / "2.JPG").write_bytes(data[: len(data) // 2])
     _write_exr_with_nan(folder / "3.exr")
+    cv2.imwrite(str(folder / "4.png"), np.full((10, 40, 3), 128, np.uint8))  # restore refuses it: under one patch
     quick = run_cli("info", folder, "--json")
     assert quick.code == 0, quick.err
     assert json.loads(quick.out)["pixels"].startswith("not decoded; --deep")
     deep = run_cli("info", folder, "--deep", "--json")
-    expect_input_error(deep, "2 of 3 images will not load", "2.JPG (cannot decode as JPG", "3.exr (1 of 48 samples are NaN or Inf")
-    unreadable = json.loads(deep.out)["will_not_load"]
-    assert sorted(unreadable) == ["2.JPG", "3.exr"]
+    expect_input_error(deep, "3 of 4 images will not load or restore", "2.JPG (cannot decode as JPG",
+                       "3.exr (1 of 48 samples are NaN or Inf", "4.png (40x10 pixels, too small for the network")
+    summary = json.loads(deep.out)
+    assert sorted(summary["will_not_load"]) == ["2.JPG", "3.exr"] and list(summary["too_small"]) == ["4.png"]
     assert run_cli("info", folder / "1.JPG", "--deep").code == 0
 
 

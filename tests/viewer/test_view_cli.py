@@ -96,4 +96,6 @@ def test_restore_with_view_refuses_a_bad_port_before_restoring(run_cli, tmp_path
         taken.listen()
         port = taken.getsockname()[1]
         expect_input_error(run_cli("restore", photos, "-o", output, "--view", "--port", port), f"--port {port}: already in use")
+    # a port without --view would be ignored: refused, so the user learns the viewer was not asked for
+    expect_input_error(run_cli("restore", photos, "-o", output, "--port", "8090"), "--port 8090", "add --view")
     assert not output.parent.exists()

@@ -12,12 +12,16 @@ from lumos3d_cli.cli.interrupts import library_imports
 from lumos3d_cli.data.lom_layout import DEGRADED_FOLDERS, REFERENCE_FOLDER, is_lom_scene
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.image_files import IMAGE_SUFFIXES, list_images
+from lumos3d_cli.model.architectures import ARCHITECTURES
+
+# restore refuses a photo smaller than one network patch (pipeline.restore.check_photo_contents)
+SMALLEST_PHOTO_SIDE = min(architecture.patch_size for architecture in ARCHITECTURES.values())
 
 EXAMPLES = """
   lumos3d info out/scene.ply
   lumos3d info scenes/kitchen            [dim]# images/ and sparse/0 of a scene folder[/dim]
   lumos3d info transforms.json --json
-  lumos3d info photos/ --deep            [dim]# decode every image: which will not load[/dim]
+  lumos3d info photos/ --deep            [dim]# decode every image: which will not load or restore[/dim]
 """
 
 
@@ -27,7 +31,7 @@ def _has_images(folder: Path) -> bool:
 
 def _image_summary(paths: list[Path], deep: bool) -> dict:
     """summarize_image_files, plus with `deep` the files that will not load and why (every image
-    decoded, as restore would). Without it only the headers are read: decoding takes about 17 ms
+    decoded, as restore would) and those too small for the network (`too_small`). Without it only the headers are read: decoding takes about 17 ms
     per 0.2-megapixel photo of LOM buu here, seconds per 24-megapixel photo or RAW file."""
     with library_imports():
         from lumos3d_cli.io.images import read_image
@@ -36,27 +40,32 @@ def _image_summary(paths: list[Path], deep: bool) -> dict:
     if not deep:
         summary["pixels"] = "not decoded; --deep decodes every image to find those that will not load"
         return summary
-    unreadable = {}
+    unreadable, too_small = {}, {}
     with progress_bar() as progress:
         task = progress.add_task("decode", total=len(paths))
         for path in paths:
             try:
-                read_image(path)
+                height, width = read_image(path).pixels.shape[:2]
+                if min(width, height) < SMALLEST_PHOTO_SIDE:
+                    too_small[path.name] = (f"{width}x{height} pixels, too small for the network (at least "
+                                            f"{SMALLEST_PHOTO_SIDE} pixels a side)")
             except InputError as error:  # NonFiniteError included: NaN or Inf samples
                 unreadable[path.name] = str(error).removeprefix(f"{path}: ")
             progress.advance(task)
     summary["will_not_load"] = unreadable
+    summary["too_small"] = too_small
     return summary
 
 
 def _refuse_unreadable(summaries: list[dict]) -> None:
-    """After the table: exit 2 with one line naming the images that will not load."""
+    """After the table: exit 2 with one line naming the images that will not load or are too
+    small to restore."""
     for summary in summaries:
-        unreadable = summary.get("will_not_load")
-        if unreadable:
-            shown = "; ".join(f"{name} ({reason})" for name, reason in list(unreadable.items())[:3])
-            more = f"; and {len(unreadable) - 3} more" if len(unreadable) > 3 else ""
-            raise InputError(f"{len(unreadable)} of {summary['count']} images will not load: {shown}{more}")
+        refused = {**summary.get("will_not_load", {}), **summary.get("too_small", {})}
+        if refused:
+            shown = "; ".join(f"{name} ({reason})" for name, reason in list(refused.items())[:3])
+            more = f"; and {len(refused) - 3} more" if len(refused) > 3 else ""
+            raise InputError(f"{len(refused)} of {summary['count']} images will not load or restore: {shown}{more}")
 
 
 def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
@@ -113,12 +122,13 @@ def _format(value) -> str:
 
 def info_command(
     path: Path = typer.Argument(..., help="A .ply scene, a checkpoint, a camera file or COLMAP folder, an image or a folder."),
-    deep: bool = typer.Option(False, "--deep", help="Decode every image (slow) and list those that will not load."),
+    deep: bool = typer.Option(False, "--deep", help="Decode every image (slow) and list those that will not load or restore."),
     json_output: bool = typer.Option(False, "--json", help="Print the summary as JSON on stdout."),
 ) -> None:
     """Summarise a Gaussian scene, a model checkpoint (refused if it holds NaN/Inf), cameras or images.
 
-    With --deep, images that will not load are listed and the command exits with 2."""
+    With --deep, images that will not load (or are too small to restore) are listed and the
+    command exits with 2."""
     summaries = collect_summaries(path, deep)
     if json_output:
         print_json(summaries[0] if len(summaries) == 1 else {"path": str(path), "summaries": summaries})

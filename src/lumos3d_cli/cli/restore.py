@@ -57,7 +57,8 @@ def restore_command(
     output_format: str = typer.Option("png", "--output-format", help="Restored views as png (8-bit), png16 or exr (linear)."),
     video: Path | None = typer.Option(None, "--video", help="Also write an orbit of the restored scene (.mp4 H.264 or .gif)."),
     view: bool = typer.Option(False, "--view", help="Open the result in the browser viewer when done (Ctrl-C stops it)."),
-    port: int = typer.Option(DEFAULT_PORT, "--port", help="The viewer's port with --view (0: any free port)."),
+    port: int | None = typer.Option(None, "--port", show_default=False,
+                                    help=f"The viewer's port with --view (0: any free port; default {DEFAULT_PORT})."),
     json_output: bool = typer.Option(False, "--json", help="Print the summary as JSON on stdout."),
 ) -> None:
     """Restore a 3D scene from unposed low-light or over-exposed photos."""
@@ -67,6 +68,9 @@ def restore_command(
     check_output_path(video, "video")
     check_view_format(output_format)
     check_lpips_weights(lpips_weights, reference)
+    if port is not None and not view:  # it would be ignored: the restore serves nothing without --view
+        raise InputError(f"{port}: the viewer's port is used only with --view; add --view, or leave --port out", parameter="port")
+    port = DEFAULT_PORT if port is None else port
     if view:  # refused before the restore, not after it has written a scene no viewer can show
         require_free_port(DEFAULT_HOST, port)
     # Everything the outputs must stay clear of; checked, with what is already in the way, before any

@@ -4,7 +4,8 @@ import torch
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.model.appearance.curve import CURVE_KNOTS
 from lumos3d_cli.model.appearance.operator import AppearanceOperator
-from lumos3d_cli.model.appearance.photo_restoration import frames_without_content, restore_photos
+from lumos3d_cli.io.colour import srgb_to_linear
+from lumos3d_cli.model.appearance.photo_restoration import frames_without_content, monochrome_frames, restore_photos
 
 
 def _operator(views=3, seed=0) -> AppearanceOperator:
@@ -44,3 +45,23 @@ def test_refuses_mismatched_inputs():
         restore_photos(torch.rand(2, 3, 8, 8), _operator(3))
     with pytest.raises(InputError, match=r"\[V, 3, H, W\]"):
         restore_photos(torch.rand(3, 8, 8), _operator(3))
+
+
+def test_a_monochrome_photo_restores_grey_with_the_operators_luminance():
+    """A tinting operator (random matrix) on a greyscale photo: the output is grey in every
+    pixel, and its linear luminance is the operator's own output's (Rec. 709 weights)."""
+    generator = torch.Generator().manual_seed(2)
+    grey = torch.rand(1, 1, 24, 32, generator=generator).expand(1, 3, 24, 32) * 0.3
+    colour = torch.rand(1, 3, 24, 32, generator=generator) * 0.3
+    photos = torch.cat([grey, colour])
+    operator = _operator(views=2)
+    assert monochrome_frames(photos) == [0]
+    assert monochrome_frames(photos + torch.tensor([0.0, 0.0, 1.5 / 255]).reshape(1, 3, 1, 1)) == []
+    restored = restore_photos(photos, operator)
+    expected = operator.apply(photos[None])[0]
+    assert float((expected[0].amax(0) - expected[0].amin(0)).max()) > 0.02  # the operator does tint it
+    assert torch.equal(restored[0][0], restored[0][1]) and torch.equal(restored[0][1], restored[0][2])
+    weights = torch.tensor([0.2126, 0.7152, 0.0722]).reshape(3, 1, 1)
+    torch.testing.assert_close((srgb_to_linear(restored[0]) * weights).sum(0),
+                               (srgb_to_linear(expected[0]) * weights).sum(0), atol=1e-5, rtol=1e-4)
+    torch.testing.assert_close(restored[1], expected[1])  # colour photos are untouched

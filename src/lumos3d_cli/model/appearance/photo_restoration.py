@@ -6,6 +6,8 @@ from __future__ import annotations
 import torch
 
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
+from lumos3d_cli.model.appearance.clipped_highlights import luminance
 from lumos3d_cli.model.appearance.operator import AppearanceOperator
 
 # A frame whose pixels are all within one 8-bit step of black (or of white in every channel)
@@ -22,6 +24,19 @@ def frames_without_content(photos: torch.Tensor) -> tuple[list[int], list[int]]:
     return black, saturated
 
 
+def monochrome_frames(photos: torch.Tensor) -> list[int]:
+    """photos [V, 3, H, W] sRGB in [0, 1] -> indices of the views whose three channels agree
+    everywhere within one 8-bit step (a greyscale file, or a grey photo saved as RGB)."""
+    spread = (photos.detach().amax(dim=1) - photos.detach().amin(dim=1)).reshape(photos.shape[0], -1)
+    return (spread.amax(dim=1) <= BLACK_LEVEL).nonzero().flatten().tolist()
+
+
+def _grey(restored: torch.Tensor) -> torch.Tensor:
+    """[3, H, W] sRGB -> the same image's linear luminance, sRGB-encoded in all three channels."""
+    level = luminance(srgb_to_linear(restored.clamp(0.0, 1.0)))
+    return linear_to_srgb(level).clamp(0.0, 1.0).expand_as(restored)
+
+
 def restore_photos(photos: torch.Tensor, operator: AppearanceOperator) -> torch.Tensor:
     """photos [V, 3, H, W] sRGB in [0, 1] at any (full) resolution, the operator of their scene
     (B = 1; its local grids, if any, for the same V views, in the same order) -> restored sRGB
@@ -29,7 +44,9 @@ def restore_photos(photos: torch.Tensor, operator: AppearanceOperator) -> torch.
 
     One view at a time, so full-resolution photo sets fit in memory. A view that is all black or
     all saturated holds nothing to restore and stays black or white (the restore job warns of
-    such photos by name, `frames_without_content`).
+    such photos by name, `frames_without_content`). A monochrome view (`monochrome_frames`) holds
+    no colour to restore: its restoration keeps its luminance and stays grey, where the operator's
+    matrix, fitted to colour photos, would tint it.
     """
     if photos.dim() != 4 or photos.shape[1] != 3:
         raise InputError(f"photos to restore must be [V, 3, H, W], got shape {tuple(photos.shape)}")
@@ -40,9 +57,12 @@ def restore_photos(photos: torch.Tensor, operator: AppearanceOperator) -> torch.
         raise InputError(f"operator has local grids for {operator.local_log2_gain.shape[1]} views, but {views} photos were given")
     restored = torch.empty(photos.shape, dtype=torch.float32, device=photos.device)
     black, saturated = frames_without_content(photos)
+    monochrome = monochrome_frames(photos)
     for view in range(views):
         if view in black or view in saturated:  # the operator's curve would turn white grey
             restored[view] = photos[view]
             continue
         restored[view] = operator.views(slice(view, view + 1)).apply(photos[view][None, None])[0, 0]
+        if view in monochrome:
+            restored[view] = _grey(restored[view])
     return restored
