@@ -72,8 +72,8 @@ from lumos3d_cli.model.lumos3d import Lumos3D  # noqa: E402
 from lumos3d_cli.pipeline.evaluation import eval_contact_sheet, evaluate_lom  # noqa: E402
 from lumos3d_cli.pipeline.lom_eval import PROTOCOLS  # noqa: E402
 from lumos3d_cli.pipeline.model_loading import load_restoration_model  # noqa: E402
-from lumos3d_cli.pipeline.choices import EXPOSURE_KEYS  # noqa: E402
-from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, RestorePreset, get_restore_preset  # noqa: E402
+from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, EXPOSURE_KEYS  # noqa: E402
+from lumos3d_cli.pipeline.presets import RestorePreset, get_restore_preset  # noqa: E402
 from lumos3d_cli.pipeline.quality import QualityMeter  # noqa: E402
 from lumos3d_cli.pipeline.restore import restore_scene  # noqa: E402
 from lumos3d_cli.train.bracket_samples import VALIDATION_SEED, validation_indices  # noqa: E402

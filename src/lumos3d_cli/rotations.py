@@ -8,9 +8,23 @@ from __future__ import annotations
 import torch
 
 
+# Quaternions shorter than this carry no direction: they count as the identity rotation (the
+# rasterizer's kernels read them so too, render/kernels/projection.py).
+DEGENERATE_QUATERNION_NORM = 1e-12
+
+
+def unit_quaternions(quats: torch.Tensor) -> torch.Tensor:
+    """[..., 4] wxyz -> unit quaternions [..., 4]; (near-)zero ones become the identity (1, 0, 0, 0).
+    Differentiable where the norm is above DEGENERATE_QUATERNION_NORM."""
+    norms = quats.norm(dim=-1, keepdim=True)
+    identity = torch.zeros_like(quats)
+    identity[..., 0] = 1.0
+    return torch.where(norms < DEGENERATE_QUATERNION_NORM, identity, quats / norms.clamp_min(DEGENERATE_QUATERNION_NORM))
+
+
 def quaternion_to_matrix(quats: torch.Tensor) -> torch.Tensor:
-    """[..., 4] wxyz (normalised here) -> [..., 3, 3] rotation."""
-    quats = quats / quats.norm(dim=-1, keepdim=True)
+    """[..., 4] wxyz (normalised here, `unit_quaternions`) -> [..., 3, 3] rotation."""
+    quats = unit_quaternions(quats)
     w, x, y, z = quats.unbind(-1)
     rows = (
         1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),

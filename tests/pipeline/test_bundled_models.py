@@ -12,7 +12,8 @@ from lumos3d_cli.io.images import load_images
 from lumos3d_cli.model.appearance.amplified_noise import MIN_NOISE_LEVEL
 from lumos3d_cli.model.bundled_models import BUNDLED_MODELS, bundled_weights_path
 from lumos3d_cli.model.checkpoints import summarize_checkpoint
-from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, RESTORE_PRESETS
+from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET
+from lumos3d_cli.pipeline.presets import RESTORE_PRESETS
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "lowlight-buu"
 WEIGHTS = {mode: bundled_weights_path(name) for mode, name in BUNDLED_MODELS.items()}

@@ -47,6 +47,9 @@ _POSE_FAULTS = {
     "straight-angle": (lambda d: [d.pop(k) for k in ("fl_x", "fl_y")] and d.update(camera_angle_x=3.141592653589793),
                        "frame 0 has camera_angle_x 3.141592653589793, but a field of view lies between 0 and pi"),
     "text-focal": (lambda d: d.update(fl_x="wide"), "frame 0 has fl_x 'wide', which is not a number"),
+    "text-width": (lambda d: d.update(w="abc"), "frame 0 has w 'abc', which is not a number"),
+    "nan-width": (lambda d: d.update(w=float("nan")), "frame 0 has the image size nanx375"),
+    "zero-width": (lambda d: d.update(w=0), "the image size of view 0 (1.JPG) is 0x375 pixels; correct the file"),
 }
 
 

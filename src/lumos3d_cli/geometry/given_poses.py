@@ -101,10 +101,7 @@ def read_given_poses(
         intrinsics[view, 0] *= width / file_width
         intrinsics[view, 1] *= height / file_height
     cameras = Cameras(chosen.extrinsics.double(), intrinsics, list(sizes), list(names))
-    try:
-        cameras.require_valid(str(path))
-    except ValueError as error:
-        raise InputError(str(error), parameter="poses") from error
+    cameras.require_valid(str(path), remedy="correct the camera file")
     if extra:
         logger.info("poses %s: %d poses without a photo are not used", path, len(extra))
     return cameras

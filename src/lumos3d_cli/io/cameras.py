@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import torch
 
 from lumos3d_cli.checks import require_finite
+from lumos3d_cli.errors import InputError
 
 # Flipping y and z turns OpenGL/nerfstudio camera axes (x right, y up, z back) into OpenCV's
 # (x right, y down, z forward) and back: the map is its own inverse.
@@ -155,8 +156,9 @@ class Cameras:
         pixels = (self.intrinsics[:, None, :2, :2] @ (camera[..., :2] / depth[..., None])[..., None])[..., 0]
         return pixels + self.intrinsics[:, None, :2, 2], depth
 
-    def require_valid(self, where: str = "cameras") -> None:
-        """Finite values, proper rotations and positive focal lengths; NonFiniteError/ValueError."""
+    def require_valid(self, where: str = "cameras", remedy: str = "correct the file") -> None:
+        """Finite values, proper rotations, positive focal lengths and image sizes; otherwise
+        NonFiniteError, or InputError naming `where` and the view and ending in `remedy`."""
         require_finite(f"{where}.extrinsics", self.extrinsics)
         require_finite(f"{where}.intrinsics", self.intrinsics)
         rotation = self.extrinsics[:, :, :3].double()
@@ -164,11 +166,16 @@ class Cameras:
         not_rotations = ((rotation @ rotation.transpose(1, 2) - identity).abs().amax(dim=(1, 2)) > 1e-4) | (
             torch.linalg.det(rotation) < 0)
         if not_rotations.any():
-            raise ValueError(f"{where}: the pose of {self._view_name(int(not_rotations.nonzero()[0]))} holds a matrix that "
-                             "is not a rotation (scaled, sheared, mirrored or singular)")
+            raise InputError(f"{where}: the pose of {self._view_name(int(not_rotations.nonzero()[0]))} holds a matrix "
+                             f"that is not a rotation (scaled, sheared, mirrored or singular); {remedy}")
         bad_focal = (self.intrinsics[:, 0, 0] <= 0) | (self.intrinsics[:, 1, 1] <= 0)
         if bad_focal.any():
-            raise ValueError(f"{where}: the focal length of {self._view_name(int(bad_focal.nonzero()[0]))} is not positive")
+            raise InputError(f"{where}: the focal length of {self._view_name(int(bad_focal.nonzero()[0]))} is not "
+                             f"positive; {remedy}")
+        for index, (width, height) in enumerate(self.sizes):
+            if width < 1 or height < 1:
+                raise InputError(f"{where}: the image size of {self._view_name(index)} is {width}x{height} pixels; "
+                                 f"{remedy}")
 
     def _view_name(self, index: int) -> str:
         return f"view {index} ({self.names[index]})" if self.names and self.names[index] else f"view {index}"

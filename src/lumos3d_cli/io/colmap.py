@@ -190,10 +190,7 @@ def read_colmap_model(folder: Path | str) -> Cameras:
         intrinsics[i] = torch.tensor([[cam.fx, 0, cam.cx], [0, cam.fy, cam.cy], [0, 0, 1]], dtype=torch.float64)
         sizes.append((cam.width, cam.height))
     result = Cameras(extrinsics, intrinsics, sizes, [v.name for v in views])
-    try:
-        result.require_valid(str(folder))
-    except ValueError as error:
-        raise InputError(f"{error}; correct the model") from None
+    result.require_valid(str(folder), remedy="correct the model")
     return result
 
 

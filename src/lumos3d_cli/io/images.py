@@ -7,6 +7,7 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -17,6 +18,9 @@ from lumos3d_cli.io.image_files import image_kind, list_images
 from lumos3d_cli.io.image_types import DecodedImage, ImageHeader
 from lumos3d_cli.io.photo import probe_photo, read_photo
 from lumos3d_cli.io.raw import probe_raw, read_raw
+
+if TYPE_CHECKING:
+    import torch
 
 logger = logging.getLogger(__name__)
 

@@ -15,6 +15,7 @@ import torch
 
 from lumos3d_cli.io.atomic import write_bytes_atomic
 from lumos3d_cli.io.gaussians import Gaussians, sh_dc_to_rgb
+from lumos3d_cli.rotations import unit_quaternions
 
 SPLAT_DTYPE = np.dtype(
     [("position", "<f4", 3), ("scale", "<f4", 3), ("rgba", "u1", 4), ("rotation", "u1", 4)]
@@ -30,9 +31,7 @@ def gaussians_to_splat(gaussians: Gaussians) -> np.ndarray:
     g = g.select(order)
     rgb = sh_dc_to_rgb(g.sh[:, 0, :])
     rgba = torch.cat([rgb, g.opacities[:, None]], dim=1)
-    norms = g.quats.norm(dim=1, keepdim=True)
-    identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=torch.float64)
-    unit = torch.where(norms > 0, g.quats / norms.clamp_min(1e-300), identity)
+    unit = unit_quaternions(g.quats)
     records = np.zeros(len(g), dtype=SPLAT_DTYPE)
     records["position"] = g.means.numpy()
     records["scale"] = g.scales.numpy()

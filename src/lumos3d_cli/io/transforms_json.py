@@ -23,9 +23,12 @@ logger = logging.getLogger(__name__)
 _DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
 
 
-def _image_size(path: Path, frame: dict, merged: dict) -> tuple[int, int]:
+def _image_size(path: Path, index: int, frame: dict, merged: dict) -> tuple[int, int]:
     if "w" in merged and "h" in merged:
-        return int(round(float(merged["w"]))), int(round(float(merged["h"])))
+        width, height = _number(path, index, merged, "w"), _number(path, index, merged, "h")
+        if not (math.isfinite(width) and math.isfinite(height)):
+            raise InputError(f"{path}: frame {index} has the image size {width}x{height}; correct the file")
+        return round(width), round(height)
     from lumos3d_cli.io.images import probe_image  # only needed for files without w/h
 
     image_path = path.parent / frame.get("file_path", "")
@@ -80,7 +83,7 @@ def read_transforms_json(path: Path | str, warn_on_distortion: bool = True) -> C
             matrix = torch.cat([matrix, torch.tensor([[0.0, 0.0, 0.0, 1.0]], dtype=torch.float64)])
         if matrix.shape != (4, 4):
             raise InputError(f"{path}: frame {index} 'transform_matrix' is {tuple(matrix.shape)}, expected 4x4")
-        width, height = _image_size(path, frame, merged)
+        width, height = _image_size(path, index, frame, merged)
         if "fl_x" in merged:
             focal_x = _number(path, index, merged, "fl_x")
             focal_y = _number(path, index, merged, "fl_y") if "fl_y" in merged else focal_x
@@ -100,10 +103,7 @@ def read_transforms_json(path: Path | str, warn_on_distortion: bool = True) -> C
     if distorted and warn_on_distortion:
         logger.warning("%s: lens distortion coefficients are ignored (pinhole model)", path)
     cameras = Cameras.from_camera_to_world(torch.stack(camera_to_world), make_intrinsics(fx, fy, cx, cy), sizes, names)
-    try:
-        cameras.require_valid(str(path))
-    except ValueError as error:
-        raise InputError(f"{error}; correct the file") from None
+    cameras.require_valid(str(path))
     return cameras
 
 

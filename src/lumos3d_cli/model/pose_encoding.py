@@ -13,32 +13,31 @@ import math
 
 import torch
 
-from lumos3d_cli.rotations import matrix_to_quaternion, quaternion_to_matrix
+from lumos3d_cli.rotations import matrix_to_quaternion, quaternion_to_matrix, unit_quaternions
 
 POSE_ENCODING_SIZE = 9
 # Fields of view are clamped into this open range before decoding so that a degenerate
 # prediction (ReLU'd to 0, or near 180 degrees) still yields a finite, positive focal length.
 MIN_FOV = 1e-3
 MAX_FOV = math.pi - 1e-3
-# Quaternions shorter than this carry no direction; they decode to the identity rotation.
-MIN_QUATERNION_NORM = 1e-8
 
 
 def xyzw_to_wxyz(quats: torch.Tensor) -> torch.Tensor:
+    """[..., 4] scalar-last (VGGT's order) -> [..., 4] scalar-first."""
     return quats[..., [3, 0, 1, 2]]
 
 
 def wxyz_to_xyzw(quats: torch.Tensor) -> torch.Tensor:
+    """[..., 4] scalar-first -> [..., 4] scalar-last (VGGT's order)."""
     return quats[..., [1, 2, 3, 0]]
 
 
 def normalize_quaternion(quats: torch.Tensor, identity_first: bool = True) -> torch.Tensor:
     """Unit quaternions [..., 4]; (near-)zero inputs become the identity (w = 1, at index 0 for
-    wxyz when `identity_first`, else at index 3 for xyzw)."""
-    norm = quats.norm(dim=-1, keepdim=True)
-    identity = torch.zeros_like(quats)
-    identity[..., 0 if identity_first else 3] = 1.0
-    return torch.where(norm > MIN_QUATERNION_NORM, quats / norm.clamp_min(MIN_QUATERNION_NORM), identity)
+    wxyz when `identity_first`, else at index 3 for xyzw; `rotations.unit_quaternions`)."""
+    if identity_first:
+        return unit_quaternions(quats)
+    return wxyz_to_xyzw(unit_quaternions(xyzw_to_wxyz(quats)))
 
 
 def encode_pose(extrinsics: torch.Tensor, intrinsics: torch.Tensor, image_size_hw: tuple[int, int]) -> torch.Tensor:

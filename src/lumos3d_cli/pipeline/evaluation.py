@@ -20,10 +20,11 @@ from lumos3d_cli.io.file_digest import file_sha256
 from lumos3d_cli.io.image_write import write_image
 from lumos3d_cli.model.appearance.exposure_prior import prior_strength
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
+from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET
 from lumos3d_cli.pipeline.eval_outputs import eval_outputs
 from lumos3d_cli.pipeline.lom_eval import PROTOCOLS, SceneEvaluation, evaluate_lom_scene
 from lumos3d_cli.pipeline.model_loading import load_restoration_model
-from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, get_restore_preset
+from lumos3d_cli.pipeline.presets import get_restore_preset
 from lumos3d_cli.pipeline.quality import QualityMeter, mean_metrics
 from lumos3d_cli.pipeline.scene_geometry import check_geometry_source
 

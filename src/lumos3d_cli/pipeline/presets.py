@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.colmap_run import SFM_LONG_SIDE
 from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
-from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, EXPOSURE_KEYS
+from lumos3d_cli.pipeline.choices import EXPOSURE_KEYS
 from lumos3d_cli.refine.settings import DensifySettings, RefineSettings
 
 

@@ -26,9 +26,10 @@ from lumos3d_cli.io.images import ImageBatch, load_images
 from lumos3d_cli.model.appearance.photo_restoration import frames_without_content
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D
+from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET
 from lumos3d_cli.pipeline.early_registration import EarlyRegistration
 from lumos3d_cli.pipeline.model_loading import load_restoration_model
-from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, RestorePreset, get_restore_preset
+from lumos3d_cli.pipeline.presets import RestorePreset, get_restore_preset
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
 from lumos3d_cli.pipeline.quality import QualityMeter, load_references, mean_metrics
 from lumos3d_cli.pipeline.restore_paths import check_lpips_weights, list_photos

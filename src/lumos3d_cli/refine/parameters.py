@@ -10,7 +10,7 @@ import torch
 
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.refine.settings import Positions
-from lumos3d_cli.render.constants import DEGENERATE_QUATERNION_NORM
+from lumos3d_cli.rotations import unit_quaternions
 
 # Scales are kept within these multiples of the scene's extent: below, a Gaussian is far under a
 # pixel from any camera (its log would only drift); above, it covers the whole scene. Degenerate
@@ -81,10 +81,7 @@ class GaussianParameters:
     def normalise(self) -> None:
         """After a step: unit quaternions (a vanished one becomes the identity, as the
         rasterizer reads it), scales and opacities back inside their bounds."""
-        norms = self.quats.norm(dim=-1, keepdim=True)
-        identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=self.quats.dtype, device=self.quats.device).expand_as(self.quats)
-        unit = self.quats / norms.clamp_min(DEGENERATE_QUATERNION_NORM)
-        self.quats.copy_(torch.where(norms < DEGENERATE_QUATERNION_NORM, identity, unit))
+        self.quats.copy_(unit_quaternions(self.quats))
         self.log_scales.clamp_(*self.log_scale_bounds)
         bound = math.log(OPACITY_BOUND / (1 - OPACITY_BOUND))
         self.opacity_logits.clamp_(bound, -bound)

@@ -10,7 +10,6 @@ FAR_PLANE = 1e10
 GAUSSIAN_EXTEND = 3.33  # largest radius in standard deviations
 MIN_COMPENSATION = 0.005  # floor of the antialiasing opacity compensation
 FOV_MARGIN = 0.3  # the EWA Jacobian is evaluated at most this fraction of tan(fov) outside the image
-DEGENERATE_QUATERNION_NORM = 1e-12  # quaternions shorter than this are treated as identity
 
 # Real SH basis constants for degrees 1-4 (3DGS order); SH_C0 and MAX_SH_DEGREE, which the
 # files and colour conversions share, live in io/gaussians.py.

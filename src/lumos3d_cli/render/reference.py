@@ -9,7 +9,6 @@ import torch
 from lumos3d_cli.io.gaussians import SH_C0
 from lumos3d_cli.render.constants import (
     ALPHA_THRESHOLD,
-    DEGENERATE_QUATERNION_NORM,
     FOV_MARGIN,
     GAUSSIAN_EXTEND,
     MAX_ALPHA,
@@ -53,12 +52,8 @@ def sh_basis_reference(degree: int, directions: torch.Tensor) -> torch.Tensor:
 
 def covariance_reference(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
     """World covariance R(q/|q|) diag(scales)^2 R^T [N,3,3] of quats [N,4] wxyz and scales [N,3];
-    a quaternion shorter than DEGENERATE_QUATERNION_NORM counts as the identity."""
-    norms = quats.norm(dim=-1, keepdim=True)
-    degenerate = norms < DEGENERATE_QUATERNION_NORM
-    identity = torch.tensor([1.0, 0.0, 0.0, 0.0], dtype=quats.dtype).expand_as(quats)
-    unit = torch.where(degenerate, identity, quats / norms.clamp_min(DEGENERATE_QUATERNION_NORM))
-    m = quaternion_to_matrix(unit) * scales[:, None, :]
+    a (near-)zero quaternion counts as the identity (`rotations.unit_quaternions`)."""
+    m = quaternion_to_matrix(quats) * scales[:, None, :]
     return m @ m.transpose(1, 2)
 
 

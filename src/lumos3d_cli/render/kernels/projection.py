@@ -41,12 +41,12 @@ from numba import njit, prange
 
 from lumos3d_cli.render.constants import (
     ALPHA_THRESHOLD,
-    DEGENERATE_QUATERNION_NORM,
     FOV_MARGIN,
     GAUSSIAN_EXTEND,
     MIN_COMPENSATION,
 )
 from lumos3d_cli.render.kernels.sh import sh_basis, sh_basis_gradient
+from lumos3d_cli.rotations import DEGENERATE_QUATERNION_NORM
 
 _CHUNK = 1024  # Gaussians per parallel work item; scratch arrays are allocated once per chunk
 
