@@ -1,10 +1,11 @@
+import cv2
 import numpy as np
 import pytest
 import torch
 from skimage import color
 from skimage.color import colorconv
 
-from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
+from lumos3d_cli.io.colour import linear_to_srgb, luma, luminance, srgb_to_linear
 
 
 def _skimage_decode(encoded: np.ndarray) -> np.ndarray:
@@ -57,3 +58,14 @@ def test_curve_is_continuous_at_the_knees():
     assert abs(linear_to_srgb(above) - linear_to_srgb(below)) < 1e-7
     below, above = np.float64(0.04045) * (1 - 1e-9), np.float64(0.04045) * (1 + 1e-9)
     assert abs(srgb_to_linear(above) - srgb_to_linear(below)) < 1e-7
+
+
+def test_luma_is_opencvs_grey_and_luminance_rec709_for_numpy_and_torch():
+    rgb = np.random.default_rng(3).random((5, 7, 3), dtype=np.float32)
+    grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+    chw = np.ascontiguousarray(rgb.transpose(2, 0, 1))
+    np.testing.assert_allclose(luma(chw)[0], grey, atol=1e-6)
+    np.testing.assert_allclose(luma(torch.from_numpy(chw))[0].numpy(), grey, atol=1e-6)
+    expected = 0.2126 * chw[0] + 0.7152 * chw[1] + 0.0722 * chw[2]
+    np.testing.assert_allclose(luminance(chw[None])[0, 0], expected, atol=1e-6)
+    assert luminance(torch.from_numpy(chw)[None].double()).shape == (1, 1, 5, 7)

@@ -20,8 +20,7 @@ import cv2
 import numpy as np
 import torch
 
-from lumos3d_cli.eval.metrics import LUMINANCE_WEIGHTS
-from lumos3d_cli.io.colour import srgb_to_linear
+from lumos3d_cli.io.colour import luminance, srgb_to_linear
 
 
 def _flatten(images: torch.Tensor) -> torch.Tensor:
@@ -33,8 +32,7 @@ def _flatten(images: torch.Tensor) -> torch.Tensor:
 def mean_linear_luminance(images: torch.Tensor) -> torch.Tensor:
     """[..., 3, H, W] sRGB in [0, 1] -> [...] float64 mean Rec. 709 luminance in linear light."""
     linear = srgb_to_linear(_flatten(images).double().clamp(0.0, 1.0))
-    weights = torch.tensor(LUMINANCE_WEIGHTS, dtype=torch.float64)[:, None, None]
-    return (linear * weights).sum(dim=1).mean(dim=(1, 2)).reshape(images.shape[:-3])
+    return luminance(linear).mean(dim=(1, 2, 3)).reshape(images.shape[:-3])
 
 
 def brightness_stops(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor:

@@ -14,6 +14,7 @@ import numpy as np
 import torch
 
 from lumos3d_cli.eval.tone_curve import auto_gamma_array
+from lumos3d_cli.io.colour import luma, luminance
 from lumos3d_cli.losses.ssim import ssim_map_mean
 
 
@@ -29,9 +30,6 @@ def psnr(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor:
     return (10 * torch.log10(1.0 / mse)).reshape(images.shape[:-3])
 
 
-GREY_WEIGHTS = (0.299, 0.587, 0.114)  # Rec. 601, OpenCV's RGB -> grey, as the GT-mean protocol uses it
-
-
 def psnr_gt_mean(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor:
     """[..., 3, H, W] in [0, 1] -> [...] PSNR in dB after scaling each image by its reference's mean
     grey level over its own (then clipping to [0, 1]): the "GT-mean" PSNR that low-light
@@ -41,9 +39,8 @@ def psnr_gt_mean(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor
     (mean grey 0) is scored as it is.
     """
     ours, theirs = _flatten(images), _flatten(references)
-    weights = torch.tensor(GREY_WEIGHTS, dtype=torch.float64)[:, None, None]
-    our_grey = (ours * weights).sum(dim=1).mean(dim=(1, 2))
-    their_grey = (theirs * weights).sum(dim=1).mean(dim=(1, 2))
+    our_grey = luma(ours).mean(dim=(1, 2, 3))  # OpenCV's grey, as the GT-mean protocol uses it
+    their_grey = luma(theirs).mean(dim=(1, 2, 3))
     scale = torch.where(our_grey > 0, their_grey / our_grey.clamp_min(1e-12), torch.ones_like(our_grey))
     matched = (ours * scale[:, None, None, None]).clamp(0.0, 1.0)
     return psnr(matched, theirs).reshape(images.shape[:-3])
@@ -68,7 +65,6 @@ def auto_gamma(images: torch.Tensor, target_mean: float = 0.45) -> torch.Tensor:
 
 
 SHARPNESS_SIGMAS = (0.7, 2.0)  # the band of a difference of Gaussians: pixel-scale detail, not shading
-LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)  # Rec. 709
 
 
 def _difference_of_gaussians(luminance: np.ndarray) -> np.ndarray:
@@ -87,9 +83,8 @@ def sharpness(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor:
     1 is as sharp as the reference; a blur scores below 1, noise or ringing above. A flat image
     scores 0; a flat reference gives NaN (nothing to compare against).
     """
-    weights = torch.tensor(LUMINANCE_WEIGHTS, dtype=torch.float64)[:, None, None]
-    ours = (_flatten(images) * weights).sum(dim=1).numpy()
-    theirs = (_flatten(references) * weights).sum(dim=1).numpy()
+    ours = luminance(_flatten(images))[:, 0].numpy()  # Rec. 709 weights on the encoded values
+    theirs = luminance(_flatten(references))[:, 0].numpy()
     ratios = []
     for image, reference in zip(ours, theirs):
         spread = image.std()

@@ -1,7 +1,7 @@
-"""sRGB <-> linear conversions, exact to IEC 61966-2-1.
+"""sRGB <-> linear conversions, exact to IEC 61966-2-1, and the grey levels of RGB.
 
-The only place where the sRGB transfer function lives. Works on numpy arrays and torch
-tensors alike (any shape), returns the input's type and dtype.
+The only place where the sRGB transfer function and the luminance weights live. Works on numpy
+arrays and torch tensors alike (any shape), returns the input's type and dtype.
 """
 
 from __future__ import annotations
@@ -23,6 +23,11 @@ _SRGB_ENCODE_KNEE = 0.0031308  # linear value where the linear segment ends
 _SRGB_SLOPE = 12.92
 _SRGB_GAMMA = 2.4
 _SRGB_OFFSET = 0.055
+
+# Rec. 709 / sRGB luminance of linear RGB.
+LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)
+# Rec. 601 luma of encoded RGB: OpenCV's RGB -> grey (and the start of its Lab conversion).
+LUMA_WEIGHTS = (0.299, 0.587, 0.114)
 
 
 def srgb_to_linear(encoded: Array) -> Array:
@@ -48,3 +53,24 @@ def linear_to_srgb(linear: Array) -> Array:
     linear = np.asarray(linear)
     curve = (1 + _SRGB_OFFSET) * np.maximum(linear, _SRGB_ENCODE_KNEE) ** (1 / _SRGB_GAMMA) - _SRGB_OFFSET
     return np.where(linear <= _SRGB_ENCODE_KNEE, linear * _SRGB_SLOPE, curve).astype(linear.dtype, copy=False)
+
+
+def _weighted_channels(images: Array, weights: tuple[float, float, float]) -> Array:
+    """[..., 3, H, W] -> [..., 1, H, W]: the channels' weighted sum."""
+    torch = loaded_torch(images)
+    if torch is not None:
+        kernel = torch.tensor(weights, dtype=images.dtype, device=images.device).reshape(3, 1, 1)
+        return (images * kernel).sum(dim=-3, keepdim=True)
+    images = np.asarray(images)
+    kernel = np.asarray(weights, dtype=images.dtype).reshape(3, 1, 1)
+    return (images * kernel).sum(axis=-3, keepdims=True)
+
+
+def luminance(linear: Array) -> Array:
+    """[..., 3, H, W] linear RGB -> [..., 1, H, W] Rec. 709 luminance."""
+    return _weighted_channels(linear, LUMINANCE_WEIGHTS)
+
+
+def luma(encoded: Array) -> Array:
+    """[..., 3, H, W] encoded (sRGB) RGB -> [..., 1, H, W] Rec. 601 luma, OpenCV's grey."""
+    return _weighted_channels(encoded, LUMA_WEIGHTS)

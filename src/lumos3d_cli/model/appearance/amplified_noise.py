@@ -27,12 +27,12 @@ import numpy as np
 import torch
 
 from lumos3d_cli.checks import require_finite
+from lumos3d_cli.io.colour import luma
 
 # Immerkaer's mask: a difference of Laplacians that cancels every smooth (quadratic) image.
 _NOISE_MASK = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
 _MASK_NORM = 6.0  # sqrt of the sum of its squared taps
 _MAD_TO_SIGMA = 1 / 0.6745  # median |x| of a zero-mean normal is 0.6745 sigma
-_LUMA = (0.299, 0.587, 0.114)  # the weights OpenCV's own Lab conversion starts from (Rec. 601)
 
 STRENGTH = 1.0  # the filter strength h, in units of the measured noise level
 MIN_NOISE_LEVEL = 1.0 / 255  # below one 8-bit step nothing is filtered
@@ -59,8 +59,7 @@ def noise_level(image: torch.Tensor) -> float:
     pixel noise (sRGB units), from the luminance's Laplacian-difference response (module docstring)."""
     if image.dim() != 3 or image.shape[0] != 3 or min(image.shape[-2:]) < 3:
         raise ValueError(f"noise_level needs an image [3, H, W] of at least 3x3 pixels, got {tuple(image.shape)}")
-    weights = torch.tensor(_LUMA, dtype=torch.float32).reshape(3, 1, 1)
-    luminance = (image.detach().float().cpu() * weights).sum(dim=0).numpy()
+    luminance = luma(image.detach().float().cpu())[0].numpy()  # the grey OpenCV's own Lab conversion starts from
     response = cv2.filter2D(luminance, -1, _NOISE_MASK)[1:-1, 1:-1]
     return float(np.median(np.abs(response))) * _MAD_TO_SIGMA / _MASK_NORM
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import torch
 
-from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
+from lumos3d_cli.io.colour import linear_to_srgb, luminance, srgb_to_linear
 
 # sRGB level of the darkest channel where the photo's hue starts to replace the operator's, and
 # where it replaces it fully (the brightest 5 % of the range: only near-white pixels).
@@ -27,8 +27,6 @@ HIGHLIGHT_FULL = 0.95
 MAX_SATURATION_GAIN = 8.0
 NEUTRAL_SLACK = 0.03
 _START_LINEAR = float(srgb_to_linear(torch.tensor(HIGHLIGHT_START, dtype=torch.float64)))
-# Rec. 709 / sRGB luminance of linear RGB.
-LUMINANCE = (0.2126, 0.7152, 0.0722)
 
 
 def clipping_weight(linear_input: torch.Tensor) -> torch.Tensor:
@@ -43,12 +41,6 @@ def clipping_weight(linear_input: torch.Tensor) -> torch.Tensor:
     darkest = linear_to_srgb(darkest)
     ramp = ((darkest - HIGHLIGHT_START) / (HIGHLIGHT_FULL - HIGHLIGHT_START)).clamp(0.0, 1.0)
     return ramp * ramp * (3.0 - 2.0 * ramp)
-
-
-def luminance(linear: torch.Tensor) -> torch.Tensor:
-    """[..., 3, H, W] linear RGB -> [..., 1, H, W]."""
-    weights = torch.tensor(LUMINANCE, dtype=linear.dtype, device=linear.device).reshape(3, 1, 1)
-    return (linear * weights).sum(dim=-3, keepdim=True)
 
 
 def _chromaticity(linear: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -26,8 +26,7 @@ import torch
 import torch.nn.functional as F
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
-from lumos3d_cli.model.appearance.clipped_highlights import luminance as linear_luminance
+from lumos3d_cli.io.colour import linear_to_srgb, luminance, srgb_to_linear
 from lumos3d_cli.model.bundled_models import bundled_weights_path
 
 KEY_FEATURE_NAMES = (
@@ -54,15 +53,15 @@ def key_features(views_at_key: torch.Tensor) -> torch.Tensor:
     if scale < 1.0:  # averaging in linear light, as a smaller photo of the scene would be
         size = (max(1, round(height * scale)), max(1, round(width * scale)))
         views = linear_to_srgb(F.adaptive_avg_pool2d(srgb_to_linear(views), size))
-    luminance = linear_to_srgb(linear_luminance(srgb_to_linear(views)))[:, 0]  # [N, h, w]
-    pooled = luminance.flatten()
+    grey = linear_to_srgb(luminance(srgb_to_linear(views)))[:, 0]  # [N, h, w]
+    pooled = grey.flatten()
     pooled = pooled[:: max(1, -(-pooled.numel() // _QUANTILE_SAMPLES))]
     quantiles = torch.quantile(pooled, pooled.new_tensor(_QUANTILES))
-    rows = luminance.shape[1]
+    rows = grey.shape[1]
     third = max(1, rows // 3)
-    top_minus_bottom = (luminance[:, :third].mean(dim=(1, 2)) - luminance[:, -third:].mean(dim=(1, 2))).mean()
-    centre = luminance[:, _middle_half(rows), _middle_half(luminance.shape[2])]
-    centre_minus_whole = (centre.mean(dim=(1, 2)) - luminance.mean(dim=(1, 2))).mean()
+    top_minus_bottom = (grey[:, :third].mean(dim=(1, 2)) - grey[:, -third:].mean(dim=(1, 2))).mean()
+    centre = grey[:, _middle_half(rows), _middle_half(grey.shape[2])]
+    centre_minus_whole = (centre.mean(dim=(1, 2)) - grey.mean(dim=(1, 2))).mean()
     colourfulness = (views.amax(dim=1) - views.amin(dim=1)).mean()
     return torch.cat([quantiles, torch.stack([
         (pooled < NEAR_BLACK).double().mean(), (pooled > NEAR_WHITE).double().mean(),

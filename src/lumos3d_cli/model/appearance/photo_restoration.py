@@ -6,8 +6,7 @@ from __future__ import annotations
 import torch
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
-from lumos3d_cli.model.appearance.clipped_highlights import luminance
+from lumos3d_cli.io.colour import linear_to_srgb, luminance, srgb_to_linear
 from lumos3d_cli.model.appearance.operator import AppearanceOperator
 
 # A frame whose pixels are all within one 8-bit step of black (or of white in every channel)
