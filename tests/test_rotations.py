@@ -21,3 +21,10 @@ def test_a_zero_quaternion_is_the_identity_rotation_everywhere_it_is_read():
     sigma = covariances(quats, torch.tensor([[1.0, 2.0, 3.0], [1.0, 2.0, 3.0]], dtype=torch.float64))
     torch.testing.assert_close(sigma[0], torch.diag(torch.tensor([1.0, 4.0, 9.0], dtype=torch.float64)))
     assert bool(torch.isfinite(sigma).all())
+
+
+def test_a_huge_float32_quaternion_is_the_rotation_it_points_at():
+    """Squaring 1e20 overflows float32: the norm is taken after dividing by the largest component."""
+    huge = torch.tensor([[1e20, 1e20, 1e20, 1e20], [3e30, 0.0, 4e30, 0.0]], dtype=torch.float32)
+    torch.testing.assert_close(unit_quaternions(huge), torch.tensor([[0.5, 0.5, 0.5, 0.5], [0.6, 0.0, 0.8, 0.0]]))
+    torch.testing.assert_close(quaternion_to_matrix(huge[:1]), quaternion_to_matrix(torch.full((1, 4), 0.5)))

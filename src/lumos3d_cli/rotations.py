@@ -15,11 +15,16 @@ DEGENERATE_QUATERNION_NORM = 1e-12
 
 def unit_quaternions(quats: torch.Tensor) -> torch.Tensor:
     """[..., 4] wxyz -> unit quaternions [..., 4]; (near-)zero ones become the identity (1, 0, 0, 0).
-    Differentiable where the norm is above DEGENERATE_QUATERNION_NORM."""
-    norms = quats.norm(dim=-1, keepdim=True)
+    Divided by the largest component first, so that no square overflows (a float32 quaternion of
+    1e20 is a rotation, not infinity). Differentiable where the norm is above
+    DEGENERATE_QUATERNION_NORM."""
+    peak = quats.detach().abs().amax(dim=-1, keepdim=True)
+    scaled = quats / peak.clamp_min(torch.finfo(quats.dtype).tiny)
+    scaled_norms = scaled.norm(dim=-1, keepdim=True)  # in [1, 2] where the peak is not 0
     identity = torch.zeros_like(quats)
     identity[..., 0] = 1.0
-    return torch.where(norms < DEGENERATE_QUATERNION_NORM, identity, quats / norms.clamp_min(DEGENERATE_QUATERNION_NORM))
+    degenerate = (peak == 0) | (peak < DEGENERATE_QUATERNION_NORM / scaled_norms.clamp_min(1.0))
+    return torch.where(degenerate, identity, scaled / scaled_norms.clamp_min(1.0))
 
 
 def quaternion_to_matrix(quats: torch.Tensor) -> torch.Tensor:

@@ -12,6 +12,7 @@ from assertions import expect_input_error
 
 from lumos3d_cli.data.lom import lom_reference_extrinsics, read_lom_scene
 from lumos3d_cli.io.camera_files import read_cameras
+from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.colmap import read_colmap_model, read_colmap_points
 from lumos3d_cli.io.transforms_json import read_transforms_json, write_transforms_json
 
@@ -152,3 +153,22 @@ def test_the_depth_sweep_never_compares_with_held_out_views(buu, monkeypatch):
     plain = build_scene(photos, FRAMES, model, get_restore_preset("best", refine_steps=0, depth_sweep=False),
                         geometry="sfm", max_views=3, required_views=[2], fuse_views=fused)
     assert not seen and plain.geometry.report["depth_sweep"] is None
+
+
+@pytest.mark.parametrize("scale", [1e-6, 1e12])
+def test_poses_in_units_that_put_the_scene_out_of_the_renderers_range_are_refused(run_cli, buu, tmp_path,
+                                                                                   random_checkpoint, scale):
+    """The rasterizer's clipping planes are absolute (0.01 to 1e10 units, as gsplat's): poses in
+    extreme units once gave an empty .ply and black views with exit 0."""
+    photos = _photos(buu, tmp_path)
+    everything = read_transforms_json(buu / "transforms_train.json")
+    stems = [name.rsplit("/", 1)[-1].split(".")[0] for name in everything.names]
+    given = everything[[stems.index(n[:-4]) for n in FRAMES]]
+    extrinsics = given.extrinsics.clone()
+    extrinsics[:, :, 3] *= scale
+    write_transforms_json(tmp_path / "poses.json", Cameras(extrinsics, given.intrinsics, given.sizes, given.names))
+    out = tmp_path / "out" / "scene.ply"
+    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--poses",
+                               tmp_path / "poses.json", "--refine-steps", 0),
+                       "--poses", "no camera sees the scene", "outside the renderer's range")
+    assert not out.parent.exists()

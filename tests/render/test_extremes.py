@@ -108,3 +108,16 @@ def test_nan_camera_is_named():
     cameras.extrinsics[0, 0, 3] = float("inf")
     with pytest.raises(NonFiniteError, match=r"cameras\.extrinsics: 1 of 12"):
         render(random_scene(3, 9, dtype=torch.float32), cameras)
+
+
+@pytest.mark.parametrize("backend", ["cpu", "reference"])
+def test_the_kernel_and_its_twin_read_a_huge_float32_quaternion_as_its_rotation(backend):
+    camera = camera_at_origin(64, 48)
+
+    def one(quat):
+        return Gaussians(torch.tensor([[0.0, 0.0, 5.0]]), torch.tensor([quat]), torch.tensor([[0.3, 0.05, 0.05]]),
+                         torch.tensor([0.9]), torch.ones(1, 1, 3))
+
+    turned = render(one([0.5, 0.5, 0.5, 0.5]), camera, backend=backend).alphas
+    torch.testing.assert_close(render(one([1e20] * 4), camera, backend=backend).alphas, turned)
+    assert float((render(one([1.0, 0.0, 0.0, 0.0]), camera, backend=backend).alphas - turned).abs().max()) > 0.1

@@ -21,6 +21,7 @@ from lumos3d_cli.io.output_set import OutputSet
 from lumos3d_cli.io.video import VideoWriter, probe_video, video_kind
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
 from lumos3d_cli.render.camera_paths import orbit_from_cameras, orbit_from_gaussians
+from lumos3d_cli.render.clipping_range import require_drawable
 from lumos3d_cli.render.render import render
 
 logger = logging.getLogger(__name__)
@@ -103,6 +104,7 @@ def render_frames(
     kind = video_kind(video) if video is not None else None
     if len(gaussians) == 0:
         raise InputError("holds no Gaussians: there is nothing to render", parameter="scene")
+    require_drawable(gaussians.means, cameras)
     if video is not None and len(set(cameras.sizes)) > 1:
         logger.warning("the cameras have %d different image sizes; a video has one: every frame is rendered at %dx%d",
                        len(set(cameras.sizes)), *cameras.sizes[0])

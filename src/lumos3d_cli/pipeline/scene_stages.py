@@ -45,6 +45,7 @@ from lumos3d_cli.pipeline.sampling_filter import apply_sampling_filter
 from lumos3d_cli.pipeline.scene_geometry import Brightened, check_geometry_source, place_views, register_views
 from lumos3d_cli.pipeline.scene_job import SceneJob
 from lumos3d_cli.pipeline.scene_refinement import refine_scene, refinement_targets
+from lumos3d_cli.render.clipping_range import require_drawable
 from lumos3d_cli.render.gaussian_budget import DEFAULT_MIN_WEIGHT, fit_budget
 
 logger = logging.getLogger(__name__)
@@ -215,6 +216,9 @@ def budget(job: SceneJob) -> SceneJob:
     preset = job.preset
     gaussians, report = fit_budget(job.gaussians, job.geometry.cameras, preset.max_gaussians,
                                    resolution=preset.budget_resolution)
+    if report.kept == 0 and report.dropped_unseen > 0:  # poses in extreme units: every view would be black
+        require_drawable(job.gaussians.means, job.geometry.cameras, None if job.poses is None else str(job.poses),
+                         parameter=None if job.poses is None else "poses")
     job.gaussians = _limit_sh(gaussians, preset.sh_degree)
     job.budget = report.as_dict() | {
         "max_gaussians": preset.max_gaussians, "min_weight_px": DEFAULT_MIN_WEIGHT, "grid": list(job.grid_size),

@@ -63,16 +63,21 @@ def camera_centre(viewmat):
 @njit(cache=True, inline="always")
 def unit_quaternion(quats, i, out):
     """out[:4] = normalised wxyz of quats[i]; returns the norm (0 for a degenerate quaternion,
-    which is then treated as identity)."""
-    norm = 0.0
+    which is then treated as identity). In float64, the components divided by the largest first,
+    so that no square overflows (a float32 quaternion of 1e20 once read as the identity)."""
+    peak = 0.0
     for r in range(4):
-        norm += float(quats[i, r]) ** 2
-    norm = math.sqrt(norm)
+        peak = max(peak, abs(np.float64(quats[i, r])))
+    scaled = 0.0
+    if peak > 0.0:
+        for r in range(4):
+            scaled += (np.float64(quats[i, r]) / peak) ** 2
+    norm = peak * math.sqrt(scaled)
     if norm < DEGENERATE_QUATERNION_NORM:
         out[0], out[1], out[2], out[3] = 1.0, 0.0, 0.0, 0.0
         return 0.0
     for r in range(4):
-        out[r] = float(quats[i, r]) / norm
+        out[r] = np.float64(quats[i, r]) / peak / math.sqrt(scaled)
     return norm
 
 

@@ -1,0 +1,32 @@
+"""Whether any camera can draw a scene at all: the rasterizer's clipping planes are absolute
+(render.constants NEAR_PLANE and FAR_PLANE, as gsplat's), so a scene in extreme units (poses in
+kilometres given as micro-units, a .ply scaled by 1e-6 or 1e12) lies wholly before the near plane
+or beyond the far one, and every view of it would be black."""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.render.constants import FAR_PLANE, NEAR_PLANE
+
+_SAMPLED_MEANS = 20_000  # enough to find a drawable Gaussian; the test is over every camera
+
+
+def require_drawable(means: torch.Tensor, cameras: Cameras, where: str | None = None, parameter: str | None = None) -> None:
+    """means [N, 3] (N >= 1), cameras (V >= 1): InputError (naming `where`, the file, when given)
+    when no camera has any of the means (every k-th, at most _SAMPLED_MEANS) between its near and
+    far planes."""
+    sampled = means.detach()[:: max(1, math.ceil(len(means) / _SAMPLED_MEANS))].to("cpu", torch.float64)
+    _, depth = cameras.to("cpu", torch.float64).project(sampled)
+    if bool(((depth >= NEAR_PLANE) & (depth <= FAR_PLANE)).any()):
+        return
+    ahead = depth[depth > 0]
+    where_it_lies = f"{float(ahead.median()):.3g} units in front of the cameras" if len(ahead) else "behind every camera"
+    prefix = f"{where}: " if where else ""
+    raise InputError(f"{prefix}no camera sees the scene: it lies {where_it_lies}, outside the renderer's range of "
+                     f"{NEAR_PLANE:g} to {FAR_PLANE:g} units; give the scene and its cameras in units that put it about "
+                     "0.1 to 1e8 units away (metres, say)", parameter=parameter)
