@@ -82,6 +82,18 @@ def test_non_finite_gaussians_are_refused(tmp_path):
     assert not (tmp_path / "a.ply").exists()
 
 
+def test_a_log_scale_too_large_for_float32_is_named_as_such(tmp_path):
+    """exp(1e4) is Inf: the file holds no NaN, so the refusal says what the value is."""
+    records = np.zeros(2, dtype=[(name, "f4") for name in ply_property_names(0)])
+    records["scale_1"] = [0.0, 1e4]
+    PlyData([PlyElement.describe(records, "vertex")]).write(str(tmp_path / "huge.ply"))
+    with pytest.raises(InputError, match=r"huge.ply: holds log-scales \(scale_\*\) up to 10000.*above 88.7"):
+        read_ply(tmp_path / "huge.ply")
+    records["scale_1"] = [0.0, 88.0]  # e^88, 1.7e38: finite, read as it is
+    PlyData([PlyElement.describe(records, "vertex")]).write(str(tmp_path / "large.ply"))
+    assert bool(torch.isfinite(read_ply(tmp_path / "large.ply").scales).all())
+
+
 def _plyfile_scene(names, n=3, text=False, byte_order="<", dtype="f4"):
     records = np.zeros(n, dtype=[(name, dtype) for name in names])
     for i, name in enumerate(names):

@@ -42,6 +42,18 @@ def test_arrays_in_the_viewer_frame():
     assert np.quantile(distances, 0.9) == pytest.approx(VIEWER_RADIUS, rel=0.02)
 
 
+def test_a_huge_gaussian_reaches_the_browser_as_finite_float16():
+    """viser stores covariances as float16: a log-scale of 10 (std 22,000) once overflowed to inf."""
+    gaussians = random_gaussians(50, 0)
+    gaussians.scales[0] = 22026.0
+    frame = frame_scene(gaussians, None)
+    arrays = splat_arrays(gaussians, frame.centre, frame.scale)
+    assert np.isfinite(arrays.covariances.astype(np.float16)).all()
+    assert np.linalg.eigvalsh(arrays.covariances.astype(np.float64)).min() > -1e-6  # still a covariance
+    rest = splat_arrays(gaussians.select(torch.arange(1, 50)), frame.centre, frame.scale)
+    np.testing.assert_array_equal(rest.covariances, arrays.covariances[1:])  # ordinary splats untouched
+
+
 def test_up_is_the_cameras_minus_y():
     # Cameras rolled upside down (180 degrees about z): their -y points along world +y.
     extrinsics = torch.diag(torch.tensor([-1.0, -1.0, 1.0], dtype=torch.float64))[None].expand(2, 3, 3)

@@ -60,6 +60,9 @@ def gaussians_to_ply_fields(gaussians: Gaussians) -> np.ndarray:
     return torch.cat(columns, dim=1).numpy().astype(np.float32)
 
 
+_MAX_LOG_SCALE = float(np.log(np.finfo(np.float32).max))  # 88.7: exp of more is Inf in float32
+
+
 def ply_fields_to_gaussians(fields: np.ndarray, sh_degree: int) -> Gaussians:
     """[N, P] float values in the order of `ply_property_names` -> Gaussians (float32)."""
     values = torch.from_numpy(np.ascontiguousarray(fields, dtype=np.float64))
@@ -190,6 +193,12 @@ def read_ply(path: Path | str) -> Gaussians:
     """Read a Gaussian `.ply` (any 3DGS-layout file) into activated Gaussians. NaN or Inf (also
     from an overflowing log-scale) is an error naming the file (`info` counts them instead)."""
     table, degree = read_ply_fields(path)
+    names = ply_property_names(degree)
+    log_scales = table[:, [names.index(f"scale_{axis}") for axis in range(3)]]
+    largest = float(np.nanmax(log_scales, initial=-np.inf))
+    if largest > _MAX_LOG_SCALE:  # a finite file value whose exp is Inf in float32: name it as what it is
+        raise InputError(f"{path}: holds log-scales (scale_*) up to {largest:g}, a Gaussian larger than float32 holds "
+                         f"(exp overflows above {_MAX_LOG_SCALE:.1f}); correct or drop those Gaussians")
     gaussians = ply_fields_to_gaussians(table, degree)
     gaussians.require_finite(f"{path}: gaussians")
     return gaussians

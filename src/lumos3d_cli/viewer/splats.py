@@ -55,6 +55,12 @@ def covariances(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
     return rotations @ torch.diag_embed(scales.square()) @ rotations.transpose(-1, -2)
 
 
+# viser sends covariances as float16 (largest 65504): a splat's standard deviation in the viewer's
+# frame (the scene's cameras about a unit apart) is capped below its square root, so that a huge
+# Gaussian reaches the browser as a very large splat, not as infinity.
+MAX_SPLAT_SCALE = 255.0
+
+
 def splat_arrays(gaussians: Gaussians, centre: torch.Tensor, scale: float, max_splats: int = DEFAULT_MAX_SPLATS) -> SplatArrays:
     """Subsample (see `select_splats`) and move into the viewer frame x' = (x - centre) * scale.
 
@@ -62,7 +68,7 @@ def splat_arrays(gaussians: Gaussians, centre: torch.Tensor, scale: float, max_s
     degree-0 colour 0.5 + C0 * f_dc is shown."""
     shown = select_splats(gaussians, max_splats).map(lambda t: t.detach().to("cpu", torch.float64))
     centers = (shown.means - centre.to(shown.means)) * scale
-    sigma = covariances(shown.quats, shown.scales * scale)
+    sigma = covariances(shown.quats, (shown.scales * scale).clamp(max=MAX_SPLAT_SCALE))
     rgbs = sh_dc_to_rgb(shown.sh[:, 0, :]).clamp(0.0, 1.0)
     return SplatArrays(
         centers.float().numpy(), sigma.float().numpy(), rgbs.float().numpy(),

@@ -31,6 +31,12 @@ def test_black_and_saturated_frames_are_found_and_restore_to_finite_values():
     photos[2] = 1.0
     assert frames_without_content(photos) == ([0], [2])
     assert frames_without_content(torch.rand(2, 3, 16, 16) * 0.05) == ([], [])
+    # within one 8-bit step of black, but in the hundreds of levels a 16-bit file holds: an image
+    sixteen_bit = torch.randint(0, 250, (1, 3, 16, 16)) / 65535.0
+    assert float(sixteen_bit.max()) <= 1 / 255 and frames_without_content(sixteen_bit) == ([], [])
+    # two 8-bit levels (codes 0 and 1; 254 and 255) are still nothing recorded
+    assert frames_without_content(torch.randint(0, 2, (1, 3, 16, 16)) / 255.0) == ([0], [])
+    assert frames_without_content(torch.randint(254, 256, (1, 3, 16, 16)) / 255.0) == ([], [0])
     restored = restore_photos(photos, _operator())
     assert bool(torch.isfinite(restored).all())
     # nothing recorded, nothing restored: the operator's curve would turn the white frame grey

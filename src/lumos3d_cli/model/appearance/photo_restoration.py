@@ -9,17 +9,26 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.colour import linear_to_srgb, luminance, srgb_to_linear
 from lumos3d_cli.model.appearance.operator import AppearanceOperator
 
-# A frame whose pixels are all within one 8-bit step of black (or of white in every channel)
-# carries no image to restore: no gain brings back what was never recorded.
+# A frame whose pixels are all within one 8-bit step of black (or of white in every channel), in
+# at most two levels, carries no image to restore: no gain brings back what was never recorded. A
+# 16-bit or RAW frame that dark still holds hundreds of levels, an image, and is restored.
 BLACK_LEVEL = 1.0 / 255
 WHITE_LEVEL = 254.0 / 255
+_LEVELS_OF_NOTHING = 2
+
+
+def _few_levels(view: torch.Tensor) -> bool:
+    """Whether `view` (any shape, in [0, 1]) takes at most _LEVELS_OF_NOTHING 16-bit levels (a
+    resized copy's rounding, 1e-7 off a level, counts as that level)."""
+    return len(torch.unique((view * 65535).round())) <= _LEVELS_OF_NOTHING
 
 
 def frames_without_content(photos: torch.Tensor) -> tuple[list[int], list[int]]:
     """photos [V, 3, H, W] sRGB in [0, 1] -> (indices of all-black views, of all-saturated views)."""
     flat = photos.detach().reshape(photos.shape[0], -1)
-    black = (flat.amax(dim=1) <= BLACK_LEVEL).nonzero().flatten().tolist()
-    saturated = (flat.amin(dim=1) >= WHITE_LEVEL).nonzero().flatten().tolist()
+    black = [view for view in (flat.amax(dim=1) <= BLACK_LEVEL).nonzero().flatten().tolist() if _few_levels(flat[view])]
+    saturated = [view for view in (flat.amin(dim=1) >= WHITE_LEVEL).nonzero().flatten().tolist()
+                 if _few_levels(flat[view])]
     return black, saturated
 
 
