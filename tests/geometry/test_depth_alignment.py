@@ -4,7 +4,8 @@ import pytest
 import torch
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.geometry.depth_alignment import DEPTH_FORMS, align_depth, fit_scale_shift, sample_depth, unproject_aligned
+from lumos3d_cli.geometry.depth_alignment import DEPTH_FORMS, align_depth, fit_scale_shift, sample_depth
+from lumos3d_cli.model.geometry import unproject_depth
 from lumos3d_cli.io.sparse_points import SparsePoints
 
 from synthetic_scene import plane_cameras, plane_depth, plane_points
@@ -125,5 +126,6 @@ def test_unprojected_aligned_depth_lies_on_the_plane():
     from synthetic_scene import PLANE_NORMAL, PLANE_OFFSET
 
     cameras = plane_cameras(3)
-    world = unproject_aligned(plane_depth(cameras), cameras)
+    depth = plane_depth(cameras)
+    world = unproject_depth(depth, cameras.extrinsics.to(depth.dtype), cameras.intrinsics.to(depth.dtype))
     torch.testing.assert_close(world @ PLANE_NORMAL, torch.full(world.shape[:-1], PLANE_OFFSET, dtype=torch.float64))

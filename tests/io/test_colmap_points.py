@@ -3,9 +3,16 @@ import pytest
 import torch
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.colmap import read_colmap_model, read_colmap_sparse_points, write_colmap_model
+from lumos3d_cli.io.colmap import read_colmap_model, sparse_points_of, write_colmap_model
 
 from synthetic_scene import plane_cameras, plane_points
+
+
+def _read_points(folder, names):
+    """The model's points through pycolmap, their views indexing `names` (as structure-from-motion reads them)."""
+    reconstruction = pycolmap.Reconstruction(folder)
+    return sparse_points_of(reconstruction, {image_id: names.index(image.name)
+                                             for image_id, image in reconstruction.images.items()})
 
 
 def _observation_set(points):
@@ -16,7 +23,7 @@ def test_points_with_tracks_round_trip_and_open_in_colmap(tmp_path):
     cameras = plane_cameras(4)
     points = plane_points(cameras, 50)
     write_colmap_model(tmp_path, cameras, points)
-    back = read_colmap_sparse_points(tmp_path, read_colmap_model(tmp_path).names)
+    back = _read_points(tmp_path, read_colmap_model(tmp_path).names)
     torch.testing.assert_close(back.xyz, points.xyz, atol=0, rtol=0)
     assert torch.equal(back.rgb, points.rgb)
     assert _observation_set(back) == _observation_set(points)
@@ -31,7 +38,7 @@ def test_binary_model_reads_like_its_text_form(buu):
     binary = read_colmap_model(buu / "colmap_sparse" / "0")
     torch.testing.assert_close(binary.extrinsics, text.extrinsics, atol=1e-12, rtol=0)
     torch.testing.assert_close(binary.intrinsics, text.intrinsics, atol=0, rtol=0)
-    points = read_colmap_sparse_points(buu / "colmap_sparse" / "0", binary.names)
+    points = _read_points(buu / "colmap_sparse" / "0", binary.names)
     pixels, depth = binary.project(points.xyz)
     assert (depth[points.view, points.point] > 0).all()
     # observations sit where the model's cameras project their points (distortion ignored)

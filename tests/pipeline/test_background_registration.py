@@ -50,7 +50,7 @@ def test_registration_on_the_tone_curve_runs_beside_the_network_with_the_same_re
     report = built.geometry.summary()
     assert report["brightening"].startswith("auto-gamma") and report["registered_views"] == 5
     # one matching thread: the run repeats exactly, so the direct call is the oracle
-    direct = register_views(photos, NAMES, "sfm", None, "low-light", SilentProgress(), sfm_long_side=384)
+    direct = register_views(photos, NAMES, "sfm", None, SilentProgress(), sfm_long_side=384)
     assert torch.equal(built.registration.cameras.extrinsics, direct.cameras.extrinsics)
     assert torch.equal(built.registration.cameras.intrinsics, direct.cameras.intrinsics)
     # the network ran once, and the photos' restoration belongs to the views it saw
@@ -66,7 +66,7 @@ def test_registration_on_the_restoration_runs_after_the_network_on_its_own_threa
     assert len(threads) == 1 and threads[0].startswith("lumos3d-sfm")
     assert built.geometry.summary()["brightening"] == "the model's restoration operator"
     brightened = scene_stages.Brightened(scene_stages._global_restoration(built.network, photos), "restoration")
-    direct = register_views(photos, NAMES, "sfm", None, "low-light", SilentProgress(), brightened, sfm_long_side=384)
+    direct = register_views(photos, NAMES, "sfm", None, SilentProgress(), brightened, sfm_long_side=384)
     assert torch.equal(built.registration.cameras.extrinsics, direct.cameras.extrinsics)
     torch.testing.assert_close(built.restored_photos, operator_restoration(built.network, photos, built.selected))
 

@@ -48,7 +48,7 @@ def test_the_job_takes_photos_and_cameras_from_the_early_run_unchanged(buu):
     built = build_scene(early.photos().batch().images, NAMES, model, _fast(), geometry="sfm", max_views=3,
                         early_registration=early)
     assert built.geometry.summary()["registered_views"] == 5
-    direct = register_views(batch.images, NAMES, "sfm", None, "low-light", SilentProgress(), sfm_long_side=384)
+    direct = register_views(batch.images, NAMES, "sfm", None, SilentProgress(), sfm_long_side=384)
     assert torch.equal(built.registration.cameras.extrinsics, direct.cameras.extrinsics)
     assert torch.equal(built.registration.cameras.intrinsics, direct.cameras.intrinsics)
     assert torch.equal(built.registration.sfm.points.xyz, direct.sfm.points.xyz)

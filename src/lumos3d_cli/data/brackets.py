@@ -33,12 +33,12 @@ import torch
 from torch.utils.data import Dataset
 
 from lumos3d_cli.data.augment import crop_and_resize, crop_box
+from lumos3d_cli.data.modes import MODES
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.images import read_image, to_srgb
 
 logger = logging.getLogger(__name__)
 
-BRACKET_MODES = ("low-light", "over-exposure")
 SPLITS = ("train", "validation", "all")
 INPUT_KINDS = ("restore", "well-exposed", "both")
 WELL_EXPOSED_MEAN = 0.45
@@ -78,8 +78,8 @@ def read_bracket_index(root: Path | str) -> dict[str, list[tuple[str, float]]]:
 def pair_frames(frames: list[tuple[str, float]], mode: str, inputs: str = "restore") -> list[tuple[int, int]]:
     """Frames [(file, mean)] of one bracket -> [(input index, target index)] by the module's rule,
     for the input kind `inputs` (INPUT_KINDS)."""
-    if mode not in BRACKET_MODES:
-        raise InputError(f"unknown mode '{mode}'; choose one of: {', '.join(BRACKET_MODES)}")
+    if mode not in MODES:
+        raise InputError(f"unknown mode '{mode}'; choose one of: {', '.join(MODES)}")
     if inputs not in INPUT_KINDS:
         raise InputError(f"unknown bracket inputs '{inputs}'; choose one of: {', '.join(INPUT_KINDS)}")
     if not frames:

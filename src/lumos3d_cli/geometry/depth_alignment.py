@@ -35,7 +35,6 @@ from lumos3d_cli.checks import require_finite
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.sparse_points import SparsePoints
-from lumos3d_cli.model.geometry import unproject_depth
 
 DEPTH_FORMS = ("depth", "inverse depth")
 DEFAULT_FORM = "inverse depth"
@@ -191,9 +190,3 @@ def align_depth(
         for v, (network_depth, sfm_depth) in enumerate(pairs)
     ], dtype=torch.float64)
     return DepthAlignment(aligned.to(depth.dtype), scale, shift, fitted, scale_only, used, residual, form)
-
-
-def unproject_aligned(depth: torch.Tensor, cameras: Cameras) -> torch.Tensor:
-    """depth [V, h, w] and cameras with intrinsics in pixels of the depth maps -> world points
-    [V, h, w, 3] in the cameras' frame."""
-    return unproject_depth(depth, cameras.extrinsics.to(depth.dtype), cameras.intrinsics.to(depth.dtype))

@@ -70,7 +70,8 @@ def _is_leftover(name: str) -> bool:
     )
 
 
-def _remove(path: Path) -> None:
+def remove_path(path: Path) -> None:
+    """Delete a file, a link (not what it points to) or a folder with everything in it; gone is fine."""
     if path.is_dir() and not path.is_symlink():
         shutil.rmtree(path, ignore_errors=True)
     else:
@@ -157,7 +158,7 @@ def remove_leftovers(folder: Path | str) -> list[Path]:
                                "cannot be read; left as it is", entry)
                 continue
             logger.warning("finished moving the outputs of an earlier run into %s: it was killed while it did", folder)
-        _remove(entry)
+        remove_path(entry)
         removed.append(entry)
         logger.info("removed %s, left behind by an earlier run that was killed", entry)
     return removed

@@ -238,16 +238,6 @@ def sparse_points_of(reconstruction: pycolmap.Reconstruction, view_of_image: dic
     )
 
 
-def read_colmap_sparse_points(folder: Path | str, names: list[str]) -> SparsePoints:
-    """The points of a text or binary model with their observations; `view` indexes `names`
-    (image names, e.g. `read_colmap_model(folder).names`); observations of other images are
-    dropped."""
-    reconstruction = _read_reconstruction(Path(folder))
-    view_of_image = {image_id: names.index(image.name) for image_id, image in reconstruction.images.items()
-                     if image.name in names}
-    return sparse_points_of(reconstruction, view_of_image)
-
-
 def _observation_lines(cameras: Cameras, points: SparsePoints | None) -> tuple[list[str], list[str]]:
     """The POINTS2D line of each image and the points3D.txt data lines (tracks refer to the
     position of each observation in its image's POINTS2D line)."""

@@ -42,6 +42,7 @@ from lumos3d_cli.io.atomic import (
     make_folders,
     remove_created_folders,
     remove_leftovers,
+    remove_path,
     temporary_prefix,
     write_commit_journal,
 )
@@ -411,7 +412,7 @@ class OutputSet:
                                      "permissions or choose another output") from error
                 shutil.rmtree(root, ignore_errors=True)
                 for path in leftovers:
-                    _remove_path(path)
+                    remove_path(path)
         except Interrupted as stop:
             stop.detail = stop.detail or f"after the outputs were written; {self.folder} holds the complete new outputs"
             raise
@@ -424,13 +425,6 @@ def _undo(done: list[tuple[Path, Path]]) -> None:
             os.replace(destination, source)
         except OSError:
             logger.error("could not move %s back to %s while undoing a failed commit", destination, source)
-
-
-def _remove_path(path: Path) -> None:
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path, ignore_errors=True)
-    else:
-        path.unlink(missing_ok=True)
 
 
 def _refuse_unless_ours(manifest: Manifest, path: Path) -> None:

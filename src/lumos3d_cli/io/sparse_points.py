@@ -44,6 +44,3 @@ class SparsePoints:
             torch.zeros(0, dtype=torch.int64), torch.zeros(0, 2, dtype=torch.float64),
         )
 
-    def track_lengths(self) -> torch.Tensor:
-        """[P] number of views that observe each point."""
-        return torch.bincount(self.point, minlength=len(self))

@@ -119,20 +119,6 @@ def video_kind(path: Path | str, option: str = "--video") -> str:
     return suffix[1:]
 
 
-def write_video(path: Path | str, frames, fps: float = 30.0) -> int:
-    """Write an iterable of [H, W, 3] frames (float sRGB in [0, 1] or uint8) to an .mp4 or .gif;
-    the container comes from the suffix. Returns the number of frames."""
-    iterator = iter(frames)
-    first = next(iterator, None)
-    if first is None:
-        raise ValueError(f"{path}: no frames to write")
-    with VideoWriter(path, first.shape[1], first.shape[0], fps, video_kind(path)) as writer:
-        writer.write(first)
-        for frame in iterator:
-            writer.write(frame)
-    return writer.frames
-
-
 @dataclass(frozen=True)
 class VideoStream:
     """What ffmpeg reports about a file's first video stream."""

@@ -17,7 +17,7 @@ from lumos3d_cli.io.gaussians import Gaussians, sh_coefficient_count
 from lumos3d_cli.model.architectures import Architecture
 from lumos3d_cli.model.pose_encoding import normalize_quaternion, xyzw_to_wxyz
 
-OPACITY = slice(0, 1)
+OPACITY = 0
 SCALE = slice(1, 4)
 ROTATION = slice(4, 8)
 SH_START = 8
@@ -55,7 +55,7 @@ def activate_gaussians(means: torch.Tensor, params: torch.Tensor, scene_scale: t
         means=means,
         quats=xyzw_to_wxyz(normalize_quaternion(params[:, ROTATION], identity_first=False)),
         scales=relative_scale * scene_scale,
-        opacities=torch.sigmoid(params[:, 0]),
+        opacities=torch.sigmoid(params[:, OPACITY]),
         # contiguous: the product keeps the transposed layout, and every render of the scene
         # (budget, refinement, views) copied it again (0.6 s of a 25-view budget)
         sh=(sh * sh_degree_weights(architecture.sh_degree, sh.dtype, sh.device)[None, :, None]).contiguous(),

@@ -118,7 +118,7 @@ class Brightened:
 
 
 def register_views(
-    images: torch.Tensor, names: list[str], geometry: str, poses: Path | str | None, mode: str, progress: JobProgress,
+    images: torch.Tensor, names: list[str], geometry: str, poses: Path | str | None, progress: JobProgress,
     brightened: Brightened | None = None, sizes: Sequence[tuple[int, int]] | None = None,
     sfm_long_side: int | None = SFM_LONG_SIDE, blind_run: Callable[[], ColmapRun] | None = None,
 ) -> ViewRegistration:

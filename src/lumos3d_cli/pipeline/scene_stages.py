@@ -128,7 +128,7 @@ def registration(job: SceneJob) -> SceneJob:
     the modules later stages import load meanwhile (`pipeline.module_prefetch`), and it runs on
     its own thread (module docstring)."""
     early = job.early_registration
-    register = partial(register_views, job.photos, job.names, job.geometry_source, job.poses, job.mode, job.progress,
+    register = partial(register_views, job.photos, job.names, job.geometry_source, job.poses, job.progress,
                        job.brightened, job.sizes, job.preset.sfm_long_side,
                        None if early is None else early.colmap_run)
     if job.geometry_source == "network" or len(job.names) < 2:  # no structure-from-motion: nothing to wait for

@@ -11,7 +11,8 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
-from lumos3d_cli.data.brackets import BRACKET_MODES, BracketDataset
+from lumos3d_cli.data.brackets import BracketDataset
+from lumos3d_cli.data.modes import MODES
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.losses.appearance import appearance_loss
 from lumos3d_cli.losses.ssim import ssim_map_mean
@@ -42,7 +43,7 @@ class BracketSamples:
         if config.root is None:
             raise ValueError("BracketSamples needs brackets.root")
         self.config = config
-        modes = BRACKET_MODES if mode == "mixed" else (mode,)
+        modes = MODES if mode == "mixed" else (mode,)
         train_inputs = "both" if config.well_exposed else "restore"
         self.train = [BracketDataset(config.root, m, "train", size, crop_scale, flip=True, seed=seed, inputs=train_inputs)
                       for m in modes]
