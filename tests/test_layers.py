@@ -34,9 +34,12 @@ def imported_modules(source: str, module: str) -> list[str]:
         elif isinstance(node, ast.ImportFrom):
             if node.level:
                 base = module.split(".")[: -node.level]
-                found.append(".".join(base + ([node.module] if node.module else [])))
-            elif node.module:
-                found.append(node.module)
+                source_module = ".".join(base + ([node.module] if node.module else []))
+            else:
+                source_module = node.module or ""
+            found.append(source_module)
+            if source_module == "lumos3d_cli":  # `from lumos3d_cli import pipeline` imports the package pipeline
+                found += [f"lumos3d_cli.{alias.name}" for alias in node.names]
     return [name for name in found if name == "lumos3d_cli" or name.startswith("lumos3d_cli.")]
 
 
@@ -69,6 +72,9 @@ def test_no_module_imports_from_a_layer_above(module, path):
     ("from lumos3d_cli.io.images import load_images", "lumos3d_cli.model.loading", 0),
     ("from lumos3d_cli.errors import InputError", "lumos3d_cli.io.images", 0),
     ("from lumos3d_cli.model.lumos3d import Lumos3D", "lumos3d_cli.io.images", 1),
+    ("from lumos3d_cli import pipeline", "lumos3d_cli.model.loading", 1),  # the package itself
+    ("from .. import cli", "lumos3d_cli.io.images", 1),
+    ("from lumos3d_cli import errors", "lumos3d_cli.io.images", 0),
 ])
 def test_the_check_catches_an_upward_import(source, module, expected):
     assert len(upward_imports(source, module)) == expected

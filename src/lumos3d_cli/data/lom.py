@@ -50,7 +50,7 @@ def _by_stem(folder: Path) -> dict[str, Path]:
 def read_lom_scene(folder: Path, mode: str) -> LomScene:
     """One scene; InputError for a missing folder, test frame or degraded photo."""
     if mode not in DEGRADED_FOLDERS:
-        raise InputError(f"--mode {mode!r}: use one of {', '.join(DEGRADED_FOLDERS)}")
+        raise InputError(f"{mode!r}: use one of {', '.join(DEGRADED_FOLDERS)}", parameter="mode")
     degraded_folder = folder / DEGRADED_FOLDERS[mode]
     if not degraded_folder.is_dir():
         raise InputError(f"{folder}: no {DEGRADED_FOLDERS[mode]}/ folder for mode {mode}")

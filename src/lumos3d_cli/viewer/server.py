@@ -21,7 +21,7 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.viewer.defaults import DEFAULT_HOST, DEFAULT_PORT
 from lumos3d_cli.viewer.framing import VIEWER_RADIUS, ViewerFrame, frame_scene, view_position_showing
 from lumos3d_cli.viewer.panel import panel_markdown
-from lumos3d_cli.viewer.port import require_free_port
+from lumos3d_cli.viewer.port import port_in_use, require_free_port
 from lumos3d_cli.viewer.scene_folder import ViewerScene, load_viewer_scene
 from lumos3d_cli.viewer.splats import DEFAULT_MAX_SPLATS, splat_arrays
 
@@ -185,7 +185,7 @@ def start_viewer(
 ) -> RunningViewer:
     """Load `path` (restore output folder or .ply), start serving it and return at once."""
     if max_splats < 1:
-        raise InputError(f"--max-splats {max_splats}: use at least 1")
+        raise InputError(f"{max_splats}: use at least 1", parameter="max_splats")
     scene = load_viewer_scene(path)
     require_free_port(host, port)
     with viser_output_to_log():
@@ -194,7 +194,7 @@ def start_viewer(
     if port != 0 and bound != port:
         # Another program took the port between our check and viser's bind.
         RunningViewer(server, "", 0, 0).stop()
-        raise InputError(f"--port {port}: already in use on {host}; pick another with --port (0 picks a free one)")
+        raise port_in_use(host, port)
     viewer = RunningViewer(server, f"http://{'localhost' if host in ('0.0.0.0', '::') else host}:{bound}", 0, len(scene.gaussians))
     try:
         viewer.shown = build_viewer(server, scene, max_splats)
