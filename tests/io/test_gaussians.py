@@ -32,3 +32,11 @@ def test_select_concatenate_and_finiteness():
     g.scales[4, 1] = float("inf")
     with pytest.raises(NonFiniteError, match=r"scene\.scales: 1 of 30"):
         g.require_finite("scene")
+
+
+def test_with_sh_degree_drops_the_bands_above_it_and_keeps_the_rest():
+    gaussians = random_gaussians(6, 3)
+    lower = gaussians.with_sh_degree(1)
+    assert lower.sh_degree == 1 and lower.sh.is_contiguous()
+    assert torch.equal(lower.sh, gaussians.sh[:, :4]) and torch.equal(lower.means, gaussians.means)
+    assert gaussians.with_sh_degree(3) is gaussians and gaussians.with_sh_degree(4) is gaussians

@@ -82,6 +82,14 @@ class Gaussians:
     def detach(self) -> Gaussians:
         return self.map(torch.Tensor.detach)
 
+    def with_sh_degree(self, degree: int) -> Gaussians:
+        """The same Gaussians with the SH bands above `degree` dropped (unchanged at or above
+        their own degree); sh [N, (degree + 1)^2, 3], contiguous."""
+        if degree >= self.sh_degree:
+            return self
+        return Gaussians(self.means, self.quats, self.scales, self.opacities,
+                         self.sh[:, : sh_coefficient_count(degree)].contiguous())
+
     def to(self, *args, **kwargs) -> Gaussians:
         return self.map(lambda t: t.to(*args, **kwargs))
 

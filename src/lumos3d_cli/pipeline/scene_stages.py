@@ -27,7 +27,6 @@ import torch
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.cameras import Cameras
-from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.model.appearance.amplified_noise import denoise_photo
 from lumos3d_cli.model.appearance.footprint import footprint_colours
 from lumos3d_cli.model.appearance.gaussian_colours import with_operator_colours
@@ -219,7 +218,7 @@ def budget(job: SceneJob) -> SceneJob:
     if report.kept == 0 and report.dropped_unseen > 0:  # poses in extreme units: every view would be black
         require_drawable(job.gaussians.means, job.geometry.cameras, None if job.poses is None else str(job.poses),
                          parameter=None if job.poses is None else "poses")
-    job.gaussians = _limit_sh(gaussians, preset.sh_degree)
+    job.gaussians = gaussians if preset.sh_degree is None else gaussians.with_sh_degree(preset.sh_degree)
     job.budget = report.as_dict() | {
         "max_gaussians": preset.max_gaussians, "min_weight_px": DEFAULT_MIN_WEIGHT, "grid": list(job.grid_size),
         "footprint_scale": DEFAULT_FOOTPRINT_SCALE * preset.voxel_scale, "weights_resolution": preset.budget_resolution,
@@ -324,8 +323,3 @@ def build_scene(
     return job
 
 
-def _limit_sh(gaussians: Gaussians, sh_degree: int | None) -> Gaussians:
-    if sh_degree is None or sh_degree >= gaussians.sh_degree:
-        return gaussians
-    return Gaussians(gaussians.means, gaussians.quats, gaussians.scales, gaussians.opacities,
-                     gaussians.sh[:, : (sh_degree + 1) ** 2].contiguous())

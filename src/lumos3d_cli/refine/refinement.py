@@ -146,7 +146,7 @@ def refine_gaussians(
     degree = gaussians.sh_degree
     if settings.choose_sh_degree:
         degree = choose_sh_degree(gaussians, working, images, settings.ssim_weight, settings.sh_tolerance)
-    gaussians = _truncated(gaussians, degree)
+    gaussians = gaussians.with_sh_degree(degree)
     parameters = GaussianParameters(gaussians, settings.positions, centres, extent)
     pinned = torch.arange(len(working)) == 0  # the first view holds the world frame
     corrections = (CameraCorrections(working.extrinsics.to(gaussians.means.device), pinned.to(gaussians.means.device))
@@ -216,7 +216,3 @@ def _mean(values: list[float]) -> float:
     return sum(values) / len(values)
 
 
-def _truncated(gaussians: Gaussians, degree: int) -> Gaussians:
-    """The Gaussians with the SH bands above `degree` dropped."""
-    return Gaussians(gaussians.means, gaussians.quats, gaussians.scales, gaussians.opacities,
-                     gaussians.sh[:, : (degree + 1) ** 2].contiguous())
