@@ -33,6 +33,11 @@ def test_overrides_and_errors(tmp_path):
     (tmp_path / "student.yaml").write_text("stage: student\noutput: x\n")
     with pytest.raises(InputError, match="stage 'student' needs `teacher`"):
         load_config(tmp_path / "student.yaml")
+    for override, message in (("data.width=0", "data.width x data.height = 0x168"), ("log_every=0", "log_every: 0"),
+                              ("validate_every=-1", "validate_every: -1"), ("max_nonfinite_steps=0", "max_nonfinite_steps: 0"),
+                              ("checkpoint_every=-5", "checkpoint_every: -5")):
+        with pytest.raises(InputError, match=message):  # once an internal error or silently accepted
+            load_config(CONFIGS / "low-light.yaml", [override])
     (tmp_path / "bad.yaml").write_text("stage: [unclosed")
     with pytest.raises(InputError, match="invalid YAML"):
         load_config(tmp_path / "bad.yaml")

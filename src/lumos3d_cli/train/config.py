@@ -42,6 +42,9 @@ class DataConfig:
     def __post_init__(self) -> None:
         if self.views < 1:
             raise ValueError(f"data.views={self.views} must be at least 1")
+        if self.width < 1 or self.height < 1:
+            raise ValueError(f"data.width x data.height = {self.width}x{self.height} must be positive multiples of the "
+                             "patch size")
         if not 0 < self.crop_scale[0] <= self.crop_scale[1] <= 1:
             raise ValueError(f"data.crop_scale={self.crop_scale} must satisfy 0 < low <= high <= 1")
 
@@ -154,6 +157,12 @@ class TrainConfig:
             raise ValueError("multiview_loss: appearance scores a restoration: it needs stage 'student'")
         if self.batch_size < 1 or self.optim.steps < 1 or self.validation_samples < 1:
             raise ValueError("batch_size, optim.steps and validation_samples must be at least 1")
+        for key in ("log_every", "max_nonfinite_steps", "validation_views"):
+            if getattr(self, key) < 1:
+                raise ValueError(f"{key}: {getattr(self, key)} must be at least 1")
+        for key in ("checkpoint_every", "validate_every"):
+            if getattr(self, key) < 0:
+                raise ValueError(f"{key}: {getattr(self, key)} must be at least 0 (0: never)")
         if self.select is not None:
             if self.select not in SELECTION_SCORES:
                 raise ValueError(f"select: {self.select!r} is not a validation score; use one of {', '.join(SELECTION_SCORES)}")

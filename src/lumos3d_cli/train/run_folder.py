@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.atomic import write_bytes_atomic
+from lumos3d_cli.io.atomic import remove_path, write_bytes_atomic
 from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.io.output_set import check_not_inputs
 
@@ -94,3 +94,14 @@ def start_run(output: Path, config_file: Path | str | None) -> RunIdentity:
                       datetime.datetime.now().isoformat(timespec="seconds"))
     write_bytes_atomic(Path(output) / RUN_FILE, (json.dumps(asdict(run), indent=2) + "\n").encode())
     return run
+
+
+def remove_unfinished_run(output: Path, created: bool) -> None:
+    """Remove what a fresh run that saved no checkpoint wrote into `output` (RUN_OUTPUTS; the
+    folder checks refused a fresh run into a folder holding any, so they are its own), and the
+    folder itself when the run created it and nothing else is left there."""
+    output = Path(output)
+    for name in RUN_OUTPUTS:
+        remove_path(output / name)
+    if created and output.is_dir() and not any(output.iterdir()):
+        output.rmdir()

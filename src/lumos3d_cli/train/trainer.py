@@ -40,7 +40,7 @@ from lumos3d_cli.train.checkpointing import (
 from lumos3d_cli.train.config import TrainConfig, config_to_yaml
 from lumos3d_cli.train.distributed import DistributedContext, all_reduce_mean, any_rank
 from lumos3d_cli.io.output_lock import folder_lock
-from lumos3d_cli.train.run_folder import RunIdentity, check_run_folder, read_run, start_run
+from lumos3d_cli.train.run_folder import RunIdentity, check_run_folder, read_run, remove_unfinished_run, start_run
 from lumos3d_cli.train.run_logs import RunLogs
 from lumos3d_cli.train.schedule import learning_rate_factor
 from lumos3d_cli.train.selection import SELECTED_FILE, best_earlier_score, drop_stale_selection, is_improvement
@@ -131,6 +131,7 @@ class Trainer:
         self.nonfinite_total = 0
         self._logs: RunLogs | None = None  # opened by `run` once the folder is the run's
         self.run_identity: RunIdentity | None = None  # the run the output folder holds (train/run_folder.py)
+        self._saved = False  # whether this process has saved a checkpoint of the run
 
     # -- set-up ---------------------------------------------------------------------------------
 
@@ -323,6 +324,7 @@ class Trainer:
                 self.run_identity.run_id if self.run_identity is not None else None,
             )
             logger.info("saved checkpoint %s", folder)
+            self._saved = True
         if self.context.enabled:
             torch.distributed.barrier()
         return folder
@@ -344,6 +346,11 @@ class Trainer:
                 logger.info("resuming from %s instead, the newest intact checkpoint", folder)
             self.optimizer.load_state_dict(state.optimizer)
             self.scheduler.load_state_dict(state.scheduler)
+            # the step it continues at takes this config's schedule (a resumed run may train
+            # longer: the saved rate was the old schedule's), as the steps after it do
+            for group, base_lr, factor in zip(self.optimizer.param_groups, self.scheduler.base_lrs,
+                                              self.scheduler.lr_lambdas):
+                group["lr"] = base_lr * factor(self.scheduler.last_epoch)
             torch.set_rng_state(state.torch_rng)
             self.nonfinite_in_a_row, self.nonfinite_total = state.nonfinite_in_a_row, state.nonfinite_total
             if self.on_resume is not None:
@@ -405,13 +412,21 @@ class Trainer:
         check_run_folder(self.output, [], resume)
         if self.context.enabled:
             torch.distributed.barrier()
+        created = not self.output.exists()
         self.output.mkdir(parents=True, exist_ok=True)
-        with folder_lock(self.output, "train") if self.context.is_main else contextlib.nullcontext():
-            # Rank 0 holds the run folder (another `train` into it is refused) and checks again
-            # under the lock: a run that started since the first check is seen now.
-            if self.context.is_main:
-                check_run_folder(self.output, [], resume)
-            return self._run_locked(resume, max_steps, stop_after, config_file)
+        try:
+            with folder_lock(self.output, "train") if self.context.is_main else contextlib.nullcontext():
+                # Rank 0 holds the run folder (another `train` into it is refused) and checks again
+                # under the lock: a run that started since the first check is seen now.
+                if self.context.is_main:
+                    check_run_folder(self.output, [], resume)
+                return self._run_locked(resume, max_steps, stop_after, config_file)
+        except BaseException:
+            # A fresh run that ends before its first checkpoint (bad data met in the first step)
+            # leaves nothing: its run.json would refuse the rerun, and there is nothing to resume.
+            if not resume and self.context.is_main and not self._saved:
+                remove_unfinished_run(self.output, created)
+            raise
 
     def _run_locked(self, resume: bool, max_steps: int | None, stop_after: int | None,
                     config_file: Path | str | None) -> TrainResult:
