@@ -233,3 +233,34 @@ def test_a_resumed_run_that_trains_longer_takes_the_new_schedules_rate_at_once(t
     resumed = _trainer(config, ["optim.steps=8"]).run(resume=True)
     fresh = _trainer(tiny_config(name="fresh", optim__steps=8, optim__warmup_steps=1)).run()
     assert [r.learning_rate for r in resumed.history] == pytest.approx([r.learning_rate for r in fresh.history[4:]])
+
+
+def test_resume_replaces_only_the_files_the_run_wrote_as_it_wrote_them(tiny_config):
+    """An edited final.safetensors, or a picture of the user's named like a validation picture of
+    the steps a resume redoes, refuses the resume by name; once moved away, the resume runs."""
+    config = tiny_config(name="owned", optim__steps=4, validate_every=2, validation_samples=1)
+    run = Path(str(config).replace(".yaml", ""))
+    _trainer(config).run(stop_after=3)  # validation/step_00000002.png, then a checkpoint at step 3
+    (run / "final.safetensors").write_bytes(b"the user's")
+    with pytest.raises(InputError, match="final.safetensors: was not written by this training run"):
+        _trainer(config).run(resume=True)
+    assert (run / "final.safetensors").read_bytes() == b"the user's"
+    (run / "final.safetensors").unlink()
+    (run / "validation" / "step_00000004.png").write_bytes(b"mine")
+    with pytest.raises(InputError, match="step_00000004.png: was not written by this training run"):
+        _trainer(config).run(resume=True)
+    (run / "validation" / "step_00000004.png").unlink()
+    (run / "validation" / "step_00000002.png").write_bytes(b"an edited picture of a step it keeps")
+    assert _trainer(config).run(resume=True).steps_done == 4  # the kept step's picture is not replaced
+    assert (run / "validation" / "step_00000002.png").read_bytes() == b"an edited picture of a step it keeps"
+    assert read_checkpoint(run / "final.safetensors").tensors  # written, and listed: a later resume may replace it
+    assert _trainer(config, ["optim.steps=6"]).run(resume=True).steps_done == 6
+
+
+def test_a_run_folder_of_an_earlier_release_resumes_as_before(tiny_config, caplog):
+    config = tiny_config(name="unlisted", optim__steps=4)
+    run = Path(str(config).replace(".yaml", ""))
+    _trainer(config).run(stop_after=2)
+    (run / ".lumos3d-manifest.json").unlink()
+    assert _trainer(config).run(resume=True).steps_done == 4
+    assert "lists no files (a run of an earlier release)" in caplog.text

@@ -17,10 +17,12 @@ from pathlib import Path
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import remove_path, write_bytes_atomic
+from lumos3d_cli.io.manifest import MANIFEST_NAME, Manifest
 from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.io.output_set import check_not_inputs
 
 RUN_FILE = "run.json"
+FINAL_FILE = "final.safetensors"
 # Everything a run writes in its folder (train/trainer.py, checkpointing, run_logs, validation,
 # selection): any of these in a folder means a run was there.
 RUN_OUTPUTS = ("run.json", "config.yaml", "metrics.jsonl", "validation.jsonl", "checkpoints", "validation",
@@ -103,5 +105,8 @@ def remove_unfinished_run(output: Path, created: bool) -> None:
     output = Path(output)
     for name in RUN_OUTPUTS:
         remove_path(output / name)
+    manifest = Manifest.read(output)
+    if all(name.split("/")[0] in RUN_OUTPUTS for name in manifest.files):  # it listed only the run's files
+        remove_path(output / MANIFEST_NAME)
     if created and output.is_dir() and not any(output.iterdir()):
         output.rmdir()

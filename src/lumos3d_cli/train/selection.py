@@ -33,13 +33,16 @@ def is_improvement(score: float, best_so_far: float | None) -> bool:
     return math.isfinite(score) and (best_so_far is None or score > best_so_far)
 
 
-def drop_stale_selection(output: Path, start: int) -> None:
+def drop_stale_selection(output: Path, start: int) -> bool:
     """Remove output/selected.safetensors when it is not the selection of the steps kept: a fresh
     run (start 0) inherits none, and a resumed run drops one chosen after `start` (its
-    validation lines were dropped with the work about to be redone, which validates again)."""
+    validation lines were dropped with the work about to be redone, which validates again).
+    Returns whether it was removed."""
     path = output / SELECTED_FILE
     if not path.is_file():
-        return
+        return False
     if start == 0 or int(read_checkpoint(path).provenance.get("steps", start + 1)) > start:
         logger.info("removing %s: chosen by a run or steps this one does not continue", path)
         path.unlink()
+        return True
+    return False

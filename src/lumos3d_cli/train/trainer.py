@@ -40,7 +40,16 @@ from lumos3d_cli.train.checkpointing import (
 from lumos3d_cli.train.config import TrainConfig, config_to_yaml
 from lumos3d_cli.train.distributed import DistributedContext, all_reduce_mean, any_rank
 from lumos3d_cli.io.output_lock import folder_lock
-from lumos3d_cli.train.run_folder import RunIdentity, check_run_folder, read_run, remove_unfinished_run, start_run
+from lumos3d_cli.train.run_files import RunFiles
+from lumos3d_cli.train.run_folder import (
+    FINAL_FILE,
+    RUN_FILE,
+    RunIdentity,
+    check_run_folder,
+    read_run,
+    remove_unfinished_run,
+    start_run,
+)
 from lumos3d_cli.train.run_logs import RunLogs
 from lumos3d_cli.train.schedule import learning_rate_factor
 from lumos3d_cli.train.selection import SELECTED_FILE, best_earlier_score, drop_stale_selection, is_improvement
@@ -132,6 +141,7 @@ class Trainer:
         self._logs: RunLogs | None = None  # opened by `run` once the folder is the run's
         self.run_identity: RunIdentity | None = None  # the run the output folder holds (train/run_folder.py)
         self._saved = False  # whether this process has saved a checkpoint of the run
+        self._files: RunFiles | None = None  # rank 0: the files the run writes whole (train/run_files.py)
 
     # -- set-up ---------------------------------------------------------------------------------
 
@@ -378,6 +388,7 @@ class Trainer:
         extra = self.brackets.scores(self.model.eval(), self.device) if self.brackets is not None else None
         line, path = validate(self.model, self._validation_samples(), step, self.output, self.config.validation_views,
                               self.config.loss.background, self._autocast, extra)
+        self._files.record(path)
         self.model.train()
         if self.config.select is not None:
             self._select(step, line[self.config.select])
@@ -389,10 +400,21 @@ class Trainer:
         if is_improvement(score, best):
             save_checkpoint(self.model, self.output / SELECTED_FILE,
                             {**self._provenance(step), "selected_by": key, "score": score})
+            self._files.record(self.output / SELECTED_FILE)
             logger.info("selected step %d: %s %.4f (best before: %s)", step, key, score,
                         "none" if best is None else f"{best:.4f}")
 
     # -- the loop -------------------------------------------------------------------------------
+
+    def _replaced_on_resume(self, start: int, end: int) -> list[Path]:
+        """The files a run resumed at `start` that trains to `end` writes whole: its config, the
+        selection it may redo, the final weights when it reaches optim.steps, and the validation
+        pictures of the steps it redoes."""
+        pictures = sorted((self.output / "validation").glob("step_*.png"))
+        redone = [path for path in pictures if path.stem.removeprefix("step_").isdigit()
+                  and int(path.stem.removeprefix("step_")) > start]
+        final = [self.output / FINAL_FILE] if end >= self.config.optim.steps else []
+        return [self.output / "config.yaml", self.output / SELECTED_FILE, *final, *redone]
 
     def _request_stop(self, signum, frame) -> None:
         logger.warning("%s: saving a checkpoint and stopping after this step", signal.Signals(signum).name)
@@ -430,20 +452,26 @@ class Trainer:
 
     def _run_locked(self, resume: bool, max_steps: int | None, stop_after: int | None,
                     config_file: Path | str | None) -> TrainResult:
+        end = min(self.config.optim.steps, max_steps) if max_steps is not None else self.config.optim.steps
+        if self.context.is_main:
+            self._files = RunFiles(self.output)
         if resume:
             self.run_identity = read_run(self.output)
         elif self.context.is_main:
             self.run_identity = start_run(self.output, config_file)
+            self._files.record(self.output / RUN_FILE)
         start = self.resume() if resume else 0
         if self.context.is_main:
+            if resume:  # before anything is replaced: the files of the user's stay as they are
+                self._files.require_replaceable(self._replaced_on_resume(start, end))
             self._logs = RunLogs(self.output, self.config.tensorboard)
             self._logs.truncate(start)
-        if self.context.is_main:
-            drop_stale_selection(self.output, start)
+            if drop_stale_selection(self.output, start):
+                self._files.forget(self.output / SELECTED_FILE)
             (self.output / "config.yaml").write_text(config_to_yaml(self.config))
+            self._files.record(self.output / "config.yaml")
         if self.config.validate_at_start and start == 0:
             self.validate(0)
-        end = min(self.config.optim.steps, max_steps) if max_steps is not None else self.config.optim.steps
         # A signal the process was started with ignored (nohup: SIGHUP) stays ignored.
         previous = {s: signal.signal(s, self._request_stop) for s in STOP_SIGNALS if signal.getsignal(s) is not signal.SIG_IGN}
         result = TrainResult(start)
@@ -472,7 +500,8 @@ class Trainer:
             if result.steps_done > start:
                 self.save(result.steps_done)
             if self.context.is_main and result.steps_done >= self.config.optim.steps:
-                result.final_checkpoint = save_checkpoint(self.model, self.output / "final.safetensors", self._provenance(result.steps_done))
+                result.final_checkpoint = save_checkpoint(self.model, self.output / FINAL_FILE, self._provenance(result.steps_done))
+                self._files.record(result.final_checkpoint)
             if self.config.select is not None and (self.output / SELECTED_FILE).is_file():
                 result.selected_checkpoint = self.output / SELECTED_FILE
             return result
