@@ -185,8 +185,13 @@ def test_degrade_bad_values(run_cli, buu, tmp_path):
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--jpeg-quality", "0"), "--jpeg-quality 0", "1 to 100")
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--jpeg-quality", "85", "--bit-depth", "16"),
                        "--jpeg-quality 85", "8 bits")
-    expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--exposure", "0.5", "0.1"), "--exposure 0.5 0.1", "0 < low <= high")
-    expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--gamma", "0", "1"), "--gamma 0.0 1.0", "0 < low <= high")
+    expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--exposure", "0.5", "0.1"), "--exposure 0.5 0.1", "1e-06 <= low <= high <= 1e+06")
+    expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--gamma", "0", "1"), "--gamma 0.0 1.0", "0.01 <= low <= high <= 100")
+    # beyond float32: an exposure of 1e308 was Inf, and Inf times a black pixel NaN in the written image
+    expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--exposure", "1e308", "1e308"), "--exposure 1e+308 1e+308")
+    # an .exr file name is a file, not a folder: refused, as .tif is
+    expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o.exr"), "o.exr: cannot write '.exr' files; use .png or .jpg")
+    assert not (tmp_path / "o.exr").exists() and not (tmp_path / "o").exists()
     assert not (tmp_path / "o").exists()
 
 

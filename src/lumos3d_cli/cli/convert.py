@@ -85,7 +85,12 @@ def convert_command(
     check_output_path(output, "output")
     outputs = _written_once(source, output)
     with outputs.reserved():
-        model = load_model(source, architecture=get_architecture(architecture) if architecture else None)
+        try:
+            model = load_model(source, architecture=get_architecture(architecture) if architecture else None)
+        except InputError as error:
+            if error.parameter != "checkpoint":
+                raise
+            raise InputError(error.detail) from None  # the library's checkpoint is convert's SOURCE, no option
         provenance = {key: value for key, value in model.provenance.items() if key not in ("path", "format")}
         provenance["converted_from"] = {"file": Path(source).name, "format": model.provenance.get("format"), "dtype": dtype}
         with outputs.staged() as staging:

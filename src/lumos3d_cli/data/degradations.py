@@ -62,9 +62,22 @@ DOCUMENTED_RANGES = {
 }
 
 
-def is_valid_range(bounds: tuple[float, float]) -> bool:
-    """Whether an exposure or gamma range (low, high) is finite with 0 < low <= high."""
-    return 0 < bounds[0] <= bounds[1] < math.inf
+# The widest exposure and gamma ranges: 20 stops either way, and curves from nearly flat to nearly
+# a step; beyond them float32 overflows (an exposure of 1e308 is Inf, and Inf times a black pixel NaN).
+RANGE_LIMITS = {"exposure": (1e-6, 1e6), "gamma": (1e-2, 1e2)}
+
+
+def is_valid_range(bounds: tuple[float, float], kind: str) -> bool:
+    """Whether an exposure or gamma range (low, high), `kind` "exposure" or "gamma", has
+    low <= high within RANGE_LIMITS[kind]."""
+    lowest, highest = RANGE_LIMITS[kind]
+    return lowest <= bounds[0] <= bounds[1] <= highest
+
+
+def range_rule(kind: str) -> str:
+    """What `is_valid_range` asks of a `kind` range, in words."""
+    lowest, highest = RANGE_LIMITS[kind]
+    return f"{lowest:g} <= low <= high <= {highest:g}"
 
 
 @dataclass(frozen=True)
@@ -103,8 +116,9 @@ class Degradation:
         for name, bounds in (("exposure", self.exposure), ("gamma", self.gamma), ("low_light.exposure", self.low_light.exposure),
                              ("low_light.gamma", self.low_light.gamma), ("over_exposure.exposure", self.over_exposure.exposure),
                              ("over_exposure.gamma", self.over_exposure.gamma)):
-            if bounds is not None and not is_valid_range(bounds):
-                raise ValueError(f"degrade.{name}={bounds} must satisfy 0 < low <= high (finite)")
+            kind = name.rsplit(".", 1)[-1]
+            if bounds is not None and not is_valid_range(bounds, kind):
+                raise ValueError(f"degrade.{name}={bounds} must satisfy {range_rule(kind)}")
         if self.mode == "mixed" and (self.exposure is not None or self.gamma is not None):
             raise ValueError("degrade.mode=mixed takes its ranges from degrade.low_light and degrade.over_exposure; "
                              "remove degrade.exposure and degrade.gamma")

@@ -10,7 +10,7 @@ import torch
 
 from lumos3d_cli.errors import InputError
 
-_SHOWN_KEYS = 10  # keys listed per problem in error messages
+_SHOWN_KEYS = 4  # keys listed per problem in error messages (one line stays readable)
 
 
 def listing(names: list[str]) -> str:
@@ -20,7 +20,7 @@ def listing(names: list[str]) -> str:
 
 def check_tensors(expected: dict[str, tuple[int, ...]], tensors: dict[str, torch.Tensor], source: str) -> None:
     """Strict check: the same key set and every shape equal; else InputError listing the
-    missing, unexpected and mis-shaped keys (at most 10 of each)."""
+    missing, unexpected and mis-shaped keys (at most _SHOWN_KEYS of each)."""
     missing = sorted(set(expected) - set(tensors))
     unexpected = sorted(set(tensors) - set(expected))
     mismatched = sorted(
@@ -71,8 +71,9 @@ def load_torch_state_dict(path: Path) -> dict[str, torch.Tensor]:
         raise InputError(f"{path}: damaged, or holds objects other than tensors, which lumos3d does not unpickle "
                          f"({reason})") from None
     except Exception as error:  # unpickling arbitrary bytes fails in arbitrary ways (IndexError, KeyError...)
-        reason = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
-        raise InputError(f"{path}: cannot read as a torch checkpoint ({reason})") from None
+        detail = str(error).strip().splitlines()[0] if str(error).strip() else ""
+        raise InputError(f"{path}: cannot read as a torch checkpoint: not a file torch.save wrote, or damaged "
+                         f"({type(error).__name__}{': ' + detail if detail else ''})") from None
     for wrapper in ("model", "state_dict"):  # training checkpoints wrap the state dict
         if isinstance(loaded, dict) and isinstance(loaded.get(wrapper), dict):
             loaded = loaded[wrapper]

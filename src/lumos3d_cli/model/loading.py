@@ -13,10 +13,11 @@ from pathlib import Path
 
 import torch
 
+from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.state_dicts import check_tensors
-from lumos3d_cli.model.architectures import Architecture
+from lumos3d_cli.model.architectures import ARCHITECTURES, Architecture
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
-from lumos3d_cli.model.checkpoints import FORMAT_VGGT, Checkpoint, read_checkpoint
+from lumos3d_cli.model.checkpoints import FORMAT_ANYSPLAT, FORMAT_VGGT, Checkpoint, read_checkpoint
 from lumos3d_cli.model.heads.gaussian import GaussianHead
 from lumos3d_cli.model.lumos3d import Lumos3D
 
@@ -35,7 +36,14 @@ def model_from_checkpoint(checkpoint: Checkpoint) -> Lumos3D:
         setattr(model, name, GaussianHead(checkpoint.architecture))
     fresh = tuple(f"{name}." for name in checkpoint.fresh_modules)
     expected = {key: tuple(t.shape) for key, t in model.state_dict().items() if not key.startswith(fresh)}
-    check_tensors(expected, checkpoint.tensors, str(checkpoint.path))
+    try:
+        check_tensors(expected, checkpoint.tensors, str(checkpoint.path))
+    except InputError as error:
+        if checkpoint.format not in (FORMAT_VGGT, FORMAT_ANYSPLAT):
+            raise
+        # a foreign file names no size: the usual cause is a model smaller than the VGGT-1B assumed
+        raise InputError(f"{error}. It was read as the '{checkpoint.architecture.name}' architecture; pass the one it "
+                         f"was trained at ({', '.join(ARCHITECTURES)})") from None
     model.load_state_dict(checkpoint.tensors, strict=False, assign=True)
     model.provenance = {**checkpoint.provenance, "format": checkpoint.format, "path": str(checkpoint.path)}
     if checkpoint.fresh_modules:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import torch
 
-from lumos3d_cli.data.degradations import MODES, Degradation, apply_degradation, is_valid_range, sample_parameters
+from lumos3d_cli.data.degradations import MODES, Degradation, apply_degradation, is_valid_range, range_rule, sample_parameters
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.image_write import write_image
 from lumos3d_cli.io.images import read_image, to_srgb
@@ -48,8 +48,8 @@ def degrade_files(
         raise InputError(f"{jpeg_quality}: JPEG compression leaves 8 bits a channel; use it with 8-bit output",
                          parameter="jpeg_quality")
     for name, bounds in (("exposure", exposure), ("gamma", gamma)):
-        if bounds is not None and not is_valid_range(bounds):
-            raise InputError(f"{bounds[0]} {bounds[1]}: the {name} range needs 0 < low <= high (finite)", parameter=name)
+        if bounds is not None and not is_valid_range(bounds, name):
+            raise InputError(f"{bounds[0]} {bounds[1]}: the {name} range needs {range_rule(name)}", parameter=name)
     degradation = Degradation(mode, exposure=exposure, gamma=gamma, noise=noise, colour_cast=(1 / colour_cast, colour_cast),
                               jpeg_quality=None if jpeg_quality is None else (jpeg_quality, jpeg_quality))
     ranges = degradation.ranges(mode)

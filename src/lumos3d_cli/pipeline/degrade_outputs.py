@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.image_files import PHOTO_SUFFIXES
+from lumos3d_cli.io.image_files import IMAGE_SUFFIXES
 from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.io.output_set import OutputSet
 
@@ -23,7 +23,7 @@ def degrade_outputs(inputs: list[Path], output: Path, bit_depth: int, given: Seq
     if bit_depth not in BIT_DEPTHS:
         raise InputError(f"{bit_depth}: use 8 or 16", parameter="bit_depth")
     suffix = output.suffix.lower()
-    if suffix in PHOTO_SUFFIXES:
+    if suffix in IMAGE_SUFFIXES:  # a file name (an .exr or a RAW one too: refused below), not a folder
         if len(inputs) != 1:
             raise InputError(f"{output}: names one file but there are {len(inputs)} inputs; give a folder", parameter="output")
         if suffix not in SINGLE_FILE_SUFFIXES:
@@ -41,4 +41,4 @@ def degrade_outputs(inputs: list[Path], output: Path, bit_depth: int, given: Seq
 
 def is_single_file(output: Path) -> bool:
     """Whether `output` names one image file rather than a folder."""
-    return output.suffix.lower() in PHOTO_SUFFIXES
+    return output.suffix.lower() in IMAGE_SUFFIXES
