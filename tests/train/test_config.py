@@ -39,8 +39,9 @@ def test_overrides_and_errors(tmp_path):
         with pytest.raises(InputError, match=message):  # once an internal error or silently accepted
             load_config(CONFIGS / "low-light.yaml", [override])
     (tmp_path / "bad.yaml").write_text("stage: [unclosed")
-    with pytest.raises(InputError, match="invalid YAML"):
+    with pytest.raises(InputError, match=r"bad.yaml: invalid YAML at line 1, column 17 \(.*\); correct the file") as error:
         load_config(tmp_path / "bad.yaml")
+    assert "\n" not in str(error.value)
 
 
 def test_mixed_mode_takes_per_mode_ranges():

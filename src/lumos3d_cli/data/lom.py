@@ -15,6 +15,7 @@ import torch
 from lumos3d_cli.data.lom_layout import DEGRADED_FOLDERS, is_lom_scene
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.image_files import IMAGE_SUFFIXES, natural_sort_key
+from lumos3d_cli.io.input_folders import require_folder
 from lumos3d_cli.io.transforms_json import read_transforms_json
 
 CAMERA_FILES = ("transforms_train.json", "transforms_val.json", "transforms_test.json")
@@ -88,8 +89,7 @@ def _missing_parts(folder: Path) -> str:
 def find_lom_scenes(root: Path | str, mode: str, names: list[str] | None = None) -> list[LomScene]:
     """Scenes under `root` (or `root` itself when it is one), optionally only `names`."""
     root = Path(root)
-    if not root.is_dir():
-        raise InputError(f"{root}: no such folder")
+    require_folder(root, "that holds the LOM scenes, or one scene")
     folders = [root] if is_lom_scene(root) else sorted(p for p in root.iterdir() if p.is_dir() and is_lom_scene(p))
     if names:
         available = {p.name for p in folders}

@@ -14,6 +14,7 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.colmap import read_colmap_images, read_colmap_model, read_colmap_points
 from lumos3d_cli.io.image_files import IMAGE_SUFFIXES, list_images
+from lumos3d_cli.io.input_folders import require_folder
 from lumos3d_cli.io.transforms_json import read_transforms_json
 
 logger = logging.getLogger(__name__)
@@ -78,8 +79,7 @@ def scan_scene_folders(root: Path | str, names: list[str] | None = None) -> list
     """Every `<root>/<scene>/images/` folder, with poses from `sparse/0` (COLMAP text) or
     `transforms.json` when present."""
     root = Path(root)
-    if not root.is_dir():
-        raise InputError(f"{root}: dataset root not found")
+    require_folder(root, "that holds the training scenes (data.root)")
     folders = sorted(p for p in root.iterdir() if (p / "images").is_dir())
     if names:
         wanted = set(names)
@@ -104,8 +104,7 @@ def scan_dl3dv(root: Path | str, downsample: int = 4, names: list[str] | None = 
     """DL3DV: `<root>/<hash>/transforms.json` with `images_<downsample>/` holding the frames
     (file names as in transforms.json's file_path); intrinsics are rescaled to those images."""
     root = Path(root)
-    if not root.is_dir():
-        raise InputError(f"{root}: dataset root not found")
+    require_folder(root, "that holds the training scenes (data.root)")
     records = []
     for folder in sorted(p for p in root.iterdir() if (p / "transforms.json").is_file()):
         if names and folder.name not in names:

@@ -102,6 +102,16 @@ class Lumos3DPrediction:
     confidence: torch.Tensor
     appearance: AppearanceOperator | None = None
 
+    def require_finite(self, hint: str) -> None:
+        """NonFiniteError naming the first prediction that holds NaN or Inf, followed by `hint`."""
+        for name in ("extrinsics", "intrinsics", "depth", "depth_conf", "params", "confidence"):
+            require_finite(f"the network's {name}", getattr(self, name), hint)
+        if self.appearance is not None:
+            for name, values in (("curve", self.appearance.curve_slopes), ("colour matrix", self.appearance.matrix),
+                                 ("local correction", self.appearance.local_log2_gain)):
+                if values is not None:
+                    require_finite(f"the network's restoration {name}", values, hint)
+
 
 class Lumos3D(nn.Module):
     """The network of the paper. Submodule names equal VGGT's (`aggregator`, `camera_head`,

@@ -84,7 +84,9 @@ def evaluate_lom(
     check_geometry_source(geometry)
     settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior, fill_unobserved,
                                   densify=densify, exposure_key=exposure_key, depth_sweep=depth_sweep)
-    limit = max_views or settings.max_views
+    if max_views is not None and max_views < 1:  # 0 once fell back to the preset's silently
+        raise InputError(f"{max_views}: use at least 1", parameter="max_views")
+    limit = settings.max_views if max_views is None else max_views
     found = find_lom_scenes(root, mode, scenes)
     weights = resolve_checkpoint(checkpoint, mode)
     meter = QualityMeter.create(lpips_weights)

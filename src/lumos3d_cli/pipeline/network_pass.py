@@ -79,6 +79,9 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mod
     device = next(model.parameters()).device
     with torch.no_grad():
         prediction = model.predict(prepared.images[None].to(device))
+    source = model.provenance.get("path", "the model's weights")
+    prediction.require_finite(f"{source} gives NaN/Inf on these photos: damaged or diverged weights; use another "
+                              "checkpoint")
     exposure_stops = None
     if prediction.appearance is not None:
         stops = exposure_prior_stops(prediction.appearance, prepared.images[None].to(device),

@@ -191,7 +191,11 @@ def load_config(path: Path | str, overrides: list[str] = ()) -> TrainConfig:
     except OSError as error:
         raise InputError(f"{path}: cannot read config ({error.strerror})") from error
     except yaml.YAMLError as error:
-        raise InputError(f"{path}: invalid YAML ({error})") from error
+        # PyYAML's message spans lines (the context, a caret under the column): one line here
+        mark = getattr(error, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(error, "problem", None) or " ".join(str(error).split())
+        raise InputError(f"{path}: invalid YAML{where} ({problem}); correct the file") from None
     if not isinstance(values, dict):
         raise InputError(f"{path}: a config must be a YAML mapping")
     for assignment in overrides:
