@@ -165,6 +165,15 @@ def test_row12_black_and_white_photos_are_named_once(tmp_path, buu, random_check
     assert result.code == 0, result.err
     assert result.err.count("entirely black") == 1 and "black.png is entirely black" in result.err
     assert result.err.count("entirely saturated") == 1 and "white.png is entirely saturated" in result.err
+    assert "did you mean" not in result.err  # buu's dark photos suit the low-light mode
+
+
+def test_row12_dark_photos_in_the_over_exposure_mode_are_questioned(tmp_path, buu, random_checkpoint):
+    photos = copy_photos(buu, tmp_path / "photos", SIX[:2])
+    result = run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", random_checkpoint, "--mode", "over-exposure"))
+    assert result.code == 0, result.err
+    assert "the photos are dark (mean level 0.08) for the over-exposure mode" in result.err
+    assert "did you mean the low-light mode?" in result.err
 
 
 def test_row12_a_white_photo_stays_white_in_the_over_exposure_model(tmp_path, run_cli):

@@ -179,15 +179,36 @@ def restore_scene(
     )
 
 
-def check_photo_contents(batch: ImageBatch, patch_size: int) -> None:
+# The photos' mean sRGB level beyond which a mode does not fit them: the development sources' dark
+# inputs average 0.03-0.12 and reach 0.27 (a lit night street), their over-exposed ones 0.63-0.92,
+# normal-light scenes 0.34-0.55.
+DARK_FOR_OVER_EXPOSURE = 0.3
+BRIGHT_FOR_LOW_LIGHT = 0.6
+
+
+def _warn_of_a_mode_the_photos_contradict(batch: ImageBatch, mode: str) -> None:
+    """A warning when dark photos go through the over-exposure model (it darkens them further) or
+    bright ones through the low-light model (it brightens them into white)."""
+    level = float(batch.images.mean())
+    if mode == "over-exposure" and level < DARK_FOR_OVER_EXPOSURE:
+        logger.warning("the photos are dark (mean level %.2f) for the over-exposure mode, which darkens; did you mean "
+                       "the low-light mode?", level)
+    elif mode == "low-light" and level > BRIGHT_FOR_LOW_LIGHT:
+        logger.warning("the photos are bright (mean level %.2f) for the low-light mode, which brightens; did you mean "
+                       "the over-exposure mode?", level)
+
+
+def check_photo_contents(batch: ImageBatch, patch_size: int, mode: str) -> None:
     """InputError naming a photo too small to hold one network patch (`patch_size` pixels a side);
-    a warning naming the photos that are all black or all saturated (nothing to restore there)."""
+    a warning naming the photos that are all black or all saturated (nothing to restore there),
+    and one when the photos contradict `mode`."""
     names = [path.name for path in batch.paths]
     for path, (width, height) in zip(batch.paths, batch.original_sizes):
         if min(width, height) < patch_size:
             raise InputError(f"{path}: is {width}x{height} pixels, too small for the network (at least {patch_size} "
                              "pixels a side); leave it out")
     black, saturated = frames_without_content(batch.images)
+    _warn_of_a_mode_the_photos_contradict(batch, mode)
     for kind, indices in (("black", black), ("saturated", saturated)):
         if indices:
             logger.warning("%s %s entirely %s: nothing to restore there (its pixels stay %s and the scene's exposure is "
@@ -252,7 +273,7 @@ neighbouring photos (`geometry.photo_consistency`). `early_registration`: the ph
     stage_started = time.perf_counter()
     model = load_restoration_model(weights, device)
     timings["load_model"] = time.perf_counter() - stage_started
-    check_photo_contents(batch, model.architecture.patch_size)
+    check_photo_contents(batch, model.architecture.patch_size, mode)
     scene = restore_scene(batch, model, settings, geometry, poses, max_views, mode, progress, early_registration)
     scene.device = device
     scene.checkpoint = {"name": weights.name, "sha256": file_sha256(weights)}
