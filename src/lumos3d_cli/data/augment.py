@@ -46,8 +46,10 @@ def crop_and_resize(
 
 def mirror(
     images: torch.Tensor, intrinsics: torch.Tensor | None, extrinsics: torch.Tensor | None, points: np.ndarray | None
-):
-    """Mirror every view left-right and the scene with it (cameras and points stay consistent)."""
+) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None, np.ndarray | None]:
+    """Mirror every view left-right and the scene with it (cameras and points stay consistent):
+    images [V, 3, H, W], intrinsics [V, 3, 3] and extrinsics [V, 3, 4] (world->camera) when
+    given, points [P, 3] when given -> the same, mirrored."""
     images = images.flip(-1)
     if intrinsics is not None:
         intrinsics = intrinsics.clone()

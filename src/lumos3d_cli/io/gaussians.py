@@ -33,6 +33,7 @@ def rgb_to_sh_dc(rgb: torch.Tensor) -> torch.Tensor:
 
 
 def sh_dc_to_rgb(dc: torch.Tensor) -> torch.Tensor:
+    """Degree-0 SH coefficients [..., 3] -> their colour [..., 3] (rgb = 0.5 + C0 * f_dc; not clamped)."""
     return 0.5 + SH_C0 * dc
 
 

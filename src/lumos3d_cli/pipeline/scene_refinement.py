@@ -60,7 +60,8 @@ def refine_scene(
     max_side: int = RefineSettings.max_side, lr_decay_per_100_steps: float = RefineSettings.lr_decay_per_100_steps,
     densify: DensifySettings | None = None, splat_colours: bool = False,
 ) -> RefinementResult:
-    """`steps` of refinement (fewer when the loss stops falling) against targets downsampled to a
+    """`steps` of refinement (fewer when the loss stops falling) against `targets` [V, 3, H, W]
+    (the `cameras`' views, sRGB in [0, 1]) downsampled to a
     longer side of at most `max_side`, the learning rates falling by `lr_decay_per_100_steps`
     every 100 steps, densified on `densify`'s schedule (None: never), otherwise with the default
     settings, shown as a "refine" progress bar. `splat_colours`: fit the renders as the hole fill

@@ -34,8 +34,9 @@ def degree_losses(gaussians: Gaussians, cameras: Cameras, targets: torch.Tensor,
 
 def choose_sh_degree(gaussians: Gaussians, cameras: Cameras, targets: torch.Tensor, ssim_weight: float,
                      tolerance: float) -> int:
-    """The lowest degree whose loss is at most (1 + tolerance) x the lowest loss of any degree;
-    0 without rendering when the view-dependent coefficients are all zero."""
+    """The lowest degree whose loss against `targets` [V, 3, H, W] (the `cameras`' views, sRGB in
+    [0, 1]) is at most (1 + tolerance) x the lowest loss of any degree; 0 without rendering when
+    the view-dependent coefficients are all zero."""
     if gaussians.sh_degree == 0 or not bool(gaussians.sh[:, 1:].any()):
         return 0
     losses = degree_losses(gaussians, cameras, targets, ssim_weight)

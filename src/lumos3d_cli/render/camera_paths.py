@@ -36,7 +36,8 @@ def _perpendicular_basis(up: torch.Tensor, reference: torch.Tensor) -> tuple[tor
 
 
 def axes_meeting_point(centres: torch.Tensor, forwards: torch.Tensor) -> torch.Tensor | None:
-    """Least-squares point nearest to all optical axes, or None when they are nearly parallel."""
+    """centres [V, 3] and unit forward directions [V, 3] of the cameras -> the least-squares point
+    [3] nearest to all their optical axes, or None when the axes are nearly parallel."""
     eye = torch.eye(3, dtype=centres.dtype)
     projectors = eye - forwards[:, :, None] * forwards[:, None, :]
     system = projectors.sum(dim=0)
@@ -86,7 +87,8 @@ def orbit_from_cameras(cameras: Cameras, frames: int, width: int, height: int, g
 
 
 def scene_centre(gaussians: Gaussians) -> torch.Tensor:
-    """Median position of the Gaussians that are not nearly transparent."""
+    """[3] float64: the median position of the Gaussians that are not nearly transparent (of all,
+    when every one is)."""
     means = gaussians.means.detach().double()
     solid = gaussians.opacities.detach() > 0.1
     return (means[solid] if solid.any() else means).median(dim=0).values

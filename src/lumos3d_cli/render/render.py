@@ -93,7 +93,8 @@ def render(
     backend: Backend = "auto",
     weights: bool = False,
 ) -> RenderOutput:
-    """Render every camera (all of the same image size, taken from `cameras.sizes`).
+    """Render every camera (all of the same image size, taken from `cameras.sizes`) over
+    `background` [3] (an RGB colour in [0, 1]; black when None).
 
     backend: "auto" = our CPU kernel for CPU tensors, gsplat for CUDA tensors when it imports
     (else our kernel on the CPU, with a warning); "cpu", "gsplat" or "reference" (the dense twin)
