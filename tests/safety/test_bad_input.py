@@ -168,6 +168,15 @@ def test_row12_black_and_white_photos_are_named_once(tmp_path, buu, random_check
     assert "did you mean" not in result.err  # buu's dark photos suit the low-light mode
 
 
+def test_row12_a_photo_copied_under_another_name_is_named(tmp_path, buu, random_checkpoint):
+    photos = copy_photos(buu, tmp_path / "photos", SIX[:3])
+    shutil.copy(photos / SIX[1], photos / "copy.JPG")
+    result = run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", random_checkpoint))
+    assert result.code == 0, result.err
+    assert result.err.count("holds the same image as") == 1
+    assert f"{SIX[1]} holds the same image as copy.JPG" in result.err or f"copy.JPG holds the same image as {SIX[1]}" in result.err
+
+
 def test_row12_dark_photos_in_the_over_exposure_mode_are_questioned(tmp_path, buu, random_checkpoint):
     photos = copy_photos(buu, tmp_path / "photos", SIX[:2])
     result = run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", random_checkpoint, "--mode", "over-exposure"))

@@ -198,16 +198,33 @@ def _warn_of_a_mode_the_photos_contradict(batch: ImageBatch, mode: str) -> None:
                        "the over-exposure mode?", level)
 
 
+def _warn_of_repeated_photos(batch: ImageBatch, empty: set[int]) -> None:
+    """A warning naming photos that hold the same image (a copy under another name): one view
+    counted twice, and a pair structure-from-motion cannot place (no baseline). Photos in `empty`
+    (all black or white, warned of apart) are left out."""
+    sums = batch.images.double().sum(dim=(1, 2, 3)).tolist()  # equal images have equal sums: compared only then
+    seen: dict[float, list[int]] = {}
+    for view, total in enumerate(sums):
+        if view in empty:
+            continue
+        copy_of = next((other for other in seen.get(total, []) if torch.equal(batch.images[other], batch.images[view])), None)
+        if copy_of is not None:
+            logger.warning("%s holds the same image as %s: the view counts twice, and no camera can be placed from the "
+                           "pair; leave one out", batch.paths[view].name, batch.paths[copy_of].name)
+        seen.setdefault(total, []).append(view)
+
+
 def check_photo_contents(batch: ImageBatch, patch_size: int, mode: str) -> None:
     """InputError naming a photo too small to hold one network patch (`patch_size` pixels a side);
     a warning naming the photos that are all black or all saturated (nothing to restore there),
-    and one when the photos contradict `mode`."""
+    one naming photos that are copies of others, and one when the photos contradict `mode`."""
     names = [path.name for path in batch.paths]
     for path, (width, height) in zip(batch.paths, batch.original_sizes):
         if min(width, height) < patch_size:
             raise InputError(f"{path}: is {width}x{height} pixels, too small for the network (at least {patch_size} "
                              "pixels a side); leave it out")
     black, saturated = frames_without_content(batch.images)
+    _warn_of_repeated_photos(batch, {*black, *saturated})
     _warn_of_a_mode_the_photos_contradict(batch, mode)
     for kind, indices in (("black", black), ("saturated", saturated)):
         if indices:
