@@ -264,3 +264,62 @@ def test_a_run_folder_of_an_earlier_release_resumes_as_before(tiny_config, caplo
     (run / ".lumos3d-manifest.json").unlink()
     assert _trainer(config).run(resume=True).steps_done == 4
     assert "lists no files (a run of an earlier release)" in caplog.text
+
+
+def test_a_run_refused_at_the_folder_check_leaves_the_other_runs_files(tiny_config, monkeypatch):
+    """Another run that starts between the two folder checks: the refusal must not take that run's
+    files for this one's to clean up."""
+    import lumos3d_cli.train.trainer as trainer_module
+
+    config = tiny_config(name="raced")
+    run = Path(str(config).replace(".yaml", ""))
+    checks = {"n": 0}
+    original = trainer_module.check_run_folder
+
+    def another_run_starts_meanwhile(output, inputs, resume):
+        checks["n"] += 1
+        if checks["n"] == 2:  # the check under the lock
+            (run / "run.json").write_text('{"run_id": "other", "config": "x", "started": "now"}')
+            (run / "metrics.jsonl").write_text('{"step": 0}\n')
+        return original(output, inputs, resume)
+
+    monkeypatch.setattr(trainer_module, "check_run_folder", another_run_starts_meanwhile)
+    with pytest.raises(InputError, match="holds run other"):
+        _trainer(config).run()
+    assert (run / "run.json").read_text().startswith('{"run_id": "other"') and (run / "metrics.jsonl").is_file()
+
+
+def test_a_fresh_run_that_fails_after_its_first_step_keeps_its_logs_and_selection(tiny_config, monkeypatch):
+    config = tiny_config(name="late", validate_every=2, validation_samples=1, select="psnr", max_nonfinite_steps=1)
+    run = Path(str(config).replace(".yaml", ""))
+    trainer = _trainer(config)
+    original = trainer.objective.forward
+    calls = {"n": 0}
+
+    def nan_from_the_fourth_step(*args, **kwargs):
+        terms = original(*args, **kwargs)
+        calls["n"] += 1
+        if calls["n"] >= 4:
+            terms["total"] = terms["total"] * float("nan")
+        return terms
+
+    monkeypatch.setattr(trainer.objective, "forward", nan_from_the_fourth_step)
+    with pytest.raises(RunError):
+        trainer.run()  # checkpoint_every 0: no checkpoint, but three steps and a validation done
+    assert (run / "metrics.jsonl").is_file() and (run / "selected.safetensors").is_file()
+    assert (run / "validation" / "step_00000002.png").is_file()
+
+
+def test_resumes_of_an_earlier_release_run_take_its_files_as_the_runs(tiny_config, caplog):
+    """A folder without the run's list (a release before it), even holding another command's
+    manifest: the first resume lists the run's files, and the second does not refuse them."""
+    config = tiny_config(name="legacy", optim__steps=6, validate_every=2, validation_samples=1, select="psnr")
+    run = Path(str(config).replace(".yaml", ""))
+    _trainer(config).run(stop_after=3)
+    (run / ".lumos3d-manifest.json").write_text(
+        '{"format": "lumos3d-manifest/1", "files": {"report.csv": {"bytes": 1, "sha256": "0", "command": "eval", '
+        '"output_set": "eval"}}}\n')
+    assert (run / "selected.safetensors").is_file()
+    assert _trainer(config, ["optim.steps=4"]).run(resume=True).steps_done == 4
+    assert "lists no files (a run of an earlier release)" in caplog.text
+    assert _trainer(config).run(resume=True).steps_done == 6

@@ -4,8 +4,8 @@ they are written, so that a resumed run replaces only what the run wrote and the
 changed since: an edited `final.safetensors` or a picture of the user's among `validation/`
 refuses the resume, naming the file, instead of being overwritten.
 
-A run folder from a release before the manifest has none: its resume replaces as it always did
-(with a warning), and lists what it writes from then on.
+A run folder from a release before the manifest lists none of its files: its resume takes the
+run's files as the run's (with a warning) and lists them, so later resumes check them too.
 """
 
 from __future__ import annotations
@@ -29,19 +29,27 @@ class RunFiles:
     def __init__(self, output: Path | str):
         self.output = Path(output)
         self.manifest = Manifest.read(self.output)
-        self.unlisted = not (self.output / MANIFEST_NAME).is_file()
+        # a folder whose manifest lists no file of a training run (none, or another command's):
+        # a run of a release before the list, or a fresh one
+        self.unlisted = not any(entry.command == _COMMAND for entry in self.manifest.files.values())
+
+    def adopt_if_unlisted(self, written: list[Path]) -> None:
+        """For a run folder of an earlier release: list the files its run wrote (`written`, those
+        present), with a warning, so that this resume and later ones may replace them."""
+        if not self.unlisted:
+            return
+        present = [path for path in written if path.is_file() and not path.is_symlink()]
+        if present:
+            logger.warning("%s lists no files (a run of an earlier release): its %d run file(s) are taken as the run's",
+                           self.output, len(present))
+        for path in present:
+            self.record(path)
 
     def require_replaceable(self, paths: list[Path]) -> None:
         """InputError naming the first of `paths` that exists but is not a file this run wrote, as
-        it wrote it (a run folder without a manifest: a warning, and nothing refused)."""
-        present = [path for path in paths if path.exists() or path.is_symlink()]
-        if self.unlisted:
-            if present:
-                logger.warning("%s lists no files (a run of an earlier release): resuming replaces %s as before",
-                               self.output, ", ".join(path.name for path in present))
-            return
-        for path in present:
-            if not self.manifest.owns(path):
+        it wrote it."""
+        for path in paths:
+            if (path.exists() or path.is_symlink()) and not self.manifest.owns(path):
                 raise InputError(f"{path}: was not written by this training run, or was changed since, and resuming "
                                  "would replace it; move it out of the run folder, then resume")
 

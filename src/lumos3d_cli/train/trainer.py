@@ -54,7 +54,7 @@ from lumos3d_cli.train.run_logs import RunLogs
 from lumos3d_cli.train.schedule import learning_rate_factor
 from lumos3d_cli.train.selection import SELECTED_FILE, best_earlier_score, drop_stale_selection, is_improvement
 from lumos3d_cli.train.trainable import restrict_training
-from lumos3d_cli.train.validation import render_views, validate
+from lumos3d_cli.train.validation import render_views, validate, validation_picture
 
 logger = logging.getLogger(__name__)
 
@@ -140,7 +140,10 @@ class Trainer:
         self.nonfinite_total = 0
         self._logs: RunLogs | None = None  # opened by `run` once the folder is the run's
         self.run_identity: RunIdentity | None = None  # the run the output folder holds (train/run_folder.py)
-        self._saved = False  # whether this process has saved a checkpoint of the run
+        # rank 0: whether this process started a fresh run in the folder, and whether any of its work
+        # (a step, a validation) counts; a run started that fails before any is removed (`run`)
+        self._started_fresh = False
+        self._kept_work = False
         self._files: RunFiles | None = None  # rank 0: the files the run writes whole (train/run_files.py)
 
     # -- set-up ---------------------------------------------------------------------------------
@@ -334,7 +337,6 @@ class Trainer:
                 self.run_identity.run_id if self.run_identity is not None else None,
             )
             logger.info("saved checkpoint %s", folder)
-            self._saved = True
         if self.context.enabled:
             torch.distributed.barrier()
         return folder
@@ -388,6 +390,7 @@ class Trainer:
         extra = self.brackets.scores(self.model.eval(), self.device) if self.brackets is not None else None
         line, path = validate(self.model, self._validation_samples(), step, self.output, self.config.validation_views,
                               self.config.loss.background, self._autocast, extra)
+        self._kept_work = True
         self._files.record(path)
         self.model.train()
         if self.config.select is not None:
@@ -406,13 +409,19 @@ class Trainer:
 
     # -- the loop -------------------------------------------------------------------------------
 
+    def _written_by_a_run(self) -> list[Path]:
+        """The files a run writes whole that its folder may hold (the validation pictures by the
+        names it gives them)."""
+        pictures = [path for path in (self.output / "validation").glob("step_*.png")
+                    if path.stem.removeprefix("step_").isdigit() and path == validation_picture(self.output, int(path.stem[5:]))]
+        return [self.output / name for name in (RUN_FILE, "config.yaml", FINAL_FILE, SELECTED_FILE)] + sorted(pictures)
+
     def _replaced_on_resume(self, start: int, end: int) -> list[Path]:
         """The files a run resumed at `start` that trains to `end` writes whole: its config, the
         selection it may redo, the final weights when it reaches optim.steps, and the validation
         pictures of the steps it redoes."""
-        pictures = sorted((self.output / "validation").glob("step_*.png"))
-        redone = [path for path in pictures if path.stem.removeprefix("step_").isdigit()
-                  and int(path.stem.removeprefix("step_")) > start]
+        every = self.config.validate_every
+        redone = [validation_picture(self.output, step) for step in range(start + 1, end + 1) if every and step % every == 0]
         final = [self.output / FINAL_FILE] if end >= self.config.optim.steps else []
         return [self.output / "config.yaml", self.output / SELECTED_FILE, *final, *redone]
 
@@ -444,9 +453,11 @@ class Trainer:
                     check_run_folder(self.output, [], resume)
                 return self._run_locked(resume, max_steps, stop_after, config_file)
         except BaseException:
-            # A fresh run that ends before its first checkpoint (bad data met in the first step)
-            # leaves nothing: its run.json would refuse the rerun, and there is nothing to resume.
-            if not resume and self.context.is_main and not self._saved:
+            # A fresh run of this process that ends before any work of it counts (bad data met in
+            # its first step) leaves nothing: its run.json would refuse the rerun, and there is
+            # nothing to resume. Only a run this process started: a refusal at the lock or at the
+            # second check means the files are another run's.
+            if self._started_fresh and not self._kept_work:
                 remove_unfinished_run(self.output, created)
             raise
 
@@ -459,11 +470,20 @@ class Trainer:
             self.run_identity = read_run(self.output)
         elif self.context.is_main:
             self.run_identity = start_run(self.output, config_file)
+            self._started_fresh = True
             self._files.record(self.output / RUN_FILE)
         start = self.resume() if resume else 0
+        if resume:  # before anything is replaced: the files of the user's stay as they are
+            refusal = None
+            if self.context.is_main:
+                try:
+                    self._files.adopt_if_unlisted(self._written_by_a_run())
+                    self._files.require_replaceable(self._replaced_on_resume(start, end))
+                except InputError as error:
+                    refusal = error
+            if any_rank(refusal is not None, self.context):  # every rank stops, not only the one that checked
+                raise refusal or InputError(f"{self.output}: rank 0 refused the resume (its message says why)")
         if self.context.is_main:
-            if resume:  # before anything is replaced: the files of the user's stay as they are
-                self._files.require_replaceable(self._replaced_on_resume(start, end))
             self._logs = RunLogs(self.output, self.config.tensorboard)
             self._logs.truncate(start)
             if drop_stale_selection(self.output, start):
@@ -478,6 +498,7 @@ class Trainer:
         try:
             for step in range(start, end):
                 report = self.step(step)
+                self._kept_work = True
                 result.history.append(report)
                 result.steps_done = step + 1
                 if report.skipped:

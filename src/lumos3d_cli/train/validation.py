@@ -84,6 +84,11 @@ def validate(
     inputs, renders, targets = first
     rows = [torch.cat([inputs[0, v], renders[0, v], targets[0, v]], dim=-1) for v in range(min(views, inputs.shape[1]))]
     grid = torch.cat(rows, dim=-2).permute(1, 2, 0).float().cpu().numpy()
-    path = output / "validation" / f"step_{step:08d}.png"
+    path = validation_picture(output, step)
     write_image(path, grid)
     return line, path
+
+
+def validation_picture(output: Path, step: int) -> Path:
+    """The picture of the validation after `step` steps in the run folder `output`."""
+    return output / "validation" / f"step_{step:08d}.png"
