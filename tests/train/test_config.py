@@ -42,6 +42,9 @@ def test_overrides_and_errors(tmp_path):
     with pytest.raises(InputError, match=r"bad.yaml: invalid YAML at line 1, column 17 \(.*\); correct the file") as error:
         load_config(tmp_path / "bad.yaml")
     assert "\n" not in str(error.value)
+    with pytest.raises(InputError, match=r"override value '\[1': invalid YAML at line 1, column 3 .*; quote it") as error:
+        load_config(CONFIGS / "low-light.yaml", ["optim.lr=[1"])
+    assert "\n" not in str(error.value)
 
 
 def test_mixed_mode_takes_per_mode_ranges():

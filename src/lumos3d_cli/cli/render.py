@@ -50,7 +50,6 @@ def render_command(
         from lumos3d_cli.io.ply import read_ply
         from lumos3d_cli.io.video import video_kind
         from lumos3d_cli.pipeline.render_job import render_cameras, render_frames, render_outputs
-        from lumos3d_cli.render.clipping_range import require_drawable
     if (poses is None) == (orbit is None):
         raise InputError("give exactly one of --poses CAMERAS or --orbit N")
     if orbit is not None and not 1 <= orbit <= 100000:
@@ -67,10 +66,10 @@ def render_command(
     if len(gaussians) == 0:
         raise InputError(f"{scene}: holds no Gaussians; there is nothing to render")
     cameras, source = render_cameras(scene, gaussians, poses, orbit, width, height)
-    require_drawable(gaussians.means, cameras, str(scene))  # named here: render_frames knows no file
     outputs = render_outputs(len(cameras), output, video, [scene, poses])
     with outputs.reserved(), progress_bar() as bars:
-        frames = render_frames(gaussians, cameras, output, video, fps, colour, antialiased, ProgressBars(bars), [scene, poses])
+        frames = render_frames(gaussians, cameras, output, video, fps, colour, antialiased, ProgressBars(bars), [scene, poses],
+                               str(scene))
     summary = {
         "scene": str(scene), "gaussians": len(gaussians), "sh_degree": gaussians.sh_degree,
         "cameras": source, "frames": frames.frames, "width": frames.size[0], "height": frames.size[1],

@@ -211,7 +211,7 @@ def register_photos(
     registration = Registration(cameras, registered, points, error, model_sizes, matching, sfm_sizes,
                                 run.seconds, run.stage_seconds)
     if len(cameras):
-        cameras.require_valid("structure-from-motion cameras")
+        cameras.require_valid("structure-from-motion cameras", remedy="use the network's cameras, or give poses")
     others = len(set(sfm_sizes)) - 1
     logger.info("structure-from-motion: %s in %.1f s (%s matching at %dx%d%s; %d points, %.2f px)",
                 registration.describe(), registration.seconds, matching, *registration.sfm_size,

@@ -265,7 +265,7 @@ def write_colmap_model(folder: Path | str, cameras: Cameras, points: SparsePoint
     `points` (their `view` indexing `cameras`) fill points3D with tracks and images with 2D
     points, so the model opens in COLMAP as a reconstruction; without them points3D is empty."""
     folder = Path(folder)
-    cameras.require_valid("cameras to save")
+    cameras.require_valid("cameras to save", remedy="nothing was written")
     observations, point_lines = _observation_lines(cameras, points)
     k = cameras.intrinsics.double()
     camera_lines = ["# Camera list with one line of data per camera:", "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]",

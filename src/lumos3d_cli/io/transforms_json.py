@@ -135,5 +135,5 @@ def cameras_to_transforms_document(cameras: Cameras) -> dict:
 
 def write_transforms_json(path: Path | str, cameras: Cameras) -> None:
     """Write atomically (camera->world, OpenGL axes, as nerfstudio expects)."""
-    cameras.require_valid("cameras to save")
+    cameras.require_valid("cameras to save", remedy="nothing was written")
     write_bytes_atomic(path, (json.dumps(cameras_to_transforms_document(cameras), indent=2) + "\n").encode())

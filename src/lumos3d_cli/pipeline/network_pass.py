@@ -13,6 +13,7 @@ from lumos3d_cli.geometry.field_of_view import FALLBACK_FOV_DEGREES, longer_side
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.appearance.exposure_key import bundled_key_model
 from lumos3d_cli.model.appearance.exposure_prior import exposure_prior_stops, prior_strength
+from lumos3d_cli.model.appearance.photo_restoration import frames_without_content
 from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DPrediction
 from lumos3d_cli.model.preprocess import PreparedImages, prepare_images
 from lumos3d_cli.pipeline.presets import RestorePreset
@@ -84,9 +85,11 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mod
                               "checkpoint")
     exposure_stops = None
     if prediction.appearance is not None:
+        black, saturated = frames_without_content(images)  # at the photos' size: their resized copies have more levels
         stops = exposure_prior_stops(prediction.appearance, prepared.images[None].to(device),
                                      prior_strength(mode, preset.exposure_prior),
-                                     key_model=bundled_key_model() if preset.exposure_key == "content" else None)
+                                     key_model=bundled_key_model() if preset.exposure_key == "content" else None,
+                                     unmetered=[{*black, *saturated}])
         prediction, exposure_stops = replace(prediction, appearance=prediction.appearance.with_gain(stops)), float(stops[0])
     intrinsics, replaced = plausible_intrinsics(prediction.intrinsics[0], prepared.network_size)
     if bool(replaced.any()):

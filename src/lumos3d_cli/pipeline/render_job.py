@@ -94,17 +94,18 @@ def render_outputs(frames: int, output: Path, video: Path | None = None, inputs:
 def render_frames(
     gaussians: Gaussians, cameras: Cameras, output: Path, video: Path | None = None, fps: int = 30,
     background: tuple[float, float, float] = (0.0, 0.0, 0.0), antialiased: bool = False,
-    progress: JobProgress | None = None, inputs: Sequence[Path | None] = (),
+    progress: JobProgress | None = None, inputs: Sequence[Path | None] = (), scene_name: str | None = None,
 ) -> RenderedFrames:
     """Render every camera, each at its own size, into `output`/00000.png ... (and `video`, .mp4 or
     .gif, whose frames share the first camera's size); the folder's frames and the video appear
     when all are written, never over a file lumos3d did not write nor over `inputs`
-    (io/output_set.py)."""
+    (io/output_set.py). A scene no camera can draw (render.clipping_range) is refused, naming
+    `scene_name` (its file) when given."""
     progress = progress or SilentProgress()
     kind = video_kind(video) if video is not None else None
     if len(gaussians) == 0:
         raise InputError("holds no Gaussians: there is nothing to render", parameter="scene")
-    require_drawable(gaussians.means, cameras)
+    require_drawable(gaussians.means, cameras, scene_name)  # a scene in extreme units would render black
     if video is not None and len(set(cameras.sizes)) > 1:
         logger.warning("the cameras have %d different image sizes; a video has one: every frame is rendered at %dx%d",
                        len(set(cameras.sizes)), *cameras.sizes[0])

@@ -202,7 +202,9 @@ def _warn_of_repeated_photos(batch: ImageBatch, empty: set[int]) -> None:
     """A warning naming photos that hold the same image (a copy under another name): one view
     counted twice, and a pair structure-from-motion cannot place (no baseline). Photos in `empty`
     (all black or white, warned of apart) are left out."""
-    sums = batch.images.double().sum(dim=(1, 2, 3)).tolist()  # equal images have equal sums: compared only then
+    # equal images have equal sums (the same reduction of the same values): compared only then;
+    # one view at a time, in the photos' own precision (a float64 copy of a RAW set is gigabytes)
+    sums = [float(view.sum()) for view in batch.images]
     seen: dict[float, list[int]] = {}
     for view, total in enumerate(sums):
         if view in empty:

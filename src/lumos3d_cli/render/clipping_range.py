@@ -14,17 +14,24 @@ from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.render.constants import FAR_PLANE, NEAR_PLANE
 
 _SAMPLED_MEANS = 20_000  # enough to find a drawable Gaussian; the test is over every camera
+_CAMERAS_AT_ONCE = 64  # [64, 20,000] depths at a time: an orbit of 100,000 frames stays small
 
 
 def require_drawable(means: torch.Tensor, cameras: Cameras, where: str | None = None, parameter: str | None = None) -> None:
     """means [N, 3] (N >= 1), cameras (V >= 1): InputError (naming `where`, the file, when given)
     when no camera has any of the means (every k-th, at most _SAMPLED_MEANS) between its near and
-    far planes."""
+    far planes. Camera depths only, a chunk of cameras at a time, stopping at the first that
+    draws something."""
     sampled = means.detach()[:: max(1, math.ceil(len(means) / _SAMPLED_MEANS))].to("cpu", torch.float64)
-    _, depth = cameras.to("cpu", torch.float64).project(sampled)
-    if bool(((depth >= NEAR_PLANE) & (depth <= FAR_PLANE)).any()):
-        return
-    ahead = depth[depth > 0]
+    extrinsics = cameras.extrinsics.detach().to("cpu", torch.float64)
+    ahead = []
+    for first in range(0, len(extrinsics), _CAMERAS_AT_ONCE):
+        chunk = extrinsics[first: first + _CAMERAS_AT_ONCE]
+        depth = chunk[:, 2, :3] @ sampled.T + chunk[:, 2, 3:]  # [C, P] camera-space z
+        if bool(((depth >= NEAR_PLANE) & (depth <= FAR_PLANE)).any()):
+            return
+        ahead.append(depth[depth > 0])
+    ahead = torch.cat(ahead)
     where_it_lies = f"{float(ahead.median()):.3g} units in front of the cameras" if len(ahead) else "behind every camera"
     prefix = f"{where}: " if where else ""
     raise InputError(f"{prefix}no camera sees the scene: it lies {where_it_lies}, outside the renderer's range of "

@@ -183,6 +183,21 @@ def training_inputs(config: TrainConfig, config_file: Path | str) -> list[Path]:
     return [Path(path) for path in paths if path]
 
 
+def _yaml_problem(error: yaml.YAMLError) -> str:
+    """PyYAML's message (over lines: the context, a caret under the column) in one line."""
+    mark = getattr(error, "problem_mark", None)
+    where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+    return f"{where} ({getattr(error, 'problem', None) or ' '.join(str(error).split())})"
+
+
+def _override_value(text: str):
+    """An override's value by YAML's rules; InputError (one line) when it is not YAML."""
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        raise InputError(f"override value {text!r}: invalid YAML{_yaml_problem(error)}; quote it or correct it") from None
+
+
 def load_config(path: Path | str, overrides: list[str] = ()) -> TrainConfig:
     """Read a YAML config, apply `key=value` overrides, validate."""
     path = Path(path)
@@ -191,15 +206,11 @@ def load_config(path: Path | str, overrides: list[str] = ()) -> TrainConfig:
     except OSError as error:
         raise InputError(f"{path}: cannot read config ({error.strerror})") from error
     except yaml.YAMLError as error:
-        # PyYAML's message spans lines (the context, a caret under the column): one line here
-        mark = getattr(error, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        problem = getattr(error, "problem", None) or " ".join(str(error).split())
-        raise InputError(f"{path}: invalid YAML{where} ({problem}); correct the file") from None
+        raise InputError(f"{path}: invalid YAML{_yaml_problem(error)}; correct the file") from None
     if not isinstance(values, dict):
         raise InputError(f"{path}: a config must be a YAML mapping")
     for assignment in overrides:
-        apply_override(values, assignment, yaml.safe_load)
+        apply_override(values, assignment, _override_value)
     return from_dict(TrainConfig, values)
 
 

@@ -149,3 +149,15 @@ def test_black_and_saturated_photos_are_not_metered():
     assert exposure_prior_stops(AppearanceOperator.identity(1), mixed, 0.75).item() == pytest.approx(alone.item(), abs=1e-6)
     blank = torch.cat([torch.zeros(1, 2, 3, 16, 20), torch.ones(1, 2, 3, 16, 20)], dim=1)
     assert exposure_prior_stops(operator, blank, 1.0).tolist() == [0.0]
+
+
+def test_the_views_left_unmetered_can_be_named_from_the_photos_themselves():
+    """A black frame with a few code-1 hot pixels has two levels at its own size but dozens once
+    resized for the network: the restore names it from the photos (`unmetered`)."""
+    real = 0.15 + 0.3 * torch.rand(1, 4, 3, 16, 20, generator=torch.Generator().manual_seed(7))  # gains under the cap
+    alone = exposure_prior_stops(AppearanceOperator.identity(1), real[:, :3], 0.75)
+    resized_black = real.clone()
+    resized_black[0, 3] = torch.rand(3, 16, 20, generator=torch.Generator().manual_seed(8)) * 0.2 / 255  # many levels
+    named = exposure_prior_stops(AppearanceOperator.identity(1), resized_black, 0.75, unmetered=[{3}])
+    assert named.item() == pytest.approx(alone.item(), abs=1e-6)
+    assert exposure_prior_stops(AppearanceOperator.identity(1), resized_black, 0.75).item() > alone.item() + 0.1

@@ -5,7 +5,7 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.model.appearance.curve import CURVE_KNOTS
 from lumos3d_cli.model.appearance.operator import AppearanceOperator
 from lumos3d_cli.io.colour import srgb_to_linear
-from lumos3d_cli.model.appearance.photo_restoration import frames_without_content, monochrome_frames, restore_photos
+from lumos3d_cli.model.appearance.photo_restoration import frames_without_content, is_monochrome, restore_photos
 
 
 def _operator(views=3, seed=0) -> AppearanceOperator:
@@ -61,8 +61,11 @@ def test_a_monochrome_photo_restores_grey_with_the_operators_luminance():
     colour = torch.rand(1, 3, 24, 32, generator=generator) * 0.3
     photos = torch.cat([grey, colour])
     operator = _operator(views=2)
-    assert monochrome_frames(photos) == [0]
-    assert monochrome_frames(photos + torch.tensor([0.0, 0.0, 1.5 / 255]).reshape(1, 3, 1, 1)) == []
+    assert is_monochrome(photos[0]) and not is_monochrome(photos[1])
+    assert not is_monochrome(photos[0] + torch.tensor([0.0, 0.0, 1.5 / 255]).reshape(3, 1, 1))
+    # a dark 16-bit colour photo lies within one 8-bit step too, but its channels differ in proportion
+    dark_colour = (colour[0] / colour[0].max() / 255 * torch.tensor([1.0, 0.7, 0.5]).reshape(3, 1, 1) * 65535).round() / 65535
+    assert float((dark_colour.amax(0) - dark_colour.amin(0)).max()) <= 1 / 255 and not is_monochrome(dark_colour)
     restored = restore_photos(photos, operator)
     expected = operator.apply(photos[None])[0]
     assert float((expected[0].amax(0) - expected[0].amin(0)).max()) > 0.02  # the operator does tint it

@@ -110,12 +110,16 @@ def highlight_headroom(restored_linear: torch.Tensor, newly_clipped: float = MAX
 
 
 def exposure_prior_stops(operator: AppearanceOperator, images: torch.Tensor, strength: float,
-                         key: float = EXPOSURE_KEY, key_model: ExposureKeyModel | None = None) -> torch.Tensor:
+                         key: float = EXPOSURE_KEY, key_model: ExposureKeyModel | None = None,
+                         unmetered: list[set[int]] | None = None) -> torch.Tensor:
     """operator of B scenes, images [B, V, 3, H, W] sRGB (the network images it was predicted
     from; its local grids are for these V views) -> [B] the prior's gain in stops: `strength`
     times the stops that bring each scene's restored mean to `key`, or with `key_model` to the
     key its content predicts (0: the operator as it is; 1: the key alone decides the exposure),
-    a brightening gain limited to the scene's `highlight_headroom`."""
+    a brightening gain limited to the scene's `highlight_headroom`. `unmetered`: per scene, the
+    views left out (all black or white); None: found in `images`, which a resize may have given
+    levels the photos did not have (`photo_restoration.frames_without_content` on the photos
+    themselves is exact)."""
     if not 0.0 <= strength <= 1.0:
         raise ValueError(f"exposure prior strength must be in [0, 1], got {strength}")
     if strength == 0.0:
@@ -125,12 +129,12 @@ def exposure_prior_stops(operator: AppearanceOperator, images: torch.Tensor, str
         require_finite("restored images the exposure prior meters", restored,
                        "the restoration operator produced NaN/Inf (corrupt weights or an unstable input?)")
         gains = []
-        for scene, photos in zip(restored, images):
+        for index, (scene, photos) in enumerate(zip(restored, images)):
             # a black or saturated photo records nothing of the scene's brightness: metered with
             # the others it would pull the whole scene's gain (one black frame beside three photos lifted
             # them by a quarter stop); a scene of nothing else gets no gain
-            black, saturated = frames_without_content(photos)
-            metered = scene[[view for view in range(len(scene)) if view not in {*black, *saturated}]][None]
+            left_out = unmetered[index] if unmetered is not None else set().union(*frames_without_content(photos))
+            metered = scene[[view for view in range(len(scene)) if view not in left_out]][None]
             if metered.shape[1] == 0:
                 gains.append(torch.zeros(1, device=scene.device))
                 continue

@@ -14,29 +14,36 @@ from lumos3d_cli.model.appearance.operator import AppearanceOperator
 # 16-bit or RAW frame that dark still holds hundreds of levels, an image, and is restored.
 BLACK_LEVEL = 1.0 / 255
 WHITE_LEVEL = 254.0 / 255
-_LEVELS_OF_NOTHING = 2
+# A monochrome photo's channels agree within one 8-bit step everywhere and, on average, within
+# this share of its level: a dark 16-bit colour photo lies within one 8-bit step too, but its
+# channels differ by a large share of their level.
+MONOCHROME_SPREAD = 0.01
 
 
-def _few_levels(view: torch.Tensor) -> bool:
-    """Whether `view` (any shape, in [0, 1]) takes at most _LEVELS_OF_NOTHING 16-bit levels (a
-    resized copy's rounding, 1e-7 off a level, counts as that level)."""
-    return len(torch.unique((view * 65535).round())) <= _LEVELS_OF_NOTHING
+def _at_most_two_levels(view: torch.Tensor) -> bool:
+    """Whether `view` (any shape, in [0, 1]) takes at most two 16-bit levels (a frame of 8-bit
+    codes 0 and 1, say). O(pixels): a 24-megapixel frame is not sorted."""
+    levels = (view * 65535).round()
+    return bool(((levels == levels.min()) | (levels == levels.max())).all())
 
 
 def frames_without_content(photos: torch.Tensor) -> tuple[list[int], list[int]]:
-    """photos [V, 3, H, W] sRGB in [0, 1] -> (indices of all-black views, of all-saturated views)."""
+    """photos [V, 3, H, W] sRGB in [0, 1] at the photos' own size (a resized copy has more
+    levels) -> (indices of all-black views, of all-saturated views)."""
     flat = photos.detach().reshape(photos.shape[0], -1)
-    black = [view for view in (flat.amax(dim=1) <= BLACK_LEVEL).nonzero().flatten().tolist() if _few_levels(flat[view])]
+    black = [view for view in (flat.amax(dim=1) <= BLACK_LEVEL).nonzero().flatten().tolist()
+             if _at_most_two_levels(flat[view])]
     saturated = [view for view in (flat.amin(dim=1) >= WHITE_LEVEL).nonzero().flatten().tolist()
-                 if _few_levels(flat[view])]
+                 if _at_most_two_levels(flat[view])]
     return black, saturated
 
 
-def monochrome_frames(photos: torch.Tensor) -> list[int]:
-    """photos [V, 3, H, W] sRGB in [0, 1] -> indices of the views whose three channels agree
-    everywhere within one 8-bit step (a greyscale file, or a grey photo saved as RGB)."""
-    spread = (photos.detach().amax(dim=1) - photos.detach().amin(dim=1)).reshape(photos.shape[0], -1)
-    return (spread.amax(dim=1) <= BLACK_LEVEL).nonzero().flatten().tolist()
+def is_monochrome(photo: torch.Tensor) -> bool:
+    """photo [3, H, W] sRGB in [0, 1]: whether its channels agree (a greyscale file, or a grey
+    photo saved as RGB): within one 8-bit step everywhere, and within MONOCHROME_SPREAD of its
+    level on average."""
+    spread = photo.detach().amax(dim=0) - photo.detach().amin(dim=0)
+    return float(spread.max()) <= BLACK_LEVEL and float(spread.mean()) <= MONOCHROME_SPREAD * float(photo.mean())
 
 
 def _grey(restored: torch.Tensor) -> torch.Tensor:
@@ -52,7 +59,7 @@ def restore_photos(photos: torch.Tensor, operator: AppearanceOperator) -> torch.
 
     One view at a time, so full-resolution photo sets fit in memory. A view that is all black or
     all saturated holds nothing to restore and stays black or white (the restore job warns of
-    such photos by name, `frames_without_content`). A monochrome view (`monochrome_frames`) holds
+    such photos by name, `frames_without_content`). A monochrome view (`is_monochrome`) holds
     no colour to restore: its restoration keeps its luminance and stays grey, where the operator's
     matrix, fitted to colour photos, would tint it.
     """
@@ -65,12 +72,11 @@ def restore_photos(photos: torch.Tensor, operator: AppearanceOperator) -> torch.
         raise InputError(f"operator has local grids for {operator.local_log2_gain.shape[1]} views, but {views} photos were given")
     restored = torch.empty(photos.shape, dtype=torch.float32, device=photos.device)
     black, saturated = frames_without_content(photos)
-    monochrome = monochrome_frames(photos)
     for view in range(views):
         if view in black or view in saturated:  # the operator's curve would turn white grey
             restored[view] = photos[view]
             continue
         restored[view] = operator.views(slice(view, view + 1)).apply(photos[view][None, None])[0, 0]
-        if view in monochrome:
+        if is_monochrome(photos[view]):
             restored[view] = _grey(restored[view])
     return restored
