@@ -2,6 +2,7 @@
 lumos3d wrote, never over or into its inputs; one run per folder at a time; the new outputs
 appear in one commit that a signal does not cut short; a failure leaves everything as it was."""
 
+import contextlib
 import errno
 import json
 import os
@@ -11,14 +12,16 @@ import subprocess
 import sys
 import tempfile
 import textwrap
+from pathlib import Path
 
 import pytest
 
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import InputError, Interrupted
 from lumos3d_cli.io import atomic
 from lumos3d_cli.io.file_digest import file_sha256
 from lumos3d_cli.io.manifest import MANIFEST_NAME, Manifest
 from lumos3d_cli.io.output_lock import LOCK_NAME, folder_lock
+from lumos3d_cli.io import output_set as output_set_module
 from lumos3d_cli.io.output_set import OutputSet
 
 from output_files import snapshot
@@ -391,3 +394,59 @@ def test_a_scene_of_another_name_never_takes_over_an_earlier_scenes_side_files(t
             (staging.root / name).write_text("second")
         (staging.root / "views").mkdir()
     assert _tree(out) == [MANIFEST_NAME, "other.ply", "summary.json", "views"]
+
+
+def test_the_journal_is_gone_before_the_staging_folder_is_removed(tmp_path, monkeypatch):
+    """A kill while the staging folder is removed must leave no journal: the next run would
+    "finish" the moves whose .replaced entries were already removed, and take the new outputs away."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], text="first")
+    seen = []
+    original = shutil.rmtree
+
+    def record(path, *args, **kwargs):
+        if ".staging." in str(path):
+            seen.append((Path(path) / atomic.COMMIT_JOURNAL).exists())
+        return original(path, *args, **kwargs)
+
+    monkeypatch.setattr(shutil, "rmtree", record)
+    _restore_like(out, ["1.png"], text="second")
+    assert seen and not any(seen) and (out / "views" / "1.png").read_text() == "second"
+
+
+def test_a_file_elsewhere_has_its_folders_manifest_staged_in_that_folder(tmp_path, monkeypatch):
+    """A video on another file system: its folder's manifest was staged in the output folder's
+    staging area, and the rename across file systems failed after all the work."""
+    out, videos = tmp_path / "out", tmp_path / "videos"
+    original, moved = os.replace, []
+
+    def across_devices(source, destination):
+        source, destination = Path(source), Path(destination)
+        if (videos in destination.parents) != (videos in source.parents):
+            raise OSError(errno.EXDEV, "Invalid cross-device link", str(source))
+        moved.append(destination)
+        original(source, destination)
+
+    monkeypatch.setattr(os, "replace", across_devices)
+    _restore_like(out, ["1.png"], video=videos / "orbit.mp4", text="first")
+    assert videos / MANIFEST_NAME in moved and (videos / "orbit.mp4").read_text() == "first"
+    assert _tree(videos) == [MANIFEST_NAME, "orbit.mp4"]
+
+
+def test_a_signal_before_the_first_move_says_nothing_changed(tmp_path, monkeypatch):
+    """A signal held over from the journal's writing lands before any move: the old set stays,
+    and the message must not claim the new one is in place."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], text="first")
+    before = snapshot(out)
+    @contextlib.contextmanager
+    def a_signal_delivered_on_entry():  # Python runs a handler once the journal's fsync returns: here
+        raise Interrupted(signal.SIGTERM)
+        yield
+
+    monkeypatch.setattr(output_set_module, "_stop_signals_held", a_signal_delivered_on_entry)
+    with pytest.raises(Interrupted) as stopped:
+        _restore_like(out, ["1.png"], text="second")
+    assert stopped.value.detail == "" and "nothing half-written" in stopped.value.message()
+    assert snapshot(out) == before and hidden_entries(out) == []
+

@@ -38,6 +38,7 @@ from pathlib import Path
 
 from lumos3d_cli.errors import STOP_SIGNALS, InputError, Interrupted
 from lumos3d_cli.io.atomic import (
+    COMMIT_JOURNAL,
     current_umask,
     make_folders,
     remove_created_folders,
@@ -356,6 +357,7 @@ class OutputSet:
         trash = root / ".replaced"
         moves: list[tuple[Path, Path, str]] = []
         leftovers: list[Path] = []  # old files moved beside themselves (outside the staging folder)
+        manifests_elsewhere: list[Path] = []  # the manifests of folders outside the staging folder's
 
         def move_away(path: Path) -> None:
             if _is_within(path.parent, self.folder.absolute()):
@@ -393,12 +395,17 @@ class OutputSet:
                 for file in files:
                     name = item.final.name + ("/" + file.relative_to(item.staged).as_posix() if item.is_folder else "")
                     manifest.files[name] = describe_file(file, self.command, item.output_set)
-            staged_manifest = root / f".manifest.{len(moves)}"
+            if _is_within(folder, self.folder.absolute()):
+                staged_manifest = root / f".manifest.{len(moves)}"
+            else:  # another folder (a video's, maybe on another file system): staged beside its manifest
+                staged_manifest = folder / f"{temporary_prefix(MANIFEST_NAME)}manifest.{len(moves)}.tmp"
+                manifests_elsewhere.append(staged_manifest)
             staged_manifest.write_text(manifest.document())
             moves.append((staged_manifest, folder / MANIFEST_NAME, "source-gone"))
-        write_commit_journal(root, self.folder.absolute(), moves)
-        done: list[tuple[Path, Path]] = []
+        committed = False
         try:
+            write_commit_journal(root, self.folder.absolute(), moves)
+            done: list[tuple[Path, Path]] = []
             with _stop_signals_held():
                 trash.mkdir()
                 try:
@@ -410,12 +417,20 @@ class OutputSet:
                     reason = _DISK_ERRORS.get(error.errno) or error.strerror or type(error).__name__
                     raise InputError(f"{error.filename}: cannot be replaced ({reason}); nothing was changed: fix its "
                                      "permissions or choose another output") from error
+                committed = True
+                # the journal goes first: a run killed while the staging folder is removed must not
+                # find it and "finish" moves whose trace (.replaced/N) is already gone
+                (root / COMMIT_JOURNAL).unlink()
                 shutil.rmtree(root, ignore_errors=True)
                 for path in leftovers:
                     remove_path(path)
         except Interrupted as stop:
-            stop.detail = stop.detail or f"after the outputs were written; {self.folder} holds the complete new outputs"
+            if committed:  # a signal held over the moves lands after them; one before them changed nothing
+                stop.detail = stop.detail or f"after the outputs were written; {self.folder} holds the complete new outputs"
             raise
+        finally:
+            for path in manifests_elsewhere:  # moved into place, unless the commit stopped before
+                path.unlink(missing_ok=True)
 
 
 def _undo(done: list[tuple[Path, Path]]) -> None:

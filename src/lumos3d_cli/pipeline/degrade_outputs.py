@@ -33,7 +33,10 @@ def degrade_outputs(inputs: list[Path], output: Path, bit_depth: int, given: Seq
         check_output_path(output, "output")
         return OutputSet(output.parent, "degrade", f"degrade {output.name}", [*inputs, *given]).add_file(output.name)
     check_output_path(output, "output", folder=True)
-    outputs = OutputSet(output, "degrade", "degrade", [*inputs, *given])
+    # photos given one by one keep their folder as an input: degraded PNGs beside them (1.JPG and
+    # 1.png) would make it a folder no command reads again ("two photos named '1'")
+    folders = sorted({path.parent for path in inputs})
+    outputs = OutputSet(output, "degrade", "degrade", [*inputs, *given, *folders])
     for name in [*(f"{path.stem}.png" for path in inputs), "degradation.json"]:
         outputs.add_file(name)
     return outputs
