@@ -40,6 +40,38 @@ def test_render_from_poses_matches_the_library(run_cli, tmp_path):
     assert np.abs(written - expected).max() <= 0.5 / 255 + 1e-6
 
 
+def test_filled_frames_are_restores_views_and_plain_ones_their_render_over_black(run_cli, tmp_path, buu, random_checkpoint):
+    """restore's views are filled renders (render.hole_filling); `render --fill-unobserved` at the
+    written cameras reproduces them, the plain render is the library's over black."""
+    from lumos3d_cli.io.camera_files import read_cameras
+    from lumos3d_cli.io.ply import read_ply
+    from lumos3d_cli.render.hole_filling import fill_unobserved
+
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for name in ("1.JPG", "4.JPG", "7.JPG"):
+        (photos / name).write_bytes((buu / "low" / name).read_bytes())
+    out = tmp_path / "out" / "scene.ply"
+    assert run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--preset", "fast").code == 0
+    filled = run_cli("render", out, "--poses", out.parent / "cameras.json", "-o", tmp_path / "filled", "--fill-unobserved",
+                     "--json")
+    assert filled.code == 0, filled.err
+    assert json.loads(filled.out)["filled"] is True
+    assert run_cli("render", out, "--poses", out.parent / "cameras.json", "-o", tmp_path / "plain").code == 0
+    gaussians, cameras = read_ply(out), read_cameras(out.parent / "cameras.json")
+    for index, name in enumerate(cameras.names):
+        view = cv2.imread(str(out.parent / "restored" / (name.rsplit(".", 1)[0] + ".png"))).astype(int)
+        assert np.abs(cv2.imread(str(tmp_path / "filled" / f"{index:05d}.png")).astype(int) - view).max() <= 1
+        with torch.no_grad():
+            output = render(gaussians, cameras[[index]])
+        expected = fill_unobserved(output.images[0], output.alphas[0]).image  # the oracle of the filled frame's rule
+        assert np.abs(np.round(expected.permute(1, 2, 0).numpy()[..., ::-1] * 255) - view).max() <= 1
+        plain = np.round(output.images[0].clamp(0, 1).permute(1, 2, 0).numpy()[..., ::-1] * 255)
+        assert np.abs(cv2.imread(str(tmp_path / "plain" / f"{index:05d}.png")).astype(int) - plain).max() <= 1
+    expect_input_error(run_cli("render", out, "--orbit", 2, "-o", tmp_path / "x", "--fill-unobserved", "--background",
+                               "1,1,1"), "--background 1,1,1: a filled frame shows no background")
+
+
 def test_render_orbit_around_cameras_beside_the_scene_with_video(run_cli, tmp_path):
     path, gaussians = _scene(tmp_path)
     write_transforms_json(path.parent / "cameras.json", orbit_from_gaussians(gaussians, 4, 64, 48))

@@ -18,6 +18,7 @@ EXAMPLES = """
   lumos3d render scene.ply --poses cameras.json -o views/ --width 1024
   lumos3d render scene.ply --poses sparse/0 -o views/ --background 1,1,1 --json
   lumos3d render out/scene.ply --orbit 48 -o frames/ --video orbit.gif --fps 12 --width 320
+  lumos3d render out/scene.ply --poses out/cameras.json -o views/ --fill-unobserved   [dim]# as restored/ shows them[/dim]
 """
 
 def parse_background(text: str) -> tuple[float, float, float]:
@@ -41,6 +42,9 @@ def render_command(
     fps: int = typer.Option(30, "--fps", help="Frames per second of the video."),
     background: str = typer.Option("0,0,0", "--background", help="Background colour r,g,b in [0, 1]."),
     antialiased: bool = typer.Option(False, "--antialiased", help="Mip-Splatting 2D filter (opacity compensation)."),
+    fill: bool = typer.Option(False, "--fill-unobserved/--black-unobserved",
+                              help="Complete each frame as restore's views are (covered pixels divided by their alpha, "
+                                   "uncovered ones inpainted), or draw it plainly over the background."),
     json_output: bool = typer.Option(False, "--json", help="Print a JSON summary on stdout."),
 ) -> None:
     """Render a Gaussian scene from cameras or along an orbit."""
@@ -59,6 +63,8 @@ def render_command(
     if not 1 <= fps <= 240:
         raise InputError(f"--fps {fps}: use between 1 and 240")
     colour = parse_background(background)
+    if fill and colour != (0.0, 0.0, 0.0):
+        raise InputError(f"--background {background}: a filled frame shows no background; leave one of them out")
     check_output_path(output, "output", folder=True)
     check_output_path(video, "video")
     started = time.perf_counter()
@@ -69,11 +75,11 @@ def render_command(
     outputs = render_outputs(len(cameras), output, video, [scene, poses])
     with outputs.reserved(), progress_bar() as bars:
         frames = render_frames(gaussians, cameras, output, video, fps, colour, antialiased, ProgressBars(bars), [scene, poses],
-                               str(scene))
+                               str(scene), fill)
     summary = {
         "scene": str(scene), "gaussians": len(gaussians), "sh_degree": gaussians.sh_degree,
         "cameras": source, "frames": frames.frames, "width": frames.size[0], "height": frames.size[1],
-        "output": str(output), "video": frames.video, "render_ms_per_frame": frames.render_ms_per_frame,
+        "output": str(output), "video": frames.video, "filled": fill, "render_ms_per_frame": frames.render_ms_per_frame,
         "total_seconds": round(time.perf_counter() - started, 3),
     }
     if json_output:

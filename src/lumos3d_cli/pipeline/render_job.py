@@ -22,6 +22,7 @@ from lumos3d_cli.io.video import VideoWriter, probe_video, video_kind
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
 from lumos3d_cli.render.camera_paths import orbit_from_cameras, orbit_from_gaussians
 from lumos3d_cli.render.clipping_range import require_drawable
+from lumos3d_cli.render.hole_filling import fill_unobserved
 from lumos3d_cli.render.render import render
 
 logger = logging.getLogger(__name__)
@@ -95,12 +96,15 @@ def render_frames(
     gaussians: Gaussians, cameras: Cameras, output: Path, video: Path | None = None, fps: int = 30,
     background: tuple[float, float, float] = (0.0, 0.0, 0.0), antialiased: bool = False,
     progress: JobProgress | None = None, inputs: Sequence[Path | None] = (), scene_name: str | None = None,
+    fill: bool = False,
 ) -> RenderedFrames:
     """Render every camera, each at its own size, into `output`/00000.png ... (and `video`, .mp4 or
     .gif, whose frames share the first camera's size); the folder's frames and the video appear
     when all are written, never over a file lumos3d did not write nor over `inputs`
     (io/output_set.py). A scene no camera can draw (render.clipping_range) is refused, naming
-    `scene_name` (its file) when given."""
+    `scene_name` (its file) when given. With `fill` each frame is completed as restore's views
+    are (render.hole_filling: covered pixels divided by their alpha, the uncovered inpainted), and
+    `background` does not apply."""
     progress = progress or SilentProgress()
     kind = video_kind(video) if video is not None else None
     if len(gaussians) == 0:
@@ -119,7 +123,9 @@ def render_frames(
             for index in range(len(cameras)):
                 started = time.perf_counter()
                 with torch.no_grad():
-                    image = render(gaussians, cameras[index], background=background, antialiased=antialiased).images[0]
+                    rendered = render(gaussians, cameras[index], background=None if fill else background,
+                                      antialiased=antialiased)
+                image = fill_unobserved(rendered.images[0], rendered.alphas[0]).image if fill else rendered.images[0]
                 render_seconds += time.perf_counter() - started
                 pixels = image.permute(1, 2, 0).numpy()
                 write_image(staging.root / f"{index:05d}.png", pixels)
