@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
+
+from lumos3d_cli.io.cameras import Cameras
 
 
 @dataclass
@@ -44,3 +46,16 @@ class SparsePoints:
             torch.zeros(0, dtype=torch.int64), torch.zeros(0, 2, dtype=torch.float64),
         )
 
+    def reprojected(self, cameras: Cameras) -> tuple[SparsePoints, float]:
+        """The points with `error` [P] measured against `cameras` (indexed by `view`): each point's
+        mean distance in pixels between where the cameras project it and where it was observed, and
+        the mean over all observations (COLMAP's mean reprojection error; nan without any)."""
+        if len(self.view) == 0:
+            return self, float("nan")
+        extrinsics, intrinsics = cameras.extrinsics.double()[self.view], cameras.intrinsics.double()[self.view]
+        camera = (extrinsics[:, :, :3] @ self.xyz[self.point][:, :, None])[..., 0] + extrinsics[:, :, 3]
+        projected = (intrinsics[:, :2, :2] @ (camera[:, :2] / camera[:, 2:])[:, :, None])[..., 0] + intrinsics[:, :2, 2]
+        distance = (projected - self.pixel).norm(dim=1)
+        sums = torch.zeros(len(self), dtype=torch.float64).index_add_(0, self.point, distance)
+        counts = torch.bincount(self.point, minlength=len(self)).clamp_min(1).double()
+        return replace(self, error=sums / counts), float(distance.mean())

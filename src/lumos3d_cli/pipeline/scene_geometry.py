@@ -208,16 +208,18 @@ def _network_geometry(registration: ViewRegistration, network: NetworkPass, sele
                          report)
 
 
-def _points_in_frame(registration: ViewRegistration) -> SparsePoints:
-    """The sparse points in the frame of the registration's cameras: SfM's own, or carried onto
-    the given poses by the similarity between SfM's cameras and the given ones."""
+def _points_in_frame(registration: ViewRegistration) -> tuple[SparsePoints, float | None]:
+    """The sparse points in the frame of the registration's cameras, and their mean reprojection
+    error there (px; None without structure-from-motion): SfM's own, or carried onto the given
+    poses by the similarity between SfM's cameras and the given ones, their errors then measured
+    against the given cameras (SfM's own would describe cameras that are not written)."""
     sfm = registration.sfm
     if sfm is None or sfm.failed:
-        return SparsePoints.empty()
+        return SparsePoints.empty(), sfm.reprojection_error if sfm is not None else None
     if registration.source != "poses":
-        return sfm.points
+        return sfm.points, sfm.reprojection_error
     similarity = fit_camera_similarity(sfm.cameras, registration.cameras[sfm.registered_indices])
-    return replace(sfm.points, xyz=similarity.apply(sfm.points.xyz))
+    return replace(sfm.points, xyz=similarity.apply(sfm.points.xyz)).reprojected(registration.cameras)
 
 
 def _points_of_views(points: SparsePoints, views: list[int]) -> SparsePoints:
@@ -311,7 +313,7 @@ def place_views(
     cameras = Cameras(cameras.extrinsics.double(), cameras.intrinsics.double(), cameras.sizes,
                       [name for view, name in enumerate(names) if view in position_of_view or bool(known[view])])
     network_cameras = _to_network(network, selected_cameras)
-    points = _points_in_frame(registration)
+    points, reprojection_error = _points_in_frame(registration)
     depth, alignment_report = _aligned_depth(network, selected, network_cameras, points, selected_names, selected_cameras)
     sweep_report = None
     if sweep is not None and images is not None and len(selected) > 1:
@@ -326,7 +328,7 @@ def place_views(
         "registered_views": int(known.sum()) if registration.source == "sfm" else None,
         "views": len(names),
         "brightening": registration.brightening if sfm is not None else None,
-        "reprojection_error_px": sfm.reprojection_error if sfm is not None else None,
+        "reprojection_error_px": reprojection_error,
         "sparse_points": len(points),
         "models": sfm.model_sizes if sfm is not None else None,
         "matching": sfm.matching if sfm is not None else None,
