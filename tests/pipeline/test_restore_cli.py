@@ -47,6 +47,13 @@ def test_restore_writes_every_output(run_cli, buu, tmp_path, random_checkpoint):
     assert cv2.imread(str(out.parent / "contact_sheet.png")) is not None
     glb = trimesh.load(str(out.parent / "preview.glb"))
     assert any(isinstance(g, trimesh.PointCloud) for g in glb.geometry.values())
+    # glTF's COLOR_0 is linear: the points' colours are the Gaussians' sRGB colours decoded
+    cloud = next(g for g in glb.geometry.values() if isinstance(g, trimesh.PointCloud))
+    gaussians = PlyData.read(str(out))["vertex"]
+    srgb = np.clip(0.5 + 0.28209479177387814 * np.stack([gaussians[f"f_dc_{c}"] for c in range(3)], axis=1), 0, 1)
+    linear = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)  # IEC 61966-2-1
+    assert abs(cloud.colors[:, :3].astype(float).mean() / 255 - linear.mean()) < 0.01
+    assert abs(cloud.colors[:, :3].astype(float).mean() / 255 - srgb.mean()) > 0.05
     assert summary["metrics"]["mean"]["psnr"] > 0 and summary["metrics"]["mean"]["lpips"] is None
     assert "no LPIPS trunk weights" in summary["metrics"]["lpips_note"]
     assert len(summary["checkpoint"]["sha256"]) == 64 and set(summary["seconds"]) >= {"load", "network", "render", "write"}

@@ -14,6 +14,7 @@ import torch
 
 from lumos3d_cli.io.atomic import write_bytes_atomic
 from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.colour import srgb_to_linear
 from lumos3d_cli.io.gaussians import Gaussians, sh_dc_to_rgb
 
 _TO_GLTF = np.array([1.0, -1.0, -1.0])
@@ -51,7 +52,9 @@ def write_preview_glb(path: Path | str, gaussians: Gaussians, cameras: Cameras, 
     if len(means) > max_points:
         keep = np.linspace(0, len(means) - 1, max_points).round().astype(np.int64)
         means, colours = means[keep], colours[keep]
-    rgba = np.concatenate([np.round(colours * 255), np.full((len(colours), 1), 255)], axis=1).astype(np.uint8)
+    # glTF's vertex colours are linear (its viewers encode them for display): 8-bit linear codes
+    linear = srgb_to_linear(colours)
+    rgba = np.concatenate([np.round(linear * 255), np.full((len(colours), 1), 255)], axis=1).astype(np.uint8)
     geometry = []
     if len(means):
         geometry.append(trimesh.PointCloud(means * _TO_GLTF, colors=rgba))
