@@ -31,6 +31,25 @@ def test_orbit_video_is_h264_with_the_rendered_frames(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["orbit.mp4"]  # no temporary left
 
 
+def test_a_filled_orbit_is_as_bright_as_the_filled_views(tmp_path):
+    """restore's video of a scene whose views are filled renders: each frame completed as they are
+    (render.hole_filling), not the darker render over black."""
+    from lumos3d_cli.render.hole_filling import fill_unobserved
+
+    gaussians = random_scene(300, 0, degree=0, dtype=torch.float32, spread=0.4)
+    gaussians.opacities = gaussians.opacities * 0.5  # half transparent: the fill brightens every covered pixel
+    cameras = orbit_from_gaussians(gaussians, 4, 66, 50)
+    orbit = write_orbit_video(gaussians, cameras, tmp_path / "orbit.mp4", frames=3, fps=10, width=33, fill=True)
+    reader = imageio_ffmpeg.read_frames(str(tmp_path / "orbit.mp4"))
+    next(reader)
+    first = np.frombuffer(next(reader), np.uint8).reshape(26, 34, 3)[:25, :33] / 255.0
+    reader.close()
+    rendered = render(gaussians, orbit[0])
+    filled = fill_unobserved(rendered.images[0], rendered.alphas[0]).image.permute(1, 2, 0).numpy()
+    plain = rendered.images[0].permute(1, 2, 0).numpy()
+    assert abs(first.mean() - filled.mean()) < 0.02 and filled.mean() > plain.mean() + 0.05
+
+
 def test_orbit_size_and_bad_inputs(tmp_path):
     cameras = orbit_from_gaussians(random_scene(10, 0), 2, 400, 300)
     assert orbit_size(cameras, 200) == (200, 150) and orbit_size(cameras, 1000) == (400, 300)

@@ -11,6 +11,7 @@ from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.io.video import VideoWriter, video_kind
 from lumos3d_cli.render.camera_paths import orbit_from_cameras
+from lumos3d_cli.render.hole_filling import fill_unobserved
 from lumos3d_cli.render.render import render
 
 # The CPU renderer's cost grows with the pixels: 512 wide keeps a 120-frame orbit to minutes
@@ -35,11 +36,13 @@ def write_orbit_video(
     width: int = DEFAULT_ORBIT_WIDTH,
     background: tuple[float, float, float] = (0.0, 0.0, 0.0),
     on_frame: Callable[[], None] | None = None,
+    fill: bool = False,
 ) -> Cameras:
     """Render `frames` views on an orbit through the space `cameras` cover (see
     `render.camera_paths.orbit_from_cameras`) into `path` (.mp4 H.264 or .gif by suffix; a command
     writes it into its staging area, io/output_set.py). on_frame() runs after each frame
-    (progress). Returns the orbit's cameras."""
+    (progress). With `fill` each frame is completed as the restored views are
+    (render.hole_filling; `background` then does not apply). Returns the orbit's cameras."""
     kind = video_kind(path)
     if frames < 1:
         raise ValueError(f"an orbit video needs at least one frame, got {frames}")
@@ -48,7 +51,8 @@ def write_orbit_video(
     with VideoWriter(path, frame_width, frame_height, fps, kind) as writer:
         for index in range(frames):
             with torch.no_grad():
-                image = render(gaussians, orbit[index], background=background).images[0]  # [3, H, W]
+                rendered = render(gaussians, orbit[index], background=None if fill else background)
+            image = fill_unobserved(rendered.images[0], rendered.alphas[0]).image if fill else rendered.images[0]  # [3, H, W]
             writer.write(image.permute(1, 2, 0).cpu().numpy())
             if on_frame is not None:
                 on_frame()

@@ -81,7 +81,10 @@ def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_fo
         for image in images:
             image.result()  # raises what the writing raised
         if video is not None:
-            write_orbit_video(scene.gaussians, scene.cameras, staging.files[Path(video)], on_frame=on_video_frame)
+            # as bright as the restored views: completed as they were (filled renders of the scene)
+            filled = scene.uncovered is not None and scene.uncovered["filled"]
+            write_orbit_video(scene.gaussians, scene.cameras, staging.files[Path(video)], on_frame=on_video_frame,
+                              fill=filled)
         scene.timings["write"] = time.perf_counter() - started
         if "total" in scene.timings:
             scene.timings["total"] += scene.timings["write"]
