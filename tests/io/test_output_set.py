@@ -450,3 +450,51 @@ def test_a_signal_before_the_first_move_says_nothing_changed(tmp_path, monkeypat
     assert stopped.value.detail == "" and "nothing half-written" in stopped.value.message()
     assert snapshot(out) == before and hidden_entries(out) == []
 
+
+
+def test_a_failed_commit_removes_its_journal_before_its_staging_folder(tmp_path, monkeypatch):
+    """After a move fails and is undone, a kill while the staging folder is removed must not leave
+    a journal whose "finish" would move the restored old outputs away."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], text="first")
+    original, seen = os.replace, []
+
+    def refused(source, destination):
+        if str(source).endswith("/views") and ".staging." not in str(source):
+            raise PermissionError(errno.EPERM, "Operation not permitted", str(source))
+        original(source, destination)
+
+    original_rmtree = shutil.rmtree
+
+    def record(path, *args, **kwargs):
+        if ".staging." in str(path):
+            seen.append((Path(path) / atomic.COMMIT_JOURNAL).exists())
+        return original_rmtree(path, *args, **kwargs)
+
+    monkeypatch.setattr(os, "replace", refused)
+    monkeypatch.setattr(shutil, "rmtree", record)
+    with pytest.raises(InputError, match="cannot be replaced"):
+        _restore_like(out, ["1.png"], text="second")
+    assert seen and not any(seen) and (out / "scene.ply").read_text() == "first"
+
+
+def test_temporaries_beside_a_file_elsewhere_are_recognised_as_leftovers(tmp_path):
+    """The staged manifest and the moved-away old file beside a video carry this process's
+    owner mark, so a later run removes them if a kill left them."""
+    out, videos = tmp_path / "out", tmp_path / "videos"
+    names = []
+    original = os.replace
+
+    def spy(source, destination):
+        names.extend(Path(p).name for p in (source, destination) if Path(p).parent == videos)
+        original(source, destination)
+
+    _restore_like(out, ["1.png"], video=videos / "orbit.mp4", text="first")
+    os.replace = spy
+    try:
+        _restore_like(out, ["1.png"], video=videos / "orbit.mp4", text="second")
+    finally:
+        os.replace = original
+    temporaries = [name for name in names if name.startswith(".") and name != MANIFEST_NAME]
+    assert any("manifest" in name for name in temporaries) and any("replaced" in name for name in temporaries)
+    assert all(atomic._OWNER.search(name) for name in temporaries), temporaries

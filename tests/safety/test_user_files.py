@@ -96,8 +96,11 @@ def test_row4_degrade_never_writes_over_its_inputs(tmp_path, buu):
     expect_input_error(run_lumos3d("degrade", pngs / "1.png", "-o", pngs / "1.png"), f"{pngs / '1.png'}: is an input")
     expect_input_error(run_lumos3d("degrade", pngs, "-o", pngs), f"{pngs}: is the input folder {pngs}")
     expect_input_error(run_lumos3d("degrade", pngs, "-o", pngs / "dark"), "lies inside the input folder")
-    # photos given one by one: their folder is an input too (1.png beside 1.JPG made it unreadable)
+    # photos given one by one: not into their own folder (1.png beside 1.JPG made it unreadable)...
     expect_input_error(run_lumos3d("degrade", pngs / "1.png", pngs / "2.png", "-o", pngs), f"{pngs}: is the input folder")
+    # ...but a folder inside it is fine (cd photos; degrade *.JPG -o dark/)
+    assert run_lumos3d("degrade", pngs / "1.png", pngs / "2.png", "-o", pngs / "dark").code == 0
+    shutil.rmtree(pngs / "dark")
     link = tmp_path / "link.png"
     link.symlink_to(pngs / "2.png")
     expect_input_error(run_lumos3d("degrade", pngs / "2.png", "-o", link), f"{link}: is an input")

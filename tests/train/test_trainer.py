@@ -308,6 +308,11 @@ def test_a_fresh_run_that_fails_after_its_first_step_keeps_its_logs_and_selectio
         trainer.run()  # checkpoint_every 0: no checkpoint, but three steps and a validation done
     assert (run / "metrics.jsonl").is_file() and (run / "selected.safetensors").is_file()
     assert (run / "validation" / "step_00000002.png").is_file()
+    # its folder says what to do, not "resume it" on one side and "nothing to resume" on the other
+    with pytest.raises(InputError, match="it saved no checkpoint to resume from; start a new numbered run"):
+        _trainer(config).run()
+    with pytest.raises(InputError, match="which saved no checkpoint, so there is nothing to resume; start a new"):
+        _trainer(config).run(resume=True)
 
 
 def test_resumes_of_an_earlier_release_run_take_its_files_as_the_runs(tiny_config, caplog):
@@ -323,3 +328,16 @@ def test_resumes_of_an_earlier_release_run_take_its_files_as_the_runs(tiny_confi
     assert _trainer(config, ["optim.steps=4"]).run(resume=True).steps_done == 4
     assert "lists no files (a run of an earlier release)" in caplog.text
     assert _trainer(config).run(resume=True).steps_done == 6
+
+
+def test_a_run_folder_whose_list_cannot_be_read_refuses_rather_than_adopts(tiny_config):
+    """A damaged manifest is not an earlier release's folder: nothing in it counts as the run's, so
+    an edited final.safetensors is refused, not taken as the run's and overwritten."""
+    config = tiny_config(name="damaged", optim__steps=4)
+    run = Path(str(config).replace(".yaml", ""))
+    _trainer(config).run(stop_after=2)
+    (run / ".lumos3d-manifest.json").write_text("{not json")
+    (run / "final.safetensors").write_bytes(b"the user's")
+    with pytest.raises(InputError, match="was not written by this training run"):  # config.yaml comes first
+        _trainer(config).run(resume=True)
+    assert (run / "final.safetensors").read_bytes() == b"the user's"

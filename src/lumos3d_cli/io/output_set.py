@@ -363,7 +363,7 @@ class OutputSet:
             if _is_within(path.parent, self.folder.absolute()):
                 destination = trash / str(len(moves))
             else:  # another folder (maybe another file system): beside itself, as a temporary of ours
-                destination = path.parent / f"{temporary_prefix(path.name)}replaced.{len(moves)}.tmp"
+                destination = path.parent / f"{temporary_prefix(path.name)}replaced_{len(moves)}.tmp"
                 leftovers.append(destination)
             moves.append((path, destination, "destination-exists"))
 
@@ -373,37 +373,37 @@ class OutputSet:
             if not item.is_folder and not _is_within(item.staged, root):
                 os.chmod(item.staged, 0o666 & ~current_umask())  # mkstemp made it private
             moves.append((item.staged, item.final, "source-gone"))
-        written_sets = {(item.final.parent, item.output_set) for item in items}
-        for folder in dict.fromkeys(item.final.parent for item in items):
-            previous = Manifest.read(folder)
-            ours = [item for item in items if item.final.parent == folder]
-            rewritten = {item.final.name for item in ours}
-            manifest = Manifest(folder)
-            for name, entry in previous.files.items():
-                if name.split("/")[0] in rewritten:
-                    continue  # moved away above with the output it belongs to
-                if (folder, entry.output_set) in written_sets:
-                    # A file of the set this run replaces that it did not write again (a view of an
-                    # earlier run with more photos): stale; removed unless the user changed it.
-                    if previous.owns(folder / name):
-                        move_away(folder / name)
-                    continue
-                if (folder / name).exists():
-                    manifest.files[name] = entry
-            for item in ours:
-                files = sorted(p for p in item.staged.rglob("*") if p.is_file()) if item.is_folder else [item.staged]
-                for file in files:
-                    name = item.final.name + ("/" + file.relative_to(item.staged).as_posix() if item.is_folder else "")
-                    manifest.files[name] = describe_file(file, self.command, item.output_set)
-            if _is_within(folder, self.folder.absolute()):
-                staged_manifest = root / f".manifest.{len(moves)}"
-            else:  # another folder (a video's, maybe on another file system): staged beside its manifest
-                staged_manifest = folder / f"{temporary_prefix(MANIFEST_NAME)}manifest.{len(moves)}.tmp"
-                manifests_elsewhere.append(staged_manifest)
-            staged_manifest.write_text(manifest.document())
-            moves.append((staged_manifest, folder / MANIFEST_NAME, "source-gone"))
         committed = False
         try:
+            written_sets = {(item.final.parent, item.output_set) for item in items}
+            for folder in dict.fromkeys(item.final.parent for item in items):
+                previous = Manifest.read(folder)
+                ours = [item for item in items if item.final.parent == folder]
+                rewritten = {item.final.name for item in ours}
+                manifest = Manifest(folder)
+                for name, entry in previous.files.items():
+                    if name.split("/")[0] in rewritten:
+                        continue  # moved away above with the output it belongs to
+                    if (folder, entry.output_set) in written_sets:
+                        # A file of the set this run replaces that it did not write again (a view of an
+                        # earlier run with more photos): stale; removed unless the user changed it.
+                        if previous.owns(folder / name):
+                            move_away(folder / name)
+                        continue
+                    if (folder / name).exists():
+                        manifest.files[name] = entry
+                for item in ours:
+                    files = sorted(p for p in item.staged.rglob("*") if p.is_file()) if item.is_folder else [item.staged]
+                    for file in files:
+                        name = item.final.name + ("/" + file.relative_to(item.staged).as_posix() if item.is_folder else "")
+                        manifest.files[name] = describe_file(file, self.command, item.output_set)
+                if _is_within(folder, self.folder.absolute()):
+                    staged_manifest = root / f".manifest.{len(moves)}"
+                else:  # another folder (a video's, maybe on another file system): staged beside its manifest
+                    staged_manifest = folder / f"{temporary_prefix(MANIFEST_NAME)}manifest_{len(moves)}.tmp"
+                    manifests_elsewhere.append(staged_manifest)
+                staged_manifest.write_text(manifest.document())
+                moves.append((staged_manifest, folder / MANIFEST_NAME, "source-gone"))
             write_commit_journal(root, self.folder.absolute(), moves)
             done: list[tuple[Path, Path]] = []
             with _stop_signals_held():
@@ -424,13 +424,17 @@ class OutputSet:
                 shutil.rmtree(root, ignore_errors=True)
                 for path in leftovers:
                     remove_path(path)
-        except Interrupted as stop:
-            if committed:  # a signal held over the moves lands after them; one before them changed nothing
+        except (Interrupted, InputError) as stop:
+            if isinstance(stop, Interrupted) and committed:  # a signal held over the moves lands after them
                 stop.detail = stop.detail or f"after the outputs were written; {self.folder} holds the complete new outputs"
+            elif not committed:
+                # the old outputs are in place (never moved, or moved back): the journal goes before
+                # the staging folder (which `staged` removes), as after a commit, and what was staged
+                # elsewhere with it (a run killed outright leaves both to the next run's clean-up)
+                (root / COMMIT_JOURNAL).unlink(missing_ok=True)
+                for path in manifests_elsewhere:
+                    path.unlink(missing_ok=True)
             raise
-        finally:
-            for path in manifests_elsewhere:  # moved into place, unless the commit stopped before
-                path.unlink(missing_ok=True)
 
 
 def _undo(done: list[tuple[Path, Path]]) -> None:

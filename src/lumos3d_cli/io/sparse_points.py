@@ -54,7 +54,9 @@ class SparsePoints:
             return self, float("nan")
         extrinsics, intrinsics = cameras.extrinsics.double()[self.view], cameras.intrinsics.double()[self.view]
         camera = (extrinsics[:, :, :3] @ self.xyz[self.point][:, :, None])[..., 0] + extrinsics[:, :, 3]
-        projected = (intrinsics[:, :2, :2] @ (camera[:, :2] / camera[:, 2:])[:, :, None])[..., 0] + intrinsics[:, :2, 2]
+        # a point at or behind a camera does not reproject: a huge, finite error (summary.json is JSON)
+        depth = camera[:, 2:].clamp_min(1e-9)
+        projected = (intrinsics[:, :2, :2] @ (camera[:, :2] / depth)[:, :, None])[..., 0] + intrinsics[:, :2, 2]
         distance = (projected - self.pixel).norm(dim=1)
         sums = torch.zeros(len(self), dtype=torch.float64).index_add_(0, self.point, distance)
         counts = torch.bincount(self.point, minlength=len(self)).clamp_min(1).double()

@@ -33,10 +33,13 @@ def degrade_outputs(inputs: list[Path], output: Path, bit_depth: int, given: Seq
         check_output_path(output, "output")
         return OutputSet(output.parent, "degrade", f"degrade {output.name}", [*inputs, *given]).add_file(output.name)
     check_output_path(output, "output", folder=True)
-    # photos given one by one keep their folder as an input: degraded PNGs beside them (1.JPG and
-    # 1.png) would make it a folder no command reads again ("two photos named '1'")
-    folders = sorted({path.parent for path in inputs})
-    outputs = OutputSet(output, "degrade", "degrade", [*inputs, *given, *folders])
+    # photos given one by one: degraded PNGs beside them in their own folder (1.JPG and 1.png)
+    # would make it a folder no command reads again ("two photos named '1'"); a folder inside it is fine
+    for folder in sorted({path.parent.resolve() for path in inputs}):
+        if output.resolve() == folder:
+            raise InputError(f"{output}: is the input folder {folder}; write the outputs to another folder",
+                             parameter="output")
+    outputs = OutputSet(output, "degrade", "degrade", [*inputs, *given])
     for name in [*(f"{path.stem}.png" for path in inputs), "degradation.json"]:
         outputs.add_file(name)
     return outputs

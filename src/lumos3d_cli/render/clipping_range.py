@@ -24,13 +24,17 @@ def require_drawable(means: torch.Tensor, cameras: Cameras, where: str | None = 
     draws something."""
     sampled = means.detach()[:: max(1, math.ceil(len(means) / _SAMPLED_MEANS))].to("cpu", torch.float64)
     extrinsics = cameras.extrinsics.detach().to("cpu", torch.float64)
-    ahead = []
+    ahead = []  # some positive depths to say where the scene lies: at most _SAMPLED_MEANS kept
+    kept = 0
     for first in range(0, len(extrinsics), _CAMERAS_AT_ONCE):
         chunk = extrinsics[first: first + _CAMERAS_AT_ONCE]
         depth = chunk[:, 2, :3] @ sampled.T + chunk[:, 2, 3:]  # [C, P] camera-space z
         if bool(((depth >= NEAR_PLANE) & (depth <= FAR_PLANE)).any()):
             return
-        ahead.append(depth[depth > 0])
+        if kept < _SAMPLED_MEANS:
+            positive = depth[depth > 0][: _SAMPLED_MEANS - kept]
+            ahead.append(positive)
+            kept += len(positive)
     ahead = torch.cat(ahead)
     where_it_lies = f"{float(ahead.median()):.3g} units in front of the cameras" if len(ahead) else "behind every camera"
     prefix = f"{where}: " if where else ""

@@ -30,8 +30,11 @@ class RunFiles:
         self.output = Path(output)
         self.manifest = Manifest.read(self.output)
         # a folder whose manifest lists no file of a training run (none, or another command's):
-        # a run of a release before the list, or a fresh one
-        self.unlisted = not any(entry.command == _COMMAND for entry in self.manifest.files.values())
+        # a run of a release before the list, or a fresh one. An unreadable manifest is not that:
+        # nothing in it counts as the run's, which refuses rather than replaces.
+        path = self.output / MANIFEST_NAME
+        readable = not (path.exists() or path.is_symlink()) or Manifest.is_manifest(path)
+        self.unlisted = readable and not any(entry.command == _COMMAND for entry in self.manifest.files.values())
 
     def adopt_if_unlisted(self, written: list[Path]) -> None:
         """For a run folder of an earlier release: list the files its run wrote (`written`, those

@@ -85,9 +85,15 @@ def check_run_folder(output: Path, inputs: list[Path | None], resume: bool) -> N
     earlier = earlier_run(output)
     if resume and earlier is None:
         raise InputError(f"output {output}: holds no training run to resume; start without --resume")
+    # a run that stopped before its first checkpoint (its logs kept) has nothing to resume from
+    checkpointed = any((output / "checkpoints").glob("step_*"))
+    if resume and not checkpointed:
+        raise InputError(f"output {output}: holds {earlier}, which saved no checkpoint, so there is nothing to resume; "
+                         "start a new numbered run folder beside it with --new-run, or choose another output")
     if not resume and earlier is not None:
-        raise InputError(f"output {output}: holds {earlier}; continue it with --resume, start a new numbered run "
-                         "folder beside it with --new-run, or choose another output")
+        continuing = "continue it with --resume, " if checkpointed else "it saved no checkpoint to resume from; "
+        raise InputError(f"output {output}: holds {earlier}; {continuing}start a new numbered run folder beside it with "
+                         "--new-run, or choose another output")
 
 
 def start_run(output: Path, config_file: Path | str | None) -> RunIdentity:
@@ -99,9 +105,10 @@ def start_run(output: Path, config_file: Path | str | None) -> RunIdentity:
 
 
 def remove_unfinished_run(output: Path, created: bool) -> None:
-    """Remove what a fresh run that saved no checkpoint wrote into `output` (RUN_OUTPUTS; the
-    folder checks refused a fresh run into a folder holding any, so they are its own), and the
-    folder itself when the run created it and nothing else is left there."""
+    """Remove what a fresh run that stopped before any of its work counted (no step, no
+    validation) wrote into `output` (RUN_OUTPUTS; the folder checks refused a fresh run into a
+    folder holding any, so they are its own), and the folder itself when the run created it and
+    nothing else is left there."""
     output = Path(output)
     for name in RUN_OUTPUTS:
         remove_path(output / name)

@@ -479,7 +479,7 @@ class Trainer:
                 try:
                     self._files.adopt_if_unlisted(self._written_by_a_run())
                     self._files.require_replaceable(self._replaced_on_resume(start, end))
-                except InputError as error:
+                except Exception as error:  # an unreadable file too: every rank must hear of it
                     refusal = error
             if any_rank(refusal is not None, self.context):  # every rank stops, not only the one that checked
                 raise refusal or InputError(f"{self.output}: rank 0 refused the resume (its message says why)")
