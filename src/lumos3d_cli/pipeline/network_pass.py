@@ -85,7 +85,8 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mod
                               "checkpoint")
     exposure_stops = None
     if prediction.appearance is not None:
-        black, saturated = frames_without_content(images)  # at the photos' size: their resized copies have more levels
+        # on the working photos (their own size unless they differ): the network's resized copies have more levels
+        black, saturated = frames_without_content(images)
         stops = exposure_prior_stops(prediction.appearance, prepared.images[None].to(device),
                                      prior_strength(mode, preset.exposure_prior),
                                      key_model=bundled_key_model() if preset.exposure_key == "content" else None,
