@@ -85,8 +85,9 @@ def check_run_folder(output: Path, inputs: list[Path | None], resume: bool) -> N
     earlier = earlier_run(output)
     if resume and earlier is None:
         raise InputError(f"output {output}: holds no training run to resume; start without --resume")
-    # a run that stopped before its first checkpoint (its logs kept) has nothing to resume from
-    checkpointed = any((output / "checkpoints").glob("step_*"))
+    # a run that stopped before its first checkpoint (its logs kept) has nothing to resume from; a
+    # checkpoints folder of any state is the resume's to judge (checkpointing.resume_candidates)
+    checkpointed = (output / "checkpoints").exists()
     if resume and not checkpointed:
         raise InputError(f"output {output}: holds {earlier}, which saved no checkpoint, so there is nothing to resume; "
                          "start a new numbered run folder beside it with --new-run, or choose another output")
