@@ -396,13 +396,10 @@ def test_a_scene_of_another_name_never_takes_over_an_earlier_scenes_side_files(t
     assert _tree(out) == [MANIFEST_NAME, "other.ply", "summary.json", "views"]
 
 
-def test_the_journal_is_gone_before_the_staging_folder_is_removed(tmp_path, monkeypatch):
-    """A kill while the staging folder is removed must leave no journal: the next run would
-    "finish" the moves whose .replaced entries were already removed, and take the new outputs away."""
-    out = tmp_path / "out"
-    _restore_like(out, ["1.png"], text="first")
-    seen = []
-    original = shutil.rmtree
+def _journal_seen_at_staging_removal(monkeypatch) -> list[bool]:
+    """Whether each staging folder still held its commit journal when its removal began (filled
+    as shutil.rmtree is called)."""
+    seen, original = [], shutil.rmtree
 
     def record(path, *args, **kwargs):
         if ".staging." in str(path):
@@ -410,6 +407,15 @@ def test_the_journal_is_gone_before_the_staging_folder_is_removed(tmp_path, monk
         return original(path, *args, **kwargs)
 
     monkeypatch.setattr(shutil, "rmtree", record)
+    return seen
+
+
+def test_the_journal_is_gone_before_the_staging_folder_is_removed(tmp_path, monkeypatch):
+    """A kill while the staging folder is removed must leave no journal: the next run would
+    "finish" the moves whose .replaced entries were already removed, and take the new outputs away."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], text="first")
+    seen = _journal_seen_at_staging_removal(monkeypatch)
     _restore_like(out, ["1.png"], text="second")
     assert seen and not any(seen) and (out / "views" / "1.png").read_text() == "second"
 
@@ -457,22 +463,15 @@ def test_a_failed_commit_removes_its_journal_before_its_staging_folder(tmp_path,
     a journal whose "finish" would move the restored old outputs away."""
     out = tmp_path / "out"
     _restore_like(out, ["1.png"], text="first")
-    original, seen = os.replace, []
+    original = os.replace
 
     def refused(source, destination):
         if str(source).endswith("/views") and ".staging." not in str(source):
             raise PermissionError(errno.EPERM, "Operation not permitted", str(source))
         original(source, destination)
 
-    original_rmtree = shutil.rmtree
-
-    def record(path, *args, **kwargs):
-        if ".staging." in str(path):
-            seen.append((Path(path) / atomic.COMMIT_JOURNAL).exists())
-        return original_rmtree(path, *args, **kwargs)
-
     monkeypatch.setattr(os, "replace", refused)
-    monkeypatch.setattr(shutil, "rmtree", record)
+    seen = _journal_seen_at_staging_removal(monkeypatch)
     with pytest.raises(InputError, match="cannot be replaced"):
         _restore_like(out, ["1.png"], text="second")
     assert seen and not any(seen) and (out / "scene.ply").read_text() == "first"
