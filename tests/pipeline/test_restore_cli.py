@@ -156,6 +156,9 @@ def test_restore_writes_an_orbit_video(run_cli, buu, tmp_path, random_checkpoint
     assert result.code == 0, result.err
     stream = probe_video(tmp_path / "orbit.mp4")
     assert stream.codec == "h264" and stream.pixel_format == "yuv420p" and stream.width > 0
+    video = json.loads((out.parent / "summary.json").read_text())["video"]  # what the file holds, as render --json says
+    assert (video["codec"], video["width"], video["height"], video["frames"]) == ("h264", stream.width, stream.height, 120)
+    assert video["path"] == str(tmp_path / "orbit.mp4") and video["filled"] is True
 
 
 def test_gaussian_grid_densifies_the_pixel_gaussians(run_cli, buu, tmp_path, random_checkpoint):

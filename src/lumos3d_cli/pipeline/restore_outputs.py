@@ -22,6 +22,7 @@ from lumos3d_cli.io.image_write import write_exr, write_image
 from lumos3d_cli.io.ply import write_ply
 from lumos3d_cli.io.preview_glb import write_preview_glb
 from lumos3d_cli.io.transforms_json import write_transforms_json
+from lumos3d_cli.io.video import probe_video
 from lumos3d_cli.pipeline.restore import RestoredScene
 from lumos3d_cli.pipeline.restore_paths import VIEW_FORMATS, check_view_format, restore_outputs
 from lumos3d_cli.pipeline.orbit_video import write_orbit_video
@@ -80,14 +81,18 @@ def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_fo
         write_preview_glb(root / "preview.glb", scene.gaussians, scene.cameras)
         for image in images:
             image.result()  # raises what the writing raised
+        written_video = None
         if video is not None:
             # as bright as the restored views: completed as they were (filled renders of the scene)
             filled = scene.uncovered is not None and scene.uncovered["filled"]
-            write_orbit_video(scene.gaussians, scene.cameras, staging.files[Path(video)], on_frame=on_video_frame,
-                              fill=filled)
+            orbit = write_orbit_video(scene.gaussians, scene.cameras, staging.files[Path(video)],
+                                      on_frame=on_video_frame, fill=filled)
+            stream = probe_video(staging.files[Path(video)])  # as ffmpeg reads it back (H.264 pads odd sides)
+            written_video = {"path": str(video), "codec": stream.codec, "pixel_format": stream.pixel_format,
+                             "width": stream.width, "height": stream.height, "frames": len(orbit), "filled": filled}
         scene.timings["write"] = time.perf_counter() - started
         if "total" in scene.timings:
             scene.timings["total"] += scene.timings["write"]
-        summary = scene.summary(scene_path, (root / scene_path.name).stat().st_size)
+        summary = scene.summary(scene_path, (root / scene_path.name).stat().st_size) | {"video": written_video}
         (root / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
