@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from lumos3d_cli.errors import NonFiniteError
-from lumos3d_cli.render.hole_filling import FILL_SIDE, OBSERVED_ALPHA, fill_unobserved, splat_colours
+from lumos3d_cli.render.hole_filling import FILL_SIDE, OBSERVED_ALPHA, fill_unobserved, render_shown, splat_colours
 from lumos3d_cli.render.render import render
 
 from factories import camera_at_origin, random_scene
@@ -113,3 +113,15 @@ def test_splat_colours_are_what_the_fill_shows_where_covered():
     torch.testing.assert_close(splats[:, covered], colour[:, covered], atol=1e-6, rtol=0)
     alpha_leaf = alpha.clone().double().requires_grad_(True)
     torch.autograd.gradcheck(lambda a: splat_colours(rendered.double(), a), (alpha_leaf,))
+
+
+def test_render_shown_is_the_fill_of_the_render_or_the_render_over_its_background():
+    gaussians, camera = random_scene(80, 3, degree=0, dtype=torch.float32), camera_at_origin(40, 30)
+    output = render(gaussians, camera)
+    filled = render_shown(gaussians, camera, fill=True)
+    expected = fill_unobserved(output.images[0], output.alphas[0])
+    torch.testing.assert_close(filled.image, expected.image)
+    assert filled.unobserved == expected.unobserved
+    plain = render_shown(gaussians, camera, fill=False, background=(0.2, 0.4, 0.6))
+    torch.testing.assert_close(plain.image, render(gaussians, camera, background=(0.2, 0.4, 0.6)).images[0])
+    assert plain.unobserved == float((output.alphas[0] < OBSERVED_ALPHA).float().mean())

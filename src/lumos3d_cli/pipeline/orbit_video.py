@@ -5,14 +5,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-import torch
-
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.io.video import VideoWriter, video_kind
 from lumos3d_cli.render.camera_paths import orbit_from_cameras
-from lumos3d_cli.render.hole_filling import fill_unobserved
-from lumos3d_cli.render.render import render
+from lumos3d_cli.render.hole_filling import render_shown
 
 # The CPU renderer's cost grows with the pixels: 512 wide keeps a 120-frame orbit to minutes
 # while staying sharp on a laptop screen.
@@ -50,9 +47,7 @@ def write_orbit_video(
     frame_width, frame_height = orbit.sizes[0]
     with VideoWriter(path, frame_width, frame_height, fps, kind) as writer:
         for index in range(frames):
-            with torch.no_grad():
-                rendered = render(gaussians, orbit[index], background=None if fill else background)
-            image = fill_unobserved(rendered.images[0], rendered.alphas[0]).image if fill else rendered.images[0]  # [3, H, W]
+            image = render_shown(gaussians, orbit[index], fill, background).image  # [3, H, W]
             writer.write(image.permute(1, 2, 0).cpu().numpy())
             if on_frame is not None:
                 on_frame()

@@ -10,8 +10,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import torch
-
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.camera_files import find_camera_source, read_cameras
 from lumos3d_cli.io.cameras import Cameras
@@ -22,8 +20,7 @@ from lumos3d_cli.io.video import VideoWriter, probe_video, video_kind
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
 from lumos3d_cli.render.camera_paths import orbit_from_cameras, orbit_from_gaussians
 from lumos3d_cli.render.clipping_range import require_drawable
-from lumos3d_cli.render.hole_filling import fill_unobserved
-from lumos3d_cli.render.render import render
+from lumos3d_cli.render.hole_filling import render_shown
 
 logger = logging.getLogger(__name__)
 
@@ -122,10 +119,7 @@ def render_frames(
               if video is not None else contextlib.nullcontext()) as writer:
             for index in range(len(cameras)):
                 started = time.perf_counter()
-                with torch.no_grad():
-                    rendered = render(gaussians, cameras[index], background=None if fill else background,
-                                      antialiased=antialiased)
-                image = fill_unobserved(rendered.images[0], rendered.alphas[0]).image if fill else rendered.images[0]
+                image = render_shown(gaussians, cameras[index], fill, background, antialiased=antialiased).image
                 render_seconds += time.perf_counter() - started
                 pixels = image.permute(1, 2, 0).numpy()
                 write_image(staging.root / f"{index:05d}.png", pixels)

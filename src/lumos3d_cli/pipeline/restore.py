@@ -35,8 +35,7 @@ from lumos3d_cli.pipeline.quality import QualityMeter, load_references, mean_met
 from lumos3d_cli.pipeline.restore_paths import check_lpips_weights, list_photos
 from lumos3d_cli.pipeline.scene_geometry import SceneGeometry, check_geometry_source
 from lumos3d_cli.pipeline.scene_stages import build_scene
-from lumos3d_cli.render.hole_filling import OBSERVED_ALPHA, fill_unobserved
-from lumos3d_cli.render.render import render
+from lumos3d_cli.render.hole_filling import render_shown
 from lumos3d_cli.render.view_threads import map_views
 
 logger = logging.getLogger(__name__)
@@ -121,13 +120,8 @@ def render_views(gaussians: Gaussians, cameras: Cameras, sh_degree: int | None,
     degree = gaussians.sh_degree if sh_degree is None else min(sh_degree, gaussians.sh_degree)
 
     def view(index: int) -> tuple[torch.Tensor, float]:
-        with torch.no_grad():
-            output = render(gaussians, cameras[index], sh_degree=degree)
-        image, alpha = output.images[0].cpu(), output.alphas[0].cpu()
-        if fill:
-            filled = fill_unobserved(image, alpha)
-            return filled.image, filled.unobserved
-        return image, float((alpha < OBSERVED_ALPHA).float().mean())
+        shown = render_shown(gaussians, cameras[index], fill, sh_degree=degree)
+        return shown.image.cpu(), shown.unobserved
 
     images, unobserved = [], []
     for image, fraction in map_views(view, len(cameras), gaussians.means.device):

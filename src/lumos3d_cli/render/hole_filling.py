@@ -28,6 +28,9 @@ import numpy as np
 import torch
 
 from lumos3d_cli.checks import require_finite
+from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.gaussians import Gaussians
+from lumos3d_cli.render.render import render
 
 OBSERVED_ALPHA = 0.5  # rendered alpha at which a pixel's colour is trusted as the splats' own
 FILL_SIDE = 512  # the longest side the inpainting runs at
@@ -92,3 +95,17 @@ def fill_unobserved(image: torch.Tensor, alpha: torch.Tensor) -> FilledView:
     result = np.clip(rendered + (1 - coverage)[..., None] * colour, 0, 1)
     filled = torch.from_numpy(np.ascontiguousarray(result.transpose(2, 0, 1)))
     return FilledView(filled.to(device=image.device, dtype=image.dtype), fraction)
+
+
+def render_shown(gaussians: Gaussians, camera: Cameras, fill: bool, background: tuple[float, float, float] | None = None,
+                 sh_degree: int | None = None, antialiased: bool = False) -> FilledView:
+    """One camera's view [3, H, W] as it is shown: with `fill` the render completed by
+    `fill_unobserved` (restore's views; `background` does not apply), else the render over
+    `background`; with the fraction of its pixels below OBSERVED_ALPHA either way. No gradients."""
+    with torch.no_grad():
+        output = render(gaussians, camera, background=None if fill else background, sh_degree=sh_degree,
+                        antialiased=antialiased)
+    image, alpha = output.images[0], output.alphas[0]
+    if fill:
+        return fill_unobserved(image, alpha)
+    return FilledView(image, float((alpha < OBSERVED_ALPHA).float().mean()))
