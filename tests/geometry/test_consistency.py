@@ -2,7 +2,7 @@ import pytest
 import torch
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.geometry.consistency import depth_consistency, nearest_neighbours
+from lumos3d_cli.geometry.consistency import depth_consistency
 
 from synthetic_scene import plane_cameras, plane_depth
 
@@ -31,7 +31,7 @@ def test_two_views_and_a_looser_tolerance():
     depth = plane_depth(cameras) * torch.tensor([1.0, 1.03], dtype=torch.float64)[:, None, None]
     assert depth_consistency(depth, cameras).share < 0.05
     assert depth_consistency(depth, cameras, tolerance=0.05).share > 0.99
-    assert nearest_neighbours(cameras).tolist() == [1, 0]
+    assert depth_consistency(depth, cameras).neighbour.tolist() == [1, 0]
 
 
 def test_bad_input_is_refused():

@@ -18,6 +18,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+from lumos3d_cli.geometry.reprojection import inside_view, land_in_view, sample_map
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.geometry import unproject_depth
 
@@ -26,30 +27,23 @@ DEFAULT_NEIGHBOURS = 4
 
 
 def neighbours_by_distance(cameras: Cameras, count: int) -> torch.Tensor:
-    """[V, min(count, V-1)] int64: each camera's nearest other cameras by centre distance."""
+    """[V, min(count, V-1)] int64: each camera's nearest other cameras by centre distance (of equally
+    near ones the lower index first)."""
     centres = cameras.centers().double()
     distances = torch.cdist(centres, centres)
     distances.fill_diagonal_(float("inf"))
-    return distances.argsort(dim=1)[:, : min(count, len(cameras) - 1)]
+    return distances.argsort(dim=1, stable=True)[:, : min(count, len(cameras) - 1)]
 
 
 def compare_with_neighbour(world: torch.Tensor, depth: torch.Tensor, cameras: Cameras, other: int, tolerance: float):
     """(confirmed [h, w], contradicted [h, w]) of one view's pixels, unprojected to world [h, w, 3],
     against `other`'s depth."""
-    height, width = depth.shape[-2:]
-    extrinsics, intrinsics = cameras.extrinsics.to(depth.dtype), cameras.intrinsics.to(depth.dtype)
-    camera = world.reshape(-1, 3) @ extrinsics[other, :, :3].T + extrinsics[other, :, 3]
-    z = camera[:, 2]
-    safe = z.clamp_min(1e-12)
-    u = intrinsics[other, 0, 0] * camera[:, 0] / safe + intrinsics[other, 0, 2]
-    v = intrinsics[other, 1, 1] * camera[:, 1] / safe + intrinsics[other, 1, 2]
-    inside = (z > 0) & (u >= 0) & (u <= width) & (v >= 0) & (v <= height)
-    grid = torch.stack([2 * u / width - 1, 2 * v / height - 1], dim=-1)
-    seen = F.grid_sample(depth[other][None, None], grid[None, None], mode="nearest", align_corners=False,
-                         padding_mode="border")[0, 0, 0]
+    u, v, z = land_in_view(world.reshape(-1, 3), cameras, other)
+    inside = inside_view(u, v, z, depth.shape[-2:])
+    seen = sample_map(depth[other], u, v, mode="nearest")
     confirmed = inside & ((z - seen).abs() <= tolerance * seen)
     contradicted = inside & (z < (1 - tolerance) * seen)
-    return confirmed.reshape(height, width), contradicted.reshape(height, width)
+    return confirmed.reshape(world.shape[:2]), contradicted.reshape(world.shape[:2])
 
 
 def confirmed_pixels(

@@ -12,9 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import torch
-import torch.nn.functional as F
-
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.geometry.confirmed_depth import neighbours_by_distance
+from lumos3d_cli.geometry.reprojection import inside_view, land_in_view, sample_map
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.geometry import unproject_depth
 
@@ -33,28 +33,13 @@ class DepthConsistency:
     checked: torch.Tensor
 
 
-def nearest_neighbours(cameras: Cameras) -> torch.Tensor:
-    """[V] int64: for each camera the other camera with the nearest centre."""
-    centres = cameras.centers().double()
-    distances = torch.cdist(centres, centres)
-    distances.fill_diagonal_(float("inf"))
-    return distances.argmin(dim=1)
-
-
 def _agreement(depth: torch.Tensor, cameras: Cameras, view: int, other: int, tolerance: float) -> tuple[int, int]:
     """(agreeing, checked) pixel counts of `view`'s depth against `other`'s."""
-    height, width = depth.shape[-2:]
     extrinsics, intrinsics = cameras.extrinsics.to(depth.dtype), cameras.intrinsics.to(depth.dtype)
     world = unproject_depth(depth[view], extrinsics[view], intrinsics[view]).reshape(-1, 3)
-    camera = world @ extrinsics[other, :, :3].T + extrinsics[other, :, 3]
-    in_front = camera[:, 2] > 0
-    z = camera[:, 2].clamp_min(1e-12)
-    u = intrinsics[other, 0, 0] * camera[:, 0] / z + intrinsics[other, 0, 2]
-    v = intrinsics[other, 1, 1] * camera[:, 1] / z + intrinsics[other, 1, 2]
-    inside = in_front & (u >= 0) & (u <= width) & (v >= 0) & (v <= height)
-    grid = torch.stack([2 * u / width - 1, 2 * v / height - 1], dim=-1)
-    sampled = F.grid_sample(depth[other][None, None], grid[None, None], mode="bilinear", align_corners=False,
-                            padding_mode="border")[0, 0, 0]
+    u, v, z = land_in_view(world, cameras, other)
+    inside = inside_view(u, v, z, depth.shape[-2:])
+    sampled = sample_map(depth[other], u, v)
     agree = inside & ((z - sampled).abs() < tolerance * sampled.abs())
     return int(agree.sum()), int(inside.sum())
 
@@ -63,7 +48,7 @@ def depth_consistency(
     depth: torch.Tensor, cameras: Cameras, tolerance: float = DEFAULT_TOLERANCE, neighbours: torch.Tensor | None = None
 ) -> DepthConsistency:
     """depth [V, h, w] (positive) with cameras whose intrinsics are in pixels of the depth maps;
-    neighbours [V] (default: `nearest_neighbours`). InputError for fewer than 2 views,
+    neighbours [V] (default: each camera's nearest by centre distance). InputError for fewer than 2 views,
     mismatched shapes or non-finite / non-positive depth."""
     if depth.dim() != 3 or depth.shape[0] != len(cameras):
         raise InputError(f"depth must be [V, h, w] for {len(cameras)} cameras, got {tuple(depth.shape)}")
@@ -71,7 +56,7 @@ def depth_consistency(
         raise InputError(f"multi-view consistency needs at least 2 views, got {len(cameras)}")
     if not (torch.isfinite(depth).all() and (depth > 0).all()):
         raise InputError("multi-view consistency needs finite, positive depth everywhere")
-    neighbours = nearest_neighbours(cameras) if neighbours is None else neighbours.long()
+    neighbours = neighbours_by_distance(cameras, 1)[:, 0] if neighbours is None else neighbours.long()
     per_view = torch.full((len(cameras),), float("nan"), dtype=torch.float64)
     checked = torch.zeros(len(cameras), dtype=torch.float64)
     total_agree = total_checked = 0

@@ -29,10 +29,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import torch
-import torch.nn.functional as F
 
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.geometry.reprojection import inside_view, sample_map
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.sparse_points import SparsePoints
 
@@ -72,11 +72,8 @@ class DepthAlignment:
 def sample_depth(depth: torch.Tensor, pixels: torch.Tensor) -> torch.Tensor:
     """Bilinear samples of depth [h, w] at pixels [N, 2] (u, v; origin at the top-left pixel
     corner) -> [N]; outside the image: nan."""
-    height, width = depth.shape
-    grid = torch.stack([2 * pixels[:, 0] / width - 1, 2 * pixels[:, 1] / height - 1], dim=-1).to(depth.dtype)
-    values = F.grid_sample(depth[None, None], grid[None, None], mode="bilinear", align_corners=False,
-                           padding_mode="border")[0, 0, 0]
-    inside = (pixels[:, 0] >= 0) & (pixels[:, 0] <= width) & (pixels[:, 1] >= 0) & (pixels[:, 1] <= height)
+    values = sample_map(depth, pixels[:, 0], pixels[:, 1])
+    inside = inside_view(pixels[:, 0], pixels[:, 1], None, depth.shape)
     return torch.where(inside, values, torch.full_like(values, float("nan")))
 
 

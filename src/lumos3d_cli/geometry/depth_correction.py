@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
+from lumos3d_cli.geometry.reprojection import inside_view, sample_map
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.sparse_points import SparsePoints
 
@@ -47,17 +48,14 @@ class DepthCorrection:
 
 def _observations(depth: torch.Tensor, cameras: Cameras, points: SparsePoints, view: int) -> tuple[torch.Tensor, torch.Tensor]:
     """(pixels [N, 2] in the depth map, log(z_sfm / z) [N]) at the points `view` observes."""
-    height, width = depth.shape[-2:]
     seen = points.point[points.view == view]
     if len(seen) == 0:
         return torch.zeros(0, 2, dtype=torch.float64), torch.zeros(0, dtype=torch.float64)
     pixels, sfm_depth = cameras[view].project(points.xyz[seen].to(cameras.extrinsics.dtype))
     pixels, sfm_depth = pixels[0].double(), sfm_depth[0].double()
-    inside = (sfm_depth > 0) & (pixels[:, 0] >= 0) & (pixels[:, 0] < width) & (pixels[:, 1] >= 0) & (pixels[:, 1] < height)
+    inside = inside_view(pixels[:, 0], pixels[:, 1], sfm_depth, depth.shape[-2:])
     pixels, sfm_depth = pixels[inside], sfm_depth[inside]
-    grid = torch.stack([2 * pixels[:, 0] / width - 1, 2 * pixels[:, 1] / height - 1], dim=-1)
-    sampled = F.grid_sample(depth[view].double()[None, None], grid[None, None], mode="bilinear",
-                            align_corners=False, padding_mode="border")[0, 0, 0]
+    sampled = sample_map(depth[view].double(), pixels[:, 0], pixels[:, 1])
     valid = sampled > 0
     return pixels[valid], torch.log(sfm_depth[valid] / sampled[valid])
 
