@@ -18,7 +18,8 @@ from importlib import import_module
 # the command line and `import lumos3d_cli` before torch both do.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-# public name -> module that defines it (the package's one export table)
+# public name -> the module that defines it, and ":name" where it is defined under another name
+# (the package's one export table)
 _LAZY = {
     # the jobs
     "restore": "lumos3d_cli.pipeline.restore",
@@ -34,7 +35,8 @@ _LAZY = {
     "read_cameras": "lumos3d_cli.io.camera_files",
     "Cameras": "lumos3d_cli.io.cameras",
     "Gaussians": "lumos3d_cli.io.gaussians",
-    "render": "lumos3d_cli.render.render",
+    # not `render`: that is the subpackage's name, which importing it binds over a function's
+    "render_gaussians": "lumos3d_cli.render.render:render",
     # the network
     "build_model": "lumos3d_cli.model.lumos3d",
     "Lumos3D": "lumos3d_cli.model.lumos3d",
@@ -69,7 +71,8 @@ def __getattr__(name: str):
         globals()[name] = _installed_version()
         return globals()[name]
     if name in _LAZY:
-        value = getattr(import_module(_LAZY[name]), name)
+        module, _, defined_as = _LAZY[name].partition(":")
+        value = getattr(import_module(module), defined_as or name)
         globals()[name] = value
         return value
     raise AttributeError(f"module 'lumos3d_cli' has no attribute '{name}'")

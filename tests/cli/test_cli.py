@@ -232,7 +232,9 @@ def test_info_on_cameras_images_and_scene_folders(run_cli, shared_data, buu):
     kinds = [s["kind"] for s in scene["summaries"]]
     assert kinds == ["images", "cameras"] and scene["summaries"][1]["count"] == 17
     lom = json.loads(run_cli("info", buu, "--json").out)  # a LOM scene: the photos of each lighting
-    assert [(Path(s["path"]).name, s["count"]) for s in lom["summaries"]] == [("high", 25), ("low", 25), ("over_exp", 25)]
+    assert [(Path(s["path"]).name, s["count"]) for s in lom["summaries"]] == [("high", 25), ("low", 25), ("over_exp", 25),
+                                                                              ("buu", 26)]
+    assert lom["summaries"][-1]["kind"] == "cameras"  # its transforms splits, read together (frame 1 in two of them)
 
 
 def test_info_on_a_restore_output_folder_shows_its_scene(run_cli, tmp_path):

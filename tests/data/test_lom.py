@@ -82,3 +82,11 @@ def test_shrub_reads_in_both_modes(shared_data):
         scene = read_lom_scene(shrub, mode)
         assert len(scene.frames) == 35 and scene.test == ["1", "17", "24", "31", "7"]
         assert set(lom_reference_extrinsics(scene)) == set(scene.frames)
+
+
+def test_one_name_is_a_scene_and_no_names_are_refused(mixed_case_scene):
+    root = mixed_case_scene.parent
+    assert [scene.name for scene in find_lom_scenes(root, "low-light", "mixed")] == ["mixed"]  # not "m", "i", ...
+    assert [scene.name for scene in find_lom_scenes(root, "low-light", None)] == ["mixed"]
+    with pytest.raises(InputError, match="^scenes \\[\\]: name at least one scene"):
+        find_lom_scenes(root, "low-light", [])

@@ -94,6 +94,22 @@ def test_lom_transforms_agree_with_its_colmap_model(buu):
     assert nerf.sizes[0] == (500, 375)
 
 
+def test_every_camera_source_restore_reads_is_read_by_read_cameras(buu):
+    """A binary COLMAP model (or one of its files) and a LOM folder of transforms splits, as
+    `restore --poses` takes them; the splits' frames together, in file-name order."""
+    text = read_colmap_model(buu / "colmap_text")
+    for source in (buu / "colmap_sparse" / "0", buu / "colmap_sparse" / "0" / "images.bin"):
+        assert find_camera_source(source) == buu / "colmap_sparse" / "0"
+        binary = read_cameras(source)
+        assert sorted(binary.names) == sorted(text.names)
+        order = [binary.names.index(name) for name in text.names]
+        torch.testing.assert_close(binary[order].extrinsics, text.extrinsics)
+    lom = read_cameras(buu)
+    splits = [read_transforms_json(buu / f"transforms_{split}.json") for split in ("test", "train", "val")]
+    assert lom.names == [name for split in splits for name in split.names]
+    torch.testing.assert_close(lom.extrinsics, torch.cat([split.extrinsics for split in splits]))
+
+
 def test_scene_sparse_model_reprojects_its_points(shared_data):
     """Our reading of a COLMAP model must put each 3D point onto the 2D observation it came from."""
     folder = shared_data / "scenes" / "kitchen" / "sparse" / "0"

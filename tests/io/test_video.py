@@ -73,7 +73,7 @@ def test_the_container_comes_from_kind_not_the_name(tmp_path):
 
 
 def test_bad_inputs(tmp_path):
-    with pytest.raises(InputError, match=r"--video clip\.avi: the file name must end in \.mp4"):
+    with pytest.raises(InputError, match=r"^video clip\.avi: the file name must end in \.mp4"):
         video_kind("clip.avi")
     assert video_kind("A.MP4") == "mp4" and video_kind("b.gif") == "gif"
     with pytest.raises(InputError, match="missing.mp4: no such video file"):

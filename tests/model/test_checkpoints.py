@@ -8,7 +8,7 @@ import torch
 from safetensors import safe_open
 from safetensors.torch import save_file
 
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import InputError, NonFiniteError
 from lumos3d_cli.model.architectures import ARCHITECTURES, Architecture, PatchEmbedConfig
 from lumos3d_cli.model.bundled_models import BUNDLED_MODELS, bundled_weights_path
 from lumos3d_cli.model.checkpoints import read_checkpoint, save_checkpoint, summarize_checkpoint
@@ -132,6 +132,16 @@ def test_half_precision_files_load_as_float32(tmp_path, source):
     loaded = load_model(path, architecture=REDUCED)
     assert all(p.dtype == torch.float32 for p in loaded.parameters())
     assert summarize_checkpoint(path)["dtypes"] == {"BF16": len(source.state_dict())}
+
+
+def test_weights_holding_nan_are_not_written(tmp_path):
+    model = build_model("tiny", seed=0)
+    with torch.no_grad():
+        next(model.parameters())[0].fill_(float("nan"))
+    name = next(name for name, _ in model.named_parameters())
+    with pytest.raises(NonFiniteError, match=f"^{name}: .* NaN or Inf; the weights are damaged"):
+        save_checkpoint(model, tmp_path / "model.safetensors")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_mismatches_list_missing_unexpected_and_misshaped_keys(tmp_path, source):

@@ -48,3 +48,16 @@ def test_unknown_names_missing_files_and_modes_name_the_parameter():
         load_model("missing/model.safetensors")
     with pytest.raises(InputError, match="^mode 'dusk': no bundled model for it; use one of 'low-light', 'over-exposure'"):
         resolve_checkpoint(None, "dusk")
+
+
+def test_a_device_this_machine_lacks_is_refused_by_name_before_the_weights_load(monkeypatch):
+    import torch
+
+    for device, message in (("bogus", "^device 'bogus': not a device; use cpu or cuda$"),
+                            ("meta", "^device meta: lumos3d runs on cpu or cuda$")):
+        with pytest.raises(InputError, match=message):
+            load_model("low-light", device=device)
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    for device in ("cuda", torch.device("cuda:0")):
+        with pytest.raises(InputError, match="CUDA is not available on this machine; use cpu$"):
+            load_model("low-light", device=device)

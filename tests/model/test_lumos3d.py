@@ -115,6 +115,34 @@ def test_bad_inputs_are_refused_with_a_clear_message(model):
         model(images)
 
 
+def test_fusion_settings_are_checked_by_name(model):
+    images = torch.rand(1, 2, 3, 28, 28, generator=torch.Generator().manual_seed(2))
+    with torch.no_grad():
+        prediction = model.predict(images)
+        for size in (0.0, -1.0, float("nan"), float("inf")):  # a size of 0 or NaN fused the scene into one Gaussian
+            with pytest.raises(InputError, match="^voxel_size .*give a positive number"):
+                model.assemble(prediction, voxel_size=size)
+        for mask in (torch.tensor([1, 0]), torch.tensor([True]), torch.tensor([True, False, True]), [True, False]):
+            with pytest.raises(InputError, match=r"^fuse_views must be a bool tensor of shape \[2\]"):
+                model.assemble(prediction, fuse_views=mask)
+        with pytest.raises(InputError, match=r"^fuse_pixels must be a bool tensor of shape \[1, 2, 28, 28\]"):
+            model.assemble(prediction, fuse_pixels=torch.ones(2, 28, 28, dtype=torch.bool))
+        assert model.assemble(prediction, fuse_views=torch.tensor([True, False])).counts[0].pixels == 28 * 28
+
+
+@pytest.mark.parametrize("dtype", [torch.float64, torch.float16, torch.bfloat16])
+def test_images_of_any_floating_type_run_in_the_weights_type(model, dtype):
+    images = torch.rand(1, 2, 3, 28, 28, generator=torch.Generator().manual_seed(3))
+    with torch.no_grad():
+        expected = model(images).depth
+        got = model(images.to(dtype)).depth
+    assert got.dtype == torch.float32
+    # the images rounded to the type's precision (bf16: 8 bits) move the depth a little
+    torch.testing.assert_close(got, expected, rtol=0.05 if dtype == torch.bfloat16 else 0.01, atol=0)
+    with pytest.raises(InputError, match="torch.uint8; give floating-point images"):
+        model((images * 255).to(torch.uint8))
+
+
 def test_prepare_then_forward_any_image_size(model):
     prepared = model.prepare(torch.rand(2, 3, 37, 51))
     assert prepared.network_size == (224, 168)

@@ -1,7 +1,7 @@
 import pytest
 import torch
 
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import InputError, NonFiniteError
 from lumos3d_cli.model.preprocess import network_size, prepare_images
 
 
@@ -58,3 +58,27 @@ def test_bad_inputs_are_refused():
         prepare_images(torch.zeros(3, 4, 4, dtype=torch.uint8), 56, 14)
     with pytest.raises(InputError):
         prepare_images(torch.zeros(4, 5, 5), 56, 14)
+    for bad in (float("nan"), float("inf")):
+        images = torch.rand(3, 20, 20)
+        images[1, 3, 4] = bad
+        with pytest.raises(NonFiniteError, match="images"):
+            prepare_images(images, 56, 14)
+    for size, patch, name in ((0, 14, "image_size"), (-5, 14, "image_size"), (10, 14, "image_size"),
+                              (56, 0, "patch_size"), (56.0, 14, "image_size")):
+        with pytest.raises(InputError, match=f"^{name} "):
+            prepare_images(torch.rand(3, 20, 20), size, patch)
+
+
+def test_values_beyond_one_are_clamped_whether_or_not_the_size_changes():
+    for height, width in ((42, 56), (40, 40)):
+        prepared = prepare_images(torch.full((3, height, width), 4.0), 56, 14)
+        assert prepared.images.max() == 1.0
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16, torch.float64])
+def test_every_floating_type_is_prepared_in_its_own_type(dtype):
+    images = torch.rand(2, 3, 37, 51, generator=torch.Generator().manual_seed(0))
+    expected = prepare_images(images.to(dtype).float(), 56, 14).images
+    prepared = prepare_images(images.to(dtype), 56, 14).images
+    assert prepared.dtype == dtype
+    torch.testing.assert_close(prepared.float(), expected.to(dtype).float())

@@ -2,6 +2,7 @@
 
 import json
 import shutil
+from types import ModuleType
 
 import lumos3d_cli
 import pytest
@@ -10,9 +11,14 @@ from plyfile import PlyData
 from lumos3d_cli.errors import InputError
 
 
-def test_every_exported_name_resolves():
+def test_every_exported_name_resolves_to_what_it_names_even_after_the_jobs_are_imported():
+    import lumos3d_cli.pipeline.restore  # imports the subpackage `render`, which Python binds on the package
+    from lumos3d_cli.render.render import render
+
     for name in lumos3d_cli.__all__:
-        assert getattr(lumos3d_cli, name) is not None, name
+        value = getattr(lumos3d_cli, name)
+        assert value is not None and not isinstance(value, ModuleType), name
+    assert lumos3d_cli.render_gaussians is render
 
 
 def test_restore_and_write_without_the_cli(buu, tmp_path, random_checkpoint):
@@ -28,6 +34,17 @@ def test_restore_and_write_without_the_cli(buu, tmp_path, random_checkpoint):
     assert json.loads((tmp_path / "out" / "summary.json").read_text()) == json.loads(json.dumps(summary))
     assert PlyData.read(str(tmp_path / "out" / "scene.ply"))["vertex"].count == len(scene.gaussians)
     assert sorted(p.name for p in (tmp_path / "out" / "restored").iterdir()) == ["4.png", "5.png"]
+    # written again: the same outputs, the total counting one write
+    total = summary["seconds"]["total"] - summary["seconds"]["write"]
+    again = lumos3d_cli.write_restored_scene(scene, tmp_path / "out" / "scene.ply")
+    assert again["seconds"]["total"] == pytest.approx(total + again["seconds"]["write"])
+    # never into the folder the photos were read from, as `lumos3d restore` refuses it
+    with pytest.raises(InputError, match="is the input folder"):
+        lumos3d_cli.write_restored_scene(scene, photos / "scene.ply")
+    with pytest.raises(InputError) as caught:
+        lumos3d_cli.write_restored_scene(scene, tmp_path / "out2" / "scene.ply", video=tmp_path / "orbit.avi")
+    assert caught.value.parameter == "video" and str(caught.value) == f"video {tmp_path / 'orbit.avi'}: the file name must end in .mp4 (H.264) or .gif"
+    assert sorted(p.name for p in photos.iterdir()) == ["4.JPG", "5.JPG"] and not (tmp_path / "out2").exists()
 
 
 def test_library_errors_name_parameters_not_flags(buu, random_checkpoint):

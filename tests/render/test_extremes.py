@@ -121,3 +121,34 @@ def test_the_kernel_and_its_twin_read_a_huge_float32_quaternion_as_its_rotation(
     turned = render(one([0.5, 0.5, 0.5, 0.5]), camera, backend=backend).alphas
     torch.testing.assert_close(render(one([1e20] * 4), camera, backend=backend).alphas, turned)
     assert float((render(one([1.0, 0.0, 0.0, 0.0]), camera, backend=backend).alphas - turned).abs().max()) > 0.1
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
+def test_half_precision_gaussians_render_in_float32_with_their_gradients(dtype):
+    gaussians = random_scene(30, 1, dtype=torch.float32)
+    expected = render(gaussians.map(lambda t: t.to(dtype).float()), camera_at_origin(16, 12)).images
+    leaves = {name: t.to(dtype).requires_grad_(True) for name, t in gaussians.tensors().items()}
+    output = render(Gaussians(**leaves), camera_at_origin(16, 12))
+    assert output.images.dtype == torch.float32
+    torch.testing.assert_close(output.images, expected)  # the same values as the Gaussians cast by hand
+    output.images.sum().backward()
+    assert all(leaf.grad.dtype == dtype and torch.isfinite(leaf.grad.float()).all() for leaf in leaves.values())
+
+
+def test_cameras_that_cannot_render_are_refused_by_name():
+    gaussians = random_scene(5, 0, dtype=torch.float32)
+    camera = camera_at_origin(16, 12)
+    for focal in (0.0, -50.0):
+        bad = camera_at_origin(16, 12)
+        bad.intrinsics[0, 0, 0] = focal
+        with pytest.raises(ValueError, match="^cameras.intrinsics: the focal lengths must be positive"):
+            render(gaussians, bad)
+    with pytest.raises(ValueError, match="^cameras: no camera to render from"):
+        render(gaussians, camera[[]])
+    with pytest.raises(ValueError, match=r"^background must be one RGB colour \[3\], got shape \(2,\)"):
+        render(gaussians, camera, background=(0.5, 0.5))
+
+
+def test_sh_beyond_the_supported_degree_is_refused_when_the_gaussians_are_made():
+    with pytest.raises(ValueError, match="36 coefficients per channel \\(SH degree 5\\); degrees 0 to 4"):
+        Gaussians(torch.zeros(1, 3), torch.tensor([[1.0, 0, 0, 0]]), torch.ones(1, 3), torch.ones(1), torch.zeros(1, 36, 3))

@@ -60,6 +60,7 @@ def test_view_serves_the_page_and_the_announced_subsample_then_stops_on_ctrl_c(r
             process.kill()
     assert process.returncode == 130, err
     assert "Traceback" not in err and "200 of 500 Gaussians" in err
+    assert err.strip().splitlines()[-1] == "interrupted by SIGINT: the viewer stopped"
     port = int(url.rsplit(":", 1)[1])
     with pytest.raises(ConnectionRefusedError):
         socket.create_connection(("127.0.0.1", port), timeout=5).close()
@@ -82,6 +83,9 @@ def test_view_bad_inputs(run_cli, restore_folder, tmp_path):
         started = time.perf_counter()
         expect_input_error(run_cli("view", restore_folder, "--port", port), f"--port {port}: already in use", "--port")
         assert time.perf_counter() - started < 30
+    # an address no interface of this machine has (TEST-NET-1, reserved for documentation) is the host's fault
+    expect_input_error(run_cli("view", restore_folder, "--host", "192.0.2.1", "--port", "0"),
+                       "--host 192.0.2.1: not an address of this machine")
 
 
 def test_restore_with_view_refuses_a_bad_port_before_restoring(run_cli, tmp_path):

@@ -12,13 +12,13 @@ import typer
 from lumos3d_cli.cli import preset_options
 from lumos3d_cli.cli.console import ProgressBars, print_json, progress_bar, say
 from lumos3d_cli.cli.interrupts import library_imports
-from lumos3d_cli.cli.view import EXIT_INTERRUPTED, announce
+from lumos3d_cli.cli.view import serve_until_stopped
 from lumos3d_cli.data.modes import MODES
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, GEOMETRY_SOURCES
 from lumos3d_cli.pipeline.restore_paths import check_lpips_weights, check_view_format, list_photos, restore_outputs
-from lumos3d_cli.viewer.defaults import DEFAULT_HOST, DEFAULT_PORT
+from lumos3d_cli.viewer.defaults import DEFAULT_HOST, DEFAULT_MAX_SPLATS, DEFAULT_PORT
 from lumos3d_cli.viewer.port import require_free_port
 
 if TYPE_CHECKING:
@@ -116,10 +116,8 @@ def restore_command(
     else:
         _report(scene, summary, output, video)
     if view:
-        with library_imports():  # viser (0.2 s of start-up) only when asked for
-            from lumos3d_cli.viewer.server import serve_scene
-        serve_scene(output.parent, DEFAULT_HOST, port, on_ready=announce)
-        raise typer.Exit(EXIT_INTERRUPTED)
+        serve_until_stopped(output.parent, DEFAULT_HOST, port, DEFAULT_MAX_SPLATS,
+                            "the viewer stopped; the restore's outputs are written")
 
 
 def _report(scene: RestoredScene, summary: dict, output: Path, video: Path | None) -> None:

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NoReturn
 
 import typer
 
 from lumos3d_cli.cli.console import say
 from lumos3d_cli.cli.interrupts import library_imports
+from lumos3d_cli.errors import Interrupted
 from lumos3d_cli.viewer.defaults import DEFAULT_HOST, DEFAULT_MAX_SPLATS, DEFAULT_PORT
 
 if TYPE_CHECKING:
@@ -38,9 +39,18 @@ def view_command(
     max_splats: int = typer.Option(DEFAULT_MAX_SPLATS, "--max-splats", help="Send at most this many Gaussians to the browser."),
 ) -> None:
     """Open a restored scene in an interactive 3D viewer in the browser (Ctrl-C stops it)."""
+    serve_until_stopped(path, host, port, max_splats, "the viewer stopped")
+
+
+def serve_until_stopped(path: Path, host: str, port: int, max_splats: int, stopped: str) -> NoReturn:
+    """Serve the scene at `path` until a signal stops the viewer, then exit saying `stopped`
+    (Ctrl-C is how a viewer ends, not a failure: there is nothing half-written to speak of)."""
     # The viewer imports viser, torch and the scene readers (seconds): imported here, when the
     # command runs, so that `--help` (which needs only the defaults above) stays fast.
     with library_imports():
         from lumos3d_cli.viewer.server import serve_scene
-    serve_scene(path, host, port, max_splats, on_ready=announce)
+    try:
+        serve_scene(path, host, port, max_splats, on_ready=announce)
+    except Interrupted as stop:
+        raise Interrupted(stop.signum, stopped) from None
     raise typer.Exit(EXIT_INTERRUPTED)

@@ -7,6 +7,7 @@ A view is its file stem, matched case-insensitively between the folders and the 
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -86,10 +87,14 @@ def _missing_parts(folder: Path) -> str:
     return " and ".join(str(folder / part) for part in parts)
 
 
-def find_lom_scenes(root: Path | str, mode: str, names: list[str] | None = None) -> list[LomScene]:
-    """Scenes under `root` (or `root` itself when it is one), optionally only `names`."""
+def find_lom_scenes(root: Path | str, mode: str, names: str | Sequence[str] | None = None) -> list[LomScene]:
+    """Scenes under `root` (or `root` itself when it is one): all (`names` None), or those named
+    (one name, or several)."""
     root = Path(root)
     require_folder(root, "that holds the LOM scenes, or one scene")
+    names = [names] if isinstance(names, str) else names
+    if names is not None and len(names) == 0:
+        raise InputError("[]: name at least one scene, or none at all for every scene found", parameter="scenes")
     folders = [root] if is_lom_scene(root) else sorted(p for p in root.iterdir() if p.is_dir() and is_lom_scene(p))
     if names:
         available = {p.name for p in folders}

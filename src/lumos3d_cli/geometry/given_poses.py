@@ -21,8 +21,6 @@ import torch
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.camera_files import read_cameras
 from lumos3d_cli.io.cameras import Cameras
-from lumos3d_cli.io.colmap import is_colmap_model, read_colmap_model
-from lumos3d_cli.io.transforms_json import read_transforms_json
 
 logger = logging.getLogger(__name__)
 
@@ -32,20 +30,6 @@ _ASPECT_TOLERANCE = 0.01
 
 def _listed(items: Sequence[str], limit: int = 5) -> str:
     return ", ".join(items[:limit]) + (f" and {len(items) - limit} more" if len(items) > limit else "")
-
-
-def _read_pose_source(path: Path) -> Cameras:
-    """The cameras in PATH, whatever supported form it takes."""
-    if path.is_dir():
-        for folder in (path, path / "sparse" / "0", path / "colmap"):
-            if folder.is_dir() and is_colmap_model(folder):
-                return read_colmap_model(folder)
-        splits = sorted(path.glob("transforms_*.json"))
-        if splits and not (path / "transforms.json").is_file():
-            parts = [read_transforms_json(split, warn_on_distortion=False) for split in splits]
-            return Cameras(torch.cat([p.extrinsics for p in parts]), torch.cat([p.intrinsics for p in parts]),
-                           [s for p in parts for s in p.sizes], [n for p in parts for n in p.names])
-    return read_cameras(path)
 
 
 def read_given_poses(
@@ -64,7 +48,7 @@ def read_given_poses(
         raise InputError(f"{len(names)} photo names for {len(sizes)} photo sizes")
     if not path.exists():
         raise InputError(f"{path}: no such file or folder", parameter="poses")
-    given = _read_pose_source(path)
+    given = read_cameras(path)
     stems = [Path(name).stem for name in given.names]
     row_of_stem: dict[str, int] = {}
     conflicting = []

@@ -4,45 +4,60 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import torch
+
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.cameras import Cameras
-from lumos3d_cli.io.colmap import read_colmap_model
+from lumos3d_cli.io.colmap import is_colmap_model, read_colmap_model
 from lumos3d_cli.io.transforms_json import read_transforms_json
 
-_HINT = "pass a transforms.json, a COLMAP text model folder (cameras.txt + images.txt) or a scene folder"
+_HINT = ("pass a transforms.json, a COLMAP model folder (text or binary), a folder of LOM-style "
+         "transforms_{train,val,test}.json or a scene folder holding one of those")
+
+
+def _transforms_splits(folder: Path) -> list[Path]:
+    """A LOM-style folder's transforms_{train,val,test}.json (none where a transforms.json is
+    there: that file is the scene's cameras)."""
+    return [] if (folder / "transforms.json").is_file() else sorted(folder.glob("transforms_*.json"))
 
 
 def find_camera_source(path: Path | str) -> Path | None:
-    """The camera file or COLMAP folder that `path` names or holds, or None.
+    """The camera file or folder that `path` names or holds, or None.
 
-    Accepted: a `.json` file; a folder or file inside a folder with cameras.txt + images.txt;
-    a scene folder with `transforms.json`, `cameras.json` or `sparse/0/`.
+    Accepted: a `.json` file; a COLMAP model folder, text or binary (or one of its cameras/images
+    files); a scene folder with `transforms.json`, `cameras.json`, `sparse/0/` or `colmap/`; a
+    folder of LOM-style transforms_{train,val,test}.json (read together).
     """
     path = Path(path)
     if path.is_file():
         if path.suffix.lower() == ".json":
             return path
-        if path.name in ("cameras.txt", "images.txt"):
-            return path.parent
+        if path.name in ("cameras.txt", "images.txt", "cameras.bin", "images.bin"):
+            return path.parent if is_colmap_model(path.parent) else None
         return None
     if not path.is_dir():
         return None
-    if (path / "cameras.txt").is_file() and (path / "images.txt").is_file():
+    if is_colmap_model(path):
         return path
     for candidate in (path / "transforms.json", path / "cameras.json", path / "sparse" / "0", path / "colmap"):
         found = find_camera_source(candidate) if candidate.exists() else None
         if found is not None:
             return found
-    return None
+    return path if _transforms_splits(path) else None
 
 
-def read_cameras(path: Path | str) -> Cameras:
-    """Read cameras from any supported source (see `find_camera_source`)."""
+def read_cameras(path: Path | str, warn_on_distortion: bool = True) -> Cameras:
+    """Read cameras from any supported source (see `find_camera_source`); the frames of a LOM
+    folder's splits in the order train, test, val (file names sorted)."""
     source = find_camera_source(path)
     if source is None:
         if not Path(path).exists():
             raise InputError(f"{path}: no such file or folder")
         raise InputError(f"{path}: no cameras found; {_HINT}")
     if source.is_dir():
-        return read_colmap_model(source)
-    return read_transforms_json(source)
+        if is_colmap_model(source):
+            return read_colmap_model(source)
+        parts = [read_transforms_json(split, warn_on_distortion) for split in _transforms_splits(source)]
+        return Cameras(torch.cat([p.extrinsics for p in parts]), torch.cat([p.intrinsics for p in parts]),
+                       [s for p in parts for s in p.sizes], [n for p in parts for n in p.names])
+    return read_transforms_json(source, warn_on_distortion)

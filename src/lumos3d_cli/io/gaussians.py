@@ -60,7 +60,9 @@ class Gaussians:
                 raise ValueError(f"Gaussians.{name} has shape {tuple(getattr(self, name).shape)}, expected {shape}")
         if self.sh.dim() != 3 or self.sh.shape[0] != n or self.sh.shape[2] != 3:
             raise ValueError(f"Gaussians.sh has shape {tuple(self.sh.shape)}, expected ({n}, K, 3)")
-        sh_degree_from_count(self.sh.shape[1])
+        if sh_degree_from_count(self.sh.shape[1]) > MAX_SH_DEGREE:
+            raise ValueError(f"Gaussians.sh holds {self.sh.shape[1]} coefficients per channel (SH degree "
+                             f"{sh_degree_from_count(self.sh.shape[1])}); degrees 0 to {MAX_SH_DEGREE} are supported")
 
     def __len__(self) -> int:
         return self.means.shape[0]

@@ -111,11 +111,11 @@ class VideoWriter:
         self.close()
 
 
-def video_kind(path: Path | str, option: str = "--video") -> str:
-    """"mp4" or "gif" from the file name; InputError for anything else."""
+def video_kind(path: Path | str, parameter: str = "video") -> str:
+    """"mp4" or "gif" from the file name; InputError (naming `parameter`) for anything else."""
     suffix = Path(path).suffix.lower()
     if suffix not in VIDEO_SUFFIXES:
-        raise InputError(f"{option} {path}: the file name must end in .mp4 (H.264) or .gif")
+        raise InputError(f"{path}: the file name must end in .mp4 (H.264) or .gif", parameter=parameter)
     return suffix[1:]
 
 

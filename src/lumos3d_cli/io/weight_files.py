@@ -14,6 +14,7 @@ import torch
 from safetensors import SafetensorError, safe_open
 from safetensors.torch import load_file, save_file
 
+from lumos3d_cli.checks import require_finite
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import atomic_path
 from lumos3d_cli.io.state_dicts import load_torch_state_dict
@@ -83,13 +84,16 @@ def read_header(path: Path) -> tuple[dict[str, tuple[int, ...]], Counter, dict[s
 def write_weights(tensors: dict[str, torch.Tensor], path: Path, metadata: dict[str, str], dtype: str = "float32") -> Path:
     """Write `tensors` as one .safetensors file (atomically) with header `metadata`. Floating-point
     tensors are stored in `dtype` ("float16" halves the file); a value beyond that range is an
-    InputError naming the tensor, never a silent infinity."""
+    InputError naming the tensor, never a silent infinity; NaN or Inf weights are a
+    NonFiniteError naming the tensor."""
     if path.suffix != ".safetensors":
         raise InputError(f"{path}: checkpoints are written as .safetensors files")
     storage = storage_dtype(dtype)
     stored = {}
     for name, tensor in tensors.items():
         tensor = tensor.detach().to("cpu", torch.float32 if tensor.is_floating_point() else tensor.dtype)
+        if tensor.is_floating_point():  # a file no loader would accept (`check_tensors`) is not written
+            require_finite(name, tensor, "the weights are damaged (a diverged training run?); nothing was written")
         if tensor.is_floating_point() and storage != torch.float32:
             limit = torch.finfo(storage).max
             if tensor.abs().max() > limit:

@@ -59,6 +59,20 @@ def load_model(source: str | Path, device: str | torch.device = "cpu", architect
     bundled model ('low-light', 'over-exposure'). `architecture` sets the size of a foreign
     (VGGT/AnySplat) checkpoint; it defaults to vggt-1b and must not be given for our own files,
     which carry theirs."""
+    device = usable_device(device)
     model = model_from_checkpoint(read_checkpoint(resolve_checkpoint(source), architecture))
     logger.info("loaded architecture '%s' from %s", model.architecture.name, model.provenance.get("path"))
     return model.to(device).eval()
+
+
+def usable_device(device: str | torch.device) -> torch.device:
+    """`device` as a torch.device that this machine has; InputError naming it otherwise."""
+    try:
+        parsed = torch.device(device)
+    except (RuntimeError, TypeError):
+        raise InputError(f"{device!r}: not a device; use cpu or cuda", parameter="device") from None
+    if parsed.type == "cuda" and not torch.cuda.is_available():
+        raise InputError(f"{device}: CUDA is not available on this machine; use cpu", parameter="device")
+    if parsed.type not in ("cpu", "cuda"):
+        raise InputError(f"{device}: lumos3d runs on cpu or cuda", parameter="device")
+    return parsed

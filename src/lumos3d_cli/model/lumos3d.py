@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 
 import torch
@@ -148,10 +149,14 @@ class Lumos3D(nn.Module):
         """Any-size images [..., 3, H, W] in [0, 1] -> this architecture's network size (`prepare_images`)."""
         return prepare_images(images, self.architecture.image_size, self.architecture.patch_size, mode)
 
-    def _check_images(self, images: torch.Tensor) -> None:
+    def _checked_images(self, images: torch.Tensor) -> torch.Tensor:
+        """The images, checked, in the weights' floating-point type (a float64 or bf16 batch
+        would otherwise meet float32 weights in the first convolution; autocast still applies)."""
         patch = self.architecture.patch_size
         if images.dim() != 5 or images.shape[2] != 3:
             raise InputError(f"model input must be [B, V, 3, H, W] images, got shape {tuple(images.shape)}")
+        if not images.is_floating_point():
+            raise InputError(f"model input images are {images.dtype}; give floating-point images in [0, 1]")
         height, width = images.shape[-2:]
         if height < patch or width < patch or height % patch or width % patch:
             raise InputError(
@@ -159,6 +164,7 @@ class Lumos3D(nn.Module):
                 "pass the images through Lumos3D.prepare / prepare_images first"
             )
         require_finite("model input images", images)
+        return images.to(next(self.parameters()).dtype)
 
     def fuse_scene(
         self, points: torch.Tensor, params: torch.Tensor, confidence: torch.Tensor, scale: torch.Tensor,
@@ -204,7 +210,7 @@ class Lumos3D(nn.Module):
         The aggregator follows any enclosing autocast (e.g. bf16); the heads run in float32, as
         in VGGT.
         """
-        self._check_images(images)
+        images = self._checked_images(images)
         height, width = images.shape[-2:]
         tokens = self.aggregator(images, self.token_layers)
         with torch.autocast(images.device.type, enabled=False):
@@ -232,7 +238,7 @@ class Lumos3D(nn.Module):
         if self.illumination_head is None:
             raise InputError(f"architecture '{self.architecture.name}' regresses colours (appearance 'regression'); "
                              "it predicts no restoration operator")
-        self._check_images(images)
+        images = self._checked_images(images)
         last = self.architecture.depth - 1
         tokens = self.aggregator(images, [last])[last]
         return self.illumination_head(tokens, images)
@@ -257,6 +263,15 @@ class Lumos3D(nn.Module):
         not differentiated, for inference)."""
         if footprint_scale is not None and voxel_size is not None:
             raise ValueError("give voxel_size or footprint_scale, not both")
+        for name, value in (("voxel_size", voxel_size), ("footprint_scale", footprint_scale)):
+            if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise InputError(f"{value!r}: give a positive number (relative to the scene's scale)", parameter=name)
+        placed_depth = prediction.depth if depth is None else depth
+        for name, mask, shape in (("fuse_views", fuse_views, tuple(placed_depth.shape[1:2])),
+                                  ("fuse_pixels", fuse_pixels, tuple(placed_depth.shape))):
+            if mask is not None and (not isinstance(mask, torch.Tensor) or mask.dtype != torch.bool or mask.shape != shape):
+                got = f"{mask.dtype} of shape {tuple(mask.shape)}" if isinstance(mask, torch.Tensor) else type(mask).__name__
+                raise InputError(f"must be a bool tensor of shape {list(shape)}, got {got}", parameter=name)
         with torch.autocast(prediction.depth.device.type, enabled=False):
             extrinsics = prediction.extrinsics if extrinsics is None else extrinsics.to(prediction.depth)
             intrinsics = prediction.intrinsics if intrinsics is None else intrinsics.to(prediction.depth)

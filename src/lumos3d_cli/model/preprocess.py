@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
+from lumos3d_cli.checks import require_finite
 from lumos3d_cli.errors import InputError
 
 MODES = ("resize", "crop")
@@ -64,20 +65,28 @@ def network_size(width: int, height: int, image_size: int, patch_size: int, mode
 
 
 def prepare_images(images: torch.Tensor, image_size: int, patch_size: int, mode: str = "resize") -> PreparedImages:
-    """images [..., 3, H, W] float in [0, 1] -> PreparedImages (bicubic, antialiased, clamped to
-    [0, 1] because bicubic overshoots at edges)."""
+    """images [..., 3, H, W] float in [0, 1] -> PreparedImages in the images' dtype (bicubic,
+    antialiased, computed in float32 for float16 and bfloat16; clamped to [0, 1], where bicubic
+    overshoots at edges). `image_size` and `patch_size` in pixels, image_size >= patch_size."""
     if images.dim() < 3 or images.shape[-3] != 3 or not images.is_floating_point():
         raise InputError(f"images must be float [..., 3, H, W], got {images.dtype} {tuple(images.shape)}")
+    for name, value in (("patch_size", patch_size), ("image_size", image_size)):
+        if not isinstance(value, int) or value < (1 if name == "patch_size" else patch_size):
+            raise InputError(f"{value!r}: give a whole number of pixels, at least "
+                             f"{1 if name == 'patch_size' else f'the patch size {patch_size}'}", parameter=name)
+    require_finite("images", images)
     height, width = images.shape[-2:]
     new_width, new_height, resized_height = network_size(width, height, image_size, patch_size, mode)
     flat = images.reshape(-1, 3, height, width)
+    if flat.dtype in (torch.float16, torch.bfloat16):  # no bicubic kernel for them on the CPU
+        flat = flat.float()
     if (new_width, resized_height) != (width, height):
         flat = F.interpolate(flat, size=(resized_height, new_width), mode="bicubic", antialias=True, align_corners=False)
-        flat = flat.clamp(0.0, 1.0)
+    flat = flat.clamp(0.0, 1.0)
     top = (resized_height - new_height) // 2
     flat = flat[:, :, top : top + new_height]
     return PreparedImages(
-        images=flat.reshape(*images.shape[:-3], 3, new_height, new_width),
+        images=flat.reshape(*images.shape[:-3], 3, new_height, new_width).to(images.dtype),
         original_size=(width, height),
         network_size=(new_width, new_height),
         scale=(new_width / width, resized_height / height),

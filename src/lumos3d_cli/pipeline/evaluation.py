@@ -60,7 +60,7 @@ def _rows(results: list[SceneEvaluation], methods: list[str]) -> list[dict]:
 
 
 def evaluate_lom(
-    root: Path | str, scenes: list[str] | None = None, mode: str = "low-light", protocol: str = "context",
+    root: Path | str, scenes: str | Sequence[str] | None = None, mode: str = "low-light", protocol: str = "context",
     checkpoint: Path | str | None = None, preset: str = DEFAULT_RESTORE_PRESET, geometry: str = "auto",
     max_views: int | None = None, device: str = "cpu", baseline: str = "gamma", lpips_weights: Path | str | None = None,
     on_scene: Callable[[str], None] | None = None, refine_steps: int | None = None, max_gaussians: int | None = None,

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import torch
-
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import Lumos3D
@@ -17,7 +15,5 @@ def load_restoration_model(checkpoint: Path, device: str) -> Lumos3D:
     """The network of `checkpoint` in eval mode on `device` ("cpu" or "cuda")."""
     if device not in DEVICES:
         raise InputError(f"{device!r}: use cpu or cuda", parameter="device")
-    if device == "cuda" and not torch.cuda.is_available():
-        raise InputError("cuda: CUDA is not available on this machine; use cpu", parameter="device")
     return load_model(checkpoint, device=device)
 

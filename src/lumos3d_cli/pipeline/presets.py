@@ -12,6 +12,7 @@ filled (render.hole_filling) and whether a one-photo restore's amplified noise i
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, replace
 
 from lumos3d_cli.errors import InputError
@@ -245,6 +246,9 @@ def get_restore_preset(
         preset = RESTORE_PRESETS[name]
     except KeyError:
         raise InputError(f"{name!r}: use one of {', '.join(RESTORE_PRESETS)}", parameter="preset") from None
+    for parameter, value in (("refine_steps", refine_steps), ("max_gaussians", max_gaussians)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, numbers.Integral)):
+            raise InputError(f"{value!r}: give a whole number", parameter=parameter)
     if refine_steps is not None:
         if refine_steps < 0:
             raise InputError(f"{refine_steps}: use 0 (no refinement) or more steps", parameter="refine_steps")

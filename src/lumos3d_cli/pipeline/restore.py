@@ -76,6 +76,9 @@ class RestoredScene:
     uncovered: dict | None = None  # the views' pixels no Gaussian covered and whether they were filled (None: not rendered)
     view_source: str = "render"  # "render": the scene at each camera; "photo restoration": one photo restored in 2D
     denoising: dict | None = None  # a one-photo restore's measured noise and whether it was removed (None: not one photo)
+    # what the job read, as given (the photos' folder or files, poses, references, checkpoint):
+    # write_restored_scene keeps the outputs clear of them, as `lumos3d restore` does
+    read_from: list[Path] = field(default_factory=list)
 
     def summary(self, scene_path: Path | str | None = None, ply_bytes: int | None = None) -> dict:
         """The JSON summary of the run (summary.json); `ply_bytes`: the size of the written scene."""
@@ -299,4 +302,6 @@ neighbouring photos (`geometry.photo_consistency`). `early_registration`: the ph
         timings["metrics"] = time.perf_counter() - stage_started
     scene.timings = timings | scene.timings
     scene.timings["total"] = time.perf_counter() - started
+    given = [photos] if isinstance(photos, (str, Path)) else list(photos)
+    scene.read_from = [Path(path) for path in (*given, poses, reference, checkpoint, lpips_weights) if path is not None]
     return scene

@@ -22,7 +22,7 @@ from lumos3d_cli.io.image_write import write_exr, write_image
 from lumos3d_cli.io.ply import write_ply
 from lumos3d_cli.io.preview_glb import write_preview_glb
 from lumos3d_cli.io.transforms_json import write_transforms_json
-from lumos3d_cli.io.video import probe_video
+from lumos3d_cli.io.video import probe_video, video_kind
 from lumos3d_cli.pipeline.restore import RestoredScene
 from lumos3d_cli.pipeline.restore_paths import VIEW_FORMATS, check_view_format, restore_outputs
 from lumos3d_cli.pipeline.orbit_video import write_orbit_video
@@ -58,13 +58,15 @@ def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_fo
     """Write every output of `scene` beside `scene_path` (a `.ply`), and an orbit `video` (.mp4 or
     .gif) when asked, and return the summary written to summary.json. The files appear together
     when all are written; a file in the way that lumos3d did not write, or an output that would
-    touch an input (the scene's photos, and `inputs`), refuses the write
-    (io/output_set.py)."""
+    touch an input (the scene's photos, what `restore` read them from: their folder, the poses,
+    the references, the checkpoint; and `inputs`), refuses the write (io/output_set.py)."""
     scene_path = Path(scene_path)
     check_view_format(output_format)
+    if video is not None:
+        video_kind(video)
     suffix = VIEW_FORMATS[output_format][0]
     started = time.perf_counter()
-    outputs = restore_outputs(scene_path, [*scene.input_paths, *inputs], video)
+    outputs = restore_outputs(scene_path, [*scene.input_paths, *scene.read_from, *inputs], video)
     with outputs.staged() as staging, ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
         root = staging.root
         (root / "restored").mkdir()
@@ -90,9 +92,10 @@ def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_fo
             stream = probe_video(staging.files[Path(video)])  # as ffmpeg reads it back (H.264 pads odd sides)
             written_video = {"path": str(video), "codec": stream.codec, "pixel_format": stream.pixel_format,
                              "width": stream.width, "height": stream.height, "frames": len(orbit), "filled": filled}
+        earlier_write = scene.timings.get("write", 0.0)  # a scene written twice counts its last write
         scene.timings["write"] = time.perf_counter() - started
         if "total" in scene.timings:
-            scene.timings["total"] += scene.timings["write"]
+            scene.timings["total"] += scene.timings["write"] - earlier_write
         summary = scene.summary(scene_path, (root / scene_path.name).stat().st_size) | {"video": written_video}
         (root / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary

@@ -48,6 +48,11 @@ def _check_inputs(gaussians: Gaussians, cameras: Cameras, sh_degree: int) -> tup
     require_finite("cameras.intrinsics", cameras.intrinsics)
     if not 0 <= sh_degree <= min(gaussians.sh_degree, MAX_SH_DEGREE):
         raise ValueError(f"sh_degree {sh_degree} must be between 0 and the scene's degree {gaussians.sh_degree}")
+    if len(cameras) == 0:
+        raise ValueError("cameras: no camera to render from")
+    focal = cameras.intrinsics[:, [0, 1], [0, 1]]
+    if bool((focal <= 0).any()):
+        raise ValueError(f"cameras.intrinsics: the focal lengths must be positive, got {focal[(focal <= 0).any(dim=1)][0].tolist()}")
     if len(set(cameras.sizes)) != 1:
         raise ValueError(f"cameras have different image sizes {sorted(set(cameras.sizes))}; use Cameras.rescaled")
     return cameras.sizes[0]
@@ -94,7 +99,8 @@ def render(
     weights: bool = False,
 ) -> RenderOutput:
     """Render every camera (all of the same image size, taken from `cameras.sizes`) over
-    `background` [3] (an RGB colour in [0, 1]; black when None).
+    `background` [3] (an RGB colour in [0, 1]; black when None). Float32 or float64 Gaussians
+    render in their type; float16 and bfloat16 ones in float32.
 
     backend: "auto" = our CPU kernel for CPU tensors, gsplat for CUDA tensors when it imports
     (else our kernel on the CPU, with a warning); "cpu", "gsplat" or "reference" (the dense twin)
@@ -106,8 +112,14 @@ def render(
     degree = gaussians.sh_degree if sh_degree is None else sh_degree
     width, height = _check_inputs(gaussians, cameras, degree)
     settings = RasterSettings(width, height, min(degree, MAX_SH_DEGREE), near, far, eps2d, antialiased)
+    if gaussians.means.dtype in (torch.float16, torch.bfloat16):
+        # the kernels blend in float32 or float64: half-precision Gaussians (e.g. from an autocast
+        # training step) render in float32, and their gradients flow back through the cast
+        gaussians = gaussians.to(dtype=torch.float32)
     dtype, device = gaussians.means.dtype, gaussians.means.device
     background = torch.zeros(3) if background is None else torch.as_tensor(background)
+    if background.shape != (3,):
+        raise ValueError(f"background must be one RGB colour [3], got shape {tuple(background.shape)}")
     background = background.to(device=device, dtype=dtype)
     require_finite("background", background)
     if backend == "auto":

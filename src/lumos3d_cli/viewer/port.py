@@ -33,4 +33,7 @@ def require_free_port(host: str, port: int) -> None:
         except OSError as error:
             if error.errno == errno.EADDRINUSE:
                 raise port_in_use(host, port) from error
+            if error.errno == errno.EADDRNOTAVAIL:
+                raise InputError(f"{host}: not an address of this machine ({error.strerror}); use 127.0.0.1 or 0.0.0.0",
+                                 parameter="host") from error
             raise InputError(f"{port}: cannot listen there on {host} ({error.strerror})", parameter="port") from error
