@@ -263,3 +263,15 @@ def test_console_script_and_debug_traceback(tmp_path):
     assert debug.returncode != 0 and "Traceback" in debug.stderr
     module = subprocess.run([sys.executable, "-m", "lumos3d_cli", "--version"], capture_output=True, text=True)
     assert module.returncode == 0 and module.stdout.startswith("lumos3d ")
+
+
+def test_usage_errors_are_one_line_naming_the_option_and_the_help(run_cli):
+    for args, message in (
+        (("restore", "photos", "-o", "out/scene.ply", "--max-views", "abc"), "Invalid value for '--max-views'"),
+        (("restore", "-o", "out/scene.ply"), "Missing argument 'photos'"),
+        (("restore", "photos", "-o", "out/scene.ply", "--bogus"), "No such option: --bogus"),
+        (("bogus",), "No such command 'bogus'"),
+    ):
+        result = run_cli(*args)
+        assert result.code == 2 and result.err.count("\n") == 1, result.err
+        assert result.err.startswith(f"error: {message}") and "--help'" in result.err

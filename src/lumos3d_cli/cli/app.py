@@ -127,9 +127,21 @@ def _run(args: list[str], debug: bool, claim_signals: Callable[[], None]) -> int
     try:
         command_line = add_commands(args)
         claim_signals()
-        command_line(args=args, prog_name="lumos3d", standalone_mode=True)
+        # Not standalone: click returns the code of typer.Exit and `--help`, and raises its usage
+        # errors here, so that they read as one line like every other bad input.
+        result = command_line(args=args, prog_name="lumos3d", standalone_mode=False)
+        return result if isinstance(result, int) else 0
     except SystemExit as done:
         return done.code if isinstance(done.code, int) else 0 if done.code is None else 1
+    except typer.Abort:  # end of input at a prompt; a signal raises Interrupted instead
+        stderr_console().print("[bold red]error:[/bold red] aborted", highlight=False)
+        return 1
+    except typer.TyperException as error:  # a usage error: unknown option, missing argument, a value of the wrong type
+        where = error.ctx.command_path if getattr(error, "ctx", None) is not None else "lumos3d"
+        message = error.format_message().rstrip(".")
+        if message:  # `lumos3d` alone has shown its help: nothing is wrong to say
+            stderr_console().print(f"[bold red]error:[/bold red] {message}; see '{where} --help'", highlight=False)
+        return getattr(error, "exit_code", 2)
     except InputError as error:
         if debug:  # the traceback, then the same line and exit code as without --debug
             traceback.print_exc()

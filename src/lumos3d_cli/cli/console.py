@@ -45,9 +45,27 @@ def configure_logging(debug: bool, quiet: bool) -> None:
     logging.getLogger("lumos3d_cli").setLevel(level)
 
 
+class _ProgressShownOnceUsed(Progress):
+    """A Progress drawn from its first task on: one that a refused command leaves unused draws
+    nothing, so its error stays the one line on stderr (a started, empty display ends in a blank
+    line)."""
+
+    def __enter__(self) -> Progress:
+        return self
+
+    def __exit__(self, *exception) -> None:
+        if self.live.is_started:
+            self.stop()
+
+    def add_task(self, *args, **kwargs):
+        if not self.live.is_started:
+            self.start()
+        return super().add_task(*args, **kwargs)
+
+
 def progress_bar() -> Progress:
     """A rich progress bar on stderr; silent under --quiet."""
-    return Progress(
+    return _ProgressShownOnceUsed(
         TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
         TimeElapsedColumn(), TimeRemainingColumn(),
         console=stderr_console(), disable=state.quiet, transient=False,
