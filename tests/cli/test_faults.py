@@ -205,12 +205,27 @@ def test_info_deep_names_the_images_that_will_not_load(tmp_path, buu, run_cli):
     quick = run_cli("info", folder, "--json")
     assert quick.code == 0, quick.err
     assert json.loads(quick.out)["pixels"].startswith("not decoded; --deep")
+    pixels = np.ones((4, 6, 3), np.float32)
+    pixels[0, 0] = np.inf
+    cv2.imwrite(str(folder / "5.tif"), pixels)  # a float TIFF holding Inf, refused as the EXR is
+    (folder / "6.jpg").write_text("no JPEG: its header does not read")
     deep = run_cli("info", folder, "--deep", "--json")
-    expect_input_error(deep, "3 of 4 images will not load or restore", "2.JPG (cannot decode as JPG",
-                       "3.exr (1 of 48 samples are NaN or Inf", "4.png (40x10 pixels, too small for the network")
+    expect_input_error(deep, "5 of 6 images will not load or restore", "2.JPG (cannot decode as JPG",
+                       "3.exr (1 of 48 samples are NaN or Inf", "5.tif (3 of 72 samples", "; and 2 more")
     summary = json.loads(deep.out)
-    assert sorted(summary["will_not_load"]) == ["2.JPG", "3.exr"] and list(summary["too_small"]) == ["4.png"]
+    assert sorted(summary["will_not_load"]) == ["2.JPG", "3.exr", "5.tif", "6.jpg"] and list(summary["too_small"]) == ["4.png"]
+    assert summary["will_not_load"]["5.tif"] == "3 of 72 samples are NaN or Inf; clamp or repair the file before use"
+    assert summary["count"] == 6 and summary["will_not_load"]["6.jpg"].startswith("cannot read image header")
     assert run_cli("info", folder / "1.JPG", "--deep").code == 0
+
+
+def test_info_summarises_a_checkpoint_folder_as_restore_takes_it(tmp_path, random_checkpoint, run_cli):
+    folder = tmp_path / "step_3"
+    folder.mkdir()
+    shutil.copy(random_checkpoint, folder / "model.safetensors")
+    result = run_cli("info", folder, "--json")
+    assert result.code == 0, result.err
+    assert json.loads(result.out)["format"] == "lumos3d"
 
 
 # -- rows 7, 8: non-finite checkpoints and scenes ------------------------------------------------------
@@ -333,3 +348,23 @@ def test_a_restore_of_photos_of_different_sizes_renders_and_opens_in_the_viewer(
     assert orbit.code == 0, orbit.err
     viewer = load_viewer_scene(scene)
     assert sorted(viewer.cameras.sizes) == sorted(sizes.values()) and viewer.notes == []
+
+
+def test_metrics_against_a_featureless_reference_are_null_in_strict_json(tmp_path, buu, random_checkpoint, run_cli):
+    """A black reference has no detail (sharpness undefined) and one grey (PSNR at its mean
+    undefined): the files and --json stay strict JSON, the values null, and a warning says so."""
+    photos = _photos(buu, tmp_path / "photos", ["1.JPG", "2.JPG"])
+    black = tmp_path / "black"
+    black.mkdir()
+    for name in ("1.png", "2.png"):
+        cv2.imwrite(str(black / name), np.zeros((375, 500, 3), np.uint8))
+    result = run_cli(*_restore(photos, tmp_path / "out" / "scene.ply", random_checkpoint, "--reference", black, "--json"))
+    assert result.code == 0, result.err
+    assert "summary.json:" in result.err and "not finite, written as null" in result.err
+
+    def refuse(constant):
+        raise AssertionError(f"not strict JSON: {constant}")
+
+    for text in (result.out, (tmp_path / "out" / "summary.json").read_text()):
+        views = json.loads(text, parse_constant=refuse)["metrics"]["views"]
+        assert views["1.JPG"]["sharpness"] is None and isinstance(views["1.JPG"]["psnr"], float)

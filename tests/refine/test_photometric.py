@@ -25,8 +25,11 @@ def test_working_size_keeps_the_aspect_and_never_enlarges(size, max_side, expect
 
 
 def test_working_size_leaves_ssim_room():
+    # a panorama keeps 11 pixels (SSIM's window) on its short side, its long side beyond max_side
+    assert working_size(4000, 50, 256) == (880, 11) and working_size(500, 40, 64) == (138, 11)
+    assert working_size(2000, 11, 256) == (2000, 11)  # never enlarged
     with pytest.raises(ValueError, match="SSIM"):
-        working_size(500, 40, 64)
+        working_size(500, 10, 256)  # the targets themselves leave no room
 
 
 def test_working_views_downsample_targets_and_rescale_cameras():

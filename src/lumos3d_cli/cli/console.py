@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import logging
 import sys
 from dataclasses import dataclass
@@ -10,6 +9,8 @@ from dataclasses import dataclass
 from rich.console import Console
 from rich.logging import RichHandler
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from lumos3d_cli.io.json_text import json_text
 
 
 @dataclass
@@ -74,7 +75,8 @@ def progress_bar() -> Progress:
 
 def print_json(document: dict) -> None:
     """One JSON document on stdout."""
-    sys.stdout.write(json.dumps(document, indent=2, default=str) + "\n")
+    # strict JSON: non-finite values as null (the files written beside it said which)
+    sys.stdout.write(json_text(document))
     sys.stdout.flush()
 
 

@@ -34,16 +34,24 @@ def _image_summary(paths: list[Path], deep: bool) -> dict:
     decoded, as restore would) and those too small for the network (`too_small`). Without it only the headers are read: decoding takes about 17 ms
     per 0.2-megapixel photo of LOM buu here, seconds per 24-megapixel photo or RAW file."""
     with library_imports():
-        from lumos3d_cli.io.images import read_image
+        from lumos3d_cli.io.images import probe_image, read_image
         from lumos3d_cli.io.summaries import summarize_image_files
-    summary = summarize_image_files(paths)
     if not deep:
+        summary = summarize_image_files(paths)
         summary["pixels"] = "not decoded; --deep decodes every image to find those that will not load"
         return summary
-    unreadable, too_small = {}, {}
+    unreadable, too_small, readable = {}, {}, []
+    for path in paths:  # a header that does not read is one more file that will not load, not the end
+        try:
+            probe_image(path)
+            readable.append(path)
+        except InputError as error:
+            unreadable[path.name] = str(error).removeprefix(f"{path}: ")
+    summary = summarize_image_files(readable) if readable else {"kind": "images"}
+    summary["count"] = len(paths)
     with progress_bar() as progress:
-        task = progress.add_task("decode", total=len(paths))
-        for path in paths:
+        task = progress.add_task("decode", total=len(readable))
+        for path in readable:
             try:
                 height, width = read_image(path).pixels.shape[:2]
                 if min(width, height) < SMALLEST_PHOTO_SIDE:
@@ -52,7 +60,7 @@ def _image_summary(paths: list[Path], deep: bool) -> dict:
             except InputError as error:  # NonFiniteError included: NaN or Inf samples
                 unreadable[path.name] = str(error).removeprefix(f"{path}: ")
             progress.advance(task)
-    summary["will_not_load"] = unreadable
+    summary["will_not_load"] = {path.name: unreadable[path.name] for path in paths if path.name in unreadable}
     summary["too_small"] = too_small
     return summary
 
@@ -74,6 +82,7 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
     # and in `_image_summary`, when the command runs, so that `--help` stays fast.
     with library_imports():
         from lumos3d_cli.io.camera_files import find_camera_source
+        from lumos3d_cli.io.weight_files import FOLDER_FILES
         from lumos3d_cli.io.summaries import summarize_camera_file, summarize_gaussian_file
         from lumos3d_cli.model.checkpoints import summarize_checkpoint
     if not path.exists():
@@ -105,8 +114,10 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
         summaries.append({**_image_summary(list_images(folder), deep), "path": str(folder)})
     if find_camera_source(path) is not None:
         summaries.append(summarize_camera_file(path))
+    if any((path / name).is_file() for name in FOLDER_FILES):  # a checkpoint folder, as restore --checkpoint takes one
+        summaries.append(summarize_checkpoint(path))
     if not summaries:
-        raise InputError(f"{path}: holds no images, cameras or .ply; nothing to summarise")
+        raise InputError(f"{path}: holds no images, cameras, checkpoint or .ply; nothing to summarise")
     return summaries
 
 

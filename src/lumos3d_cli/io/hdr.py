@@ -7,10 +7,9 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 
-from lumos3d_cli.checks import count_non_finite
-from lumos3d_cli.errors import InputError, NonFiniteError
+from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.image_types import DecodedImage, ImageHeader
-from lumos3d_cli.io.photo import read_file_bytes
+from lumos3d_cli.io.photo import read_file_bytes, require_finite_samples
 
 
 def _open(path: Path) -> oiio.ImageInput:
@@ -43,11 +42,7 @@ def read_hdr(path: Path) -> DecodedImage:
         source.close()
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
     rgb = np.ascontiguousarray(pixels[..., _rgb_channels(spec)])
-    bad = count_non_finite(rgb)
-    if bad:
-        raise NonFiniteError(
-            f"{path}: {bad} of {rgb.size} samples are NaN or Inf; clamp or repair the file before use"
-        )
+    require_finite_samples(path, rgb)
     bits = 16 if spec.format.basetype == oiio.HALF else 32
     return DecodedImage(path, rgb, "linear", bits, "hdr")
 

@@ -8,7 +8,8 @@ import cv2
 import numpy as np
 import OpenImageIO as oiio
 
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.checks import count_non_finite
+from lumos3d_cli.errors import InputError, NonFiniteError
 from lumos3d_cli.io.image_types import DecodedImage, ImageHeader
 
 # IMREAD_COLOR applies EXIF orientation, turns grayscale into 3 channels and drops alpha;
@@ -28,6 +29,14 @@ def read_file_bytes(path: Path) -> np.ndarray:
     return data
 
 
+def require_finite_samples(path: Path, rgb: np.ndarray) -> None:
+    """NonFiniteError naming the file when decoded float samples hold NaN or Inf (float TIFF,
+    EXR, HDR): they would reach the network and every output."""
+    bad = count_non_finite(rgb)
+    if bad:
+        raise NonFiniteError(f"{path}: {bad} of {rgb.size} samples are NaN or Inf; clamp or repair the file before use")
+
+
 def read_photo(path: Path) -> DecodedImage:
     """Decode a photo to RGB float32: [0, 1] sRGB for 8/16-bit files, linear for float TIFFs."""
     data = read_file_bytes(path)
@@ -43,6 +52,7 @@ def read_photo(path: Path) -> DecodedImage:
     if rgb.dtype == np.uint16:
         return DecodedImage(path, rgb.astype(np.float32) / 65535.0, "srgb", 16, "photo")
     if rgb.dtype in (np.float32, np.float64):
+        require_finite_samples(path, rgb)
         return DecodedImage(path, rgb.astype(np.float32), "linear", 32, "photo")
     raise InputError(f"{path}: unsupported sample type {rgb.dtype}; save it as 8- or 16-bit")
 

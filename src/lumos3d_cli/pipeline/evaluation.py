@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +17,7 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.eval.contact_sheet import contact_sheet
 from lumos3d_cli.io.file_digest import file_sha256
 from lumos3d_cli.io.image_write import write_image
+from lumos3d_cli.io.json_text import json_text
 from lumos3d_cli.model.appearance.exposure_prior import prior_strength
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET
@@ -136,7 +136,7 @@ def write_eval_report(report: EvalReport, out: Path | str, inputs: Sequence[Path
     """metrics.json, metrics.csv and contact_sheet_<scene>.png into `out`, all or nothing, never
     over a file lumos3d did not write nor over `inputs` (io/output_set.py)."""
     with eval_outputs(out, [result.scene for result in report.scenes], inputs).staged() as staging:
-        (staging.root / "metrics.json").write_text(json.dumps(report.document, indent=2) + "\n")
+        (staging.root / "metrics.json").write_text(json_text(report.document, "metrics.json"))
         buffer = io.StringIO()
         writer = csv.DictWriter(buffer, fieldnames=["scene", "method", *METRIC_KEYS])
         writer.writeheader()

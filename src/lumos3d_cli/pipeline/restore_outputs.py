@@ -5,7 +5,6 @@ earlier outputs (io/output_set.py)."""
 
 from __future__ import annotations
 
-import json
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -19,6 +18,7 @@ from lumos3d_cli.eval.contact_sheet import contact_sheet
 from lumos3d_cli.io.colmap import write_colmap_model
 from lumos3d_cli.io.colour import srgb_to_linear
 from lumos3d_cli.io.image_write import write_exr, write_image
+from lumos3d_cli.io.json_text import finite_document, json_text
 from lumos3d_cli.io.ply import write_ply
 from lumos3d_cli.io.preview_glb import write_preview_glb
 from lumos3d_cli.io.transforms_json import write_transforms_json
@@ -96,6 +96,7 @@ def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_fo
         scene.timings["write"] = time.perf_counter() - started
         if "total" in scene.timings:
             scene.timings["total"] += scene.timings["write"] - earlier_write
-        summary = scene.summary(scene_path, (root / scene_path.name).stat().st_size) | {"video": written_video}
-        (root / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        summary = finite_document(scene.summary(scene_path, (root / scene_path.name).stat().st_size)
+                                  | {"video": written_video}, "summary.json")
+        (root / "summary.json").write_text(json_text(summary))
     return summary

@@ -18,8 +18,11 @@ def photometric_loss(renders: torch.Tensor, targets: torch.Tensor, ssim_weight: 
 
 def working_size(width: int, height: int, max_side: int) -> tuple[int, int]:
     """(width, height) with the longer side at most `max_side` (the aspect ratio kept, never
-    enlarged); ValueError when the shorter side leaves SSIM's window no room (<= 2 * RADIUS)."""
-    factor = min(1.0, max_side / max(width, height))
+    enlarged), except that the shorter side keeps room for SSIM's window (2 * RADIUS + 1 pixels:
+    a panorama of 4000x50 works at 880x11, not 256x3); ValueError when the targets themselves
+    have no such room."""
+    window = 2 * RADIUS + 1
+    factor = min(1.0, max(max_side / max(width, height), window / min(width, height)))
     size = (max(1, round(width * factor)), max(1, round(height * factor)))
     if min(size) <= 2 * RADIUS:
         raise ValueError(f"targets of {width}x{height} work at {size[0]}x{size[1]}: SSIM needs at least "
