@@ -46,3 +46,16 @@ def test_entries_named_as_images_that_are_not_files_are_skipped_by_name(tmp_path
         list_images(tmp_path / "3.png")
     with pytest.raises(InputError, match="2.jpg: no such file or folder"):
         list_images(tmp_path / "2.jpg")
+
+
+def test_images_in_formats_lumos3d_does_not_read_are_named_when_skipped(tmp_path, caplog):
+    for name in ("IMG_2.HEIC", "IMG_10.avif", "IMG_3.gif"):
+        (tmp_path / name).write_bytes(b"x")
+    (tmp_path / "notes.txt").write_text("not an image: skipped silently")
+    with pytest.raises(InputError, match="holds no images .*; IMG_2.HEIC, IMG_3.gif, IMG_10.avif cannot be read: convert"):
+        list_images(tmp_path)
+    (tmp_path / "IMG_1.jpg").write_bytes(b"x")
+    with caplog.at_level(logging.WARNING, logger="lumos3d_cli.io.image_files"):
+        assert list_images(tmp_path) == [tmp_path / "IMG_1.jpg"]
+    assert "skipped IMG_2.HEIC, IMG_3.gif, IMG_10.avif: a format lumos3d does not read" in caplog.text
+    assert "notes.txt" not in caplog.text

@@ -211,3 +211,20 @@ def test_linear_sources_are_encoded_once_and_clipped(tmp_path):
     batch = load_images(tmp_path)
     np.testing.assert_allclose(batch.images[0].numpy(), linear_to_srgb(np.float32(0.18)), atol=1e-6)
     np.testing.assert_allclose(batch.images[1].numpy(), 1.0)
+
+
+def test_transparent_pixels_are_warned_of_since_alpha_is_ignored(tmp_path, caplog):
+    rgba = np.zeros((8, 10, 4), np.uint8)
+    rgba[..., 1] = 200
+    rgba[..., 3] = 255
+    cv2.imwrite(str(tmp_path / "opaque.png"), rgba)
+    rgba[:, :5, 3] = 0  # the left half hidden
+    cv2.imwrite(str(tmp_path / "half.png"), rgba)
+    cv2.imwrite(str(tmp_path / "rgb.png"), rgba[..., :3])
+    with caplog.at_level(logging.WARNING, logger="lumos3d_cli.io.photo"):
+        for name in ("opaque.png", "rgb.png"):
+            assert read_image(tmp_path / name).pixels.shape == (8, 10, 3)
+        assert caplog.text == ""
+        half = read_image(tmp_path / "half.png").pixels
+    assert "half.png: 50.0 % of its pixels are transparent; alpha is ignored" in caplog.text
+    assert np.allclose(half[..., 1], 200 / 255)  # the colour under the hidden pixels, as documented

@@ -37,7 +37,7 @@ def test_restore_and_write_without_the_cli(buu, tmp_path, random_checkpoint):
     # written again: the same outputs, the total counting one write
     total = summary["seconds"]["total"] - summary["seconds"]["write"]
     again = lumos3d_cli.write_restored_scene(scene, tmp_path / "out" / "scene.ply")
-    assert again["seconds"]["total"] == pytest.approx(total + again["seconds"]["write"])
+    assert again["seconds"]["total"] == pytest.approx(total + again["seconds"]["write"], abs=2e-3)  # rounded to ms
     # never into the folder the photos were read from, as `lumos3d restore` refuses it
     with pytest.raises(InputError, match="is the input folder"):
         lumos3d_cli.write_restored_scene(scene, photos / "scene.ply")

@@ -40,7 +40,7 @@ def restore_command(
     preset: str = typer.Option(DEFAULT_RESTORE_PRESET, "--preset", help="Speed/accuracy: fast, balanced or best."),
     mode: str = typer.Option("low-light", "--mode", help=f"One of: {', '.join(MODES)}."),
     geometry: str = typer.Option("auto", "--geometry", help=f"Cameras from: {', '.join(GEOMETRY_SOURCES)} (auto: sfm when it registers most views, else network)."),
-    poses: Path | None = typer.Option(None, "--poses", help="Known cameras: a transforms.json or a COLMAP model folder (matched by file stem)."),
+    poses: Path | None = typer.Option(None, "--poses", help="Known cameras: a transforms.json, a COLMAP model folder (text or binary), a folder of LOM transforms_*.json, or a scene folder holding one (matched by file stem)."),
     max_views: int | None = typer.Option(None, "--max-views", help="Views the network sees (default: the preset's)."),
     refine_steps: int | None = preset_options.REFINE_STEPS,
     max_gaussians: int | None = preset_options.MAX_GAUSSIANS,
@@ -76,7 +76,8 @@ def restore_command(
     # Everything the outputs must stay clear of; checked, with what is already in the way, before any
     # work (and before the libraries load: a refusal ends at once), and again while the output
     # folder is held against other runs (io/output_set.py).
-    inputs = [*list_photos(photos), *photos, poses, reference, checkpoint, lpips_weights]
+    paths = list_photos(photos)  # listed once: what the folder skips is said once
+    inputs = [*paths, *photos, poses, reference, checkpoint, lpips_weights]
     outputs = restore_outputs(output, inputs, video)
     outputs.check()
     # The job's modules import torch, pycolmap, trimesh, viser and imageio-ffmpeg (seconds): imported
@@ -89,7 +90,7 @@ def restore_command(
             from lumos3d_cli.pipeline.early_registration import start_early_registration
             from lumos3d_cli.pipeline.presets import get_restore_preset
 
-            early = start_early_registration(list_photos(photos), get_restore_preset(preset), geometry, poses)
+            early = start_early_registration(paths, get_restore_preset(preset), geometry, poses)
             from lumos3d_cli.io.video import video_kind
             from lumos3d_cli.pipeline.orbit_video import DEFAULT_ORBIT_FRAMES
             from lumos3d_cli.pipeline.restore import restore
@@ -98,7 +99,7 @@ def restore_command(
             video_kind(video)
         with outputs.reserved(), progress_bar() as bars:
             scene = restore(
-                photos, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,
+                paths, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,
                 max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, gaussian_grid=gaussian_grid,
                 exposure_prior=exposure_prior, exposure_key=exposure_key, fill_unobserved=fill_unobserved, densify=densify,
                 depth_sweep=depth_sweep,

@@ -21,6 +21,9 @@ RAW_SUFFIXES = frozenset(
     }
 )
 IMAGE_SUFFIXES = PHOTO_SUFFIXES | HDR_SUFFIXES | RAW_SUFFIXES
+# Images lumos3d does not read: in a folder they are named when skipped, not passed over in
+# silence (a phone's HEIC photos among its JPEGs would otherwise drop views unnoticed).
+UNREAD_IMAGE_SUFFIXES = frozenset({".heic", ".heif", ".avif", ".gif", ".jxl", ".jp2", ".psd", ".svg", ".ico"})
 
 _DIGITS = re.compile(r"(\d+)")
 
@@ -44,6 +47,10 @@ def image_kind(path: Path) -> str:
     raise InputError(f"{path}: unsupported file type '{path.suffix}'; use one of: {supported}")
 
 
+def _listed(names: Sequence[str], limit: int = 5) -> str:
+    return ", ".join(names[:limit]) + (f" and {len(names) - limit} more" if len(names) > limit else "")
+
+
 def list_images(inputs: Path | str | Sequence[Path | str]) -> list[Path]:
     """Expand a folder (its image files, naturally sorted) or a list of files and folders.
 
@@ -58,14 +65,20 @@ def list_images(inputs: Path | str | Sequence[Path | str]) -> list[Path]:
     for item in items:
         path = Path(item)
         if path.is_dir():
-            named = [p for p in path.iterdir() if not p.name.startswith(".") and p.suffix.lower() in IMAGE_SUFFIXES]
+            entries = [p for p in path.iterdir() if not p.name.startswith(".")]
+            named = [p for p in entries if p.suffix.lower() in IMAGE_SUFFIXES]
             found = [p for p in named if p.is_file()]
             unreadable = sorted(p.name for p in named if not p.is_file() and not p.is_dir())
             if unreadable:
                 logger.warning("%s: skipped %s: named as images but not files (a broken link, a pipe or a device)",
                                path, ", ".join(unreadable))
+            unread = sorted((p.name for p in entries if p.suffix.lower() in UNREAD_IMAGE_SUFFIXES), key=natural_sort_key)
             if not found:
-                raise InputError(f"{path}: folder holds no images ({', '.join(sorted(IMAGE_SUFFIXES))})")
+                also = f"; {_listed(unread)} cannot be read: convert them to JPEG or PNG" if unread else ""
+                raise InputError(f"{path}: folder holds no images ({', '.join(sorted(IMAGE_SUFFIXES))}){also}")
+            if unread:
+                logger.warning("%s: skipped %s: a format lumos3d does not read; convert to JPEG or PNG to include them",
+                               path, _listed(unread))
             paths.extend(sorted(found, key=natural_sort_key))
         elif path.is_file():
             image_kind(path)

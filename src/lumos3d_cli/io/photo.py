@@ -1,7 +1,9 @@
-"""JPEG, PNG, TIFF, WebP and BMP through OpenCV (EXIF orientation applied, alpha dropped)."""
+"""JPEG, PNG, TIFF, WebP and BMP through OpenCV (EXIF orientation applied, alpha dropped with a
+warning where it hides pixels)."""
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import cv2
@@ -16,6 +18,9 @@ from lumos3d_cli.io.image_types import DecodedImage, ImageHeader
 # IMREAD_ANYDEPTH keeps 16-bit and float samples.
 _READ_FLAGS = cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH
 _TRANSPOSING_ORIENTATIONS = {5, 6, 7, 8}
+_ALPHA_SUFFIXES = {".png", ".tif", ".tiff", ".webp"}  # the photo formats that can carry alpha
+
+logger = logging.getLogger(__name__)
 
 
 def read_file_bytes(path: Path) -> np.ndarray:
@@ -37,6 +42,30 @@ def require_finite_samples(path: Path, rgb: np.ndarray) -> None:
         raise NonFiniteError(f"{path}: {bad} of {rgb.size} samples are NaN or Inf; clamp or repair the file before use")
 
 
+def _warn_of_transparency(path: Path, data: np.ndarray) -> None:
+    """A warning when the photo has an alpha channel that hides some pixels: alpha is dropped, so
+    whatever colour lies under them is restored as part of the photo."""
+    if path.suffix.lower() not in _ALPHA_SUFFIXES:
+        return
+    source = oiio.ImageInput.open(str(path))  # the header only: most photos carry no alpha
+    if source is None:
+        return  # the decoder has read the file; a header this library cannot read says nothing of alpha
+    try:
+        has_alpha = source.spec().alpha_channel >= 0 or source.spec().nchannels in (2, 4)
+    finally:
+        source.close()
+    if not has_alpha:
+        return
+    pixels = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    if pixels is None or pixels.ndim != 3 or pixels.shape[2] not in (2, 4):
+        return
+    alpha = pixels[..., -1]
+    hidden = float(np.mean(alpha < np.iinfo(alpha.dtype).max if alpha.dtype.kind == "u" else alpha < 1))
+    if hidden > 0:
+        logger.warning("%s: %.1f %% of its pixels are transparent; alpha is ignored, so the colour under them is "
+                       "restored too: flatten the image onto a background first to choose that colour", path, 100 * hidden)
+
+
 def read_photo(path: Path) -> DecodedImage:
     """Decode a photo to RGB float32: [0, 1] sRGB for 8/16-bit files, linear for float TIFFs."""
     data = read_file_bytes(path)
@@ -46,6 +75,7 @@ def read_photo(path: Path) -> DecodedImage:
             f"{path}: cannot decode as {path.suffix.lstrip('.').upper()} (corrupt, truncated or not an image); "
             "replace or remove the file"
         )
+    _warn_of_transparency(path, data)
     rgb = np.ascontiguousarray(bgr[..., ::-1])
     if rgb.dtype == np.uint8:
         return DecodedImage(path, rgb.astype(np.float32) / 255.0, "srgb", 8, "photo")

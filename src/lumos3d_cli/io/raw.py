@@ -11,17 +11,33 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.image_types import DecodedImage, ImageHeader
 from lumos3d_cli.io.photo import read_file_bytes
 
-_CONVERT_HINT = "convert it to DNG (Adobe DNG Converter) or export a 16-bit TIFF"
+def _convert_hint(path: Path) -> str:
+    if path.suffix.lower() == ".dng":
+        return "export it as a 16-bit TIFF from a RAW editor"
+    return "convert it to DNG (Adobe DNG Converter) or export a 16-bit TIFF"
+
+
+def _reason(error: rawpy.LibRawError) -> str:
+    """LibRaw's reason, readable (it comes as bytes: b'Input/output error')."""
+    reason = error.args[0] if error.args else error
+    return reason.decode(errors="replace") if isinstance(reason, bytes) else str(reason)
+
+
+def _refusal(path: Path, action: str, error: rawpy.LibRawError) -> InputError:
+    if isinstance(error, (rawpy.LibRawIOError, rawpy.LibRawDataError)):  # what a truncated or damaged file gives
+        return InputError(f"{path}: cannot {action} camera RAW: the file is damaged or truncated ({_reason(error)}); "
+                          "copy it from the camera or card again")
+    if isinstance(error, rawpy.LibRawFileUnsupportedError):
+        return InputError(f"{path}: unsupported camera RAW ({_reason(error)}); {_convert_hint(path)}")
+    return InputError(f"{path}: cannot {action} camera RAW ({_reason(error)}); {_convert_hint(path)}")
 
 
 def _open(path: Path) -> rawpy.RawPy:
     read_file_bytes(path)
     try:
         return rawpy.imread(str(path))
-    except rawpy.LibRawFileUnsupportedError as error:
-        raise InputError(f"{path}: unsupported camera RAW ({error}); {_CONVERT_HINT}") from error
     except rawpy.LibRawError as error:
-        raise InputError(f"{path}: cannot read camera RAW ({error}); the file may be corrupt; {_CONVERT_HINT}") from error
+        raise _refusal(path, "read", error) from error
 
 
 def read_raw(path: Path) -> DecodedImage:
@@ -40,7 +56,7 @@ def read_raw(path: Path) -> DecodedImage:
                 output_color=rawpy.ColorSpace.sRGB,
             )
         except rawpy.LibRawError as error:
-            raise InputError(f"{path}: cannot decode camera RAW ({error}); {_CONVERT_HINT}") from error
+            raise _refusal(path, "decode", error) from error
     return DecodedImage(path, rgb16.astype(np.float32) / 65535.0, "linear", 16, "raw")
 
 
