@@ -233,8 +233,11 @@ def test_info_on_cameras_images_and_scene_folders(run_cli, shared_data, buu):
     assert kinds == ["images", "cameras"] and scene["summaries"][1]["count"] == 17
     lom = json.loads(run_cli("info", buu, "--json").out)  # a LOM scene: the photos of each lighting
     assert [(Path(s["path"]).name, s["count"]) for s in lom["summaries"]] == [("high", 25), ("low", 25), ("over_exp", 25),
-                                                                              ("buu", 26)]
-    assert lom["summaries"][-1]["kind"] == "cameras"  # its transforms splits, read together (frame 1 in two of them)
+                                                                              ("buu", 25)]
+    # its transforms splits, read together (frame 1, in two of them, once)
+    assert lom["summaries"][-1]["kind"] == "cameras" and lom["summaries"][-1]["format"] == "transforms splits"
+    colmap = json.loads(run_cli("info", buu / "colmap_sparse" / "0" / "images.bin", "--json").out)  # not a checkpoint
+    assert colmap["kind"] == "cameras" and colmap["format"] == "colmap" and colmap["count"] == 25
 
 
 def test_info_on_a_restore_output_folder_shows_its_scene(run_cli, tmp_path):
@@ -275,3 +278,14 @@ def test_usage_errors_are_one_line_naming_the_option_and_the_help(run_cli):
         result = run_cli(*args)
         assert result.code == 2 and result.err.count("\n") == 1, result.err
         assert result.err.startswith(f"error: {message}") and "--help'" in result.err
+
+
+def test_paths_and_values_are_printed_as_typed_never_read_as_markup(run_cli, tmp_path):
+    folder = tmp_path / "[bold]IMG [edited]"
+    folder.mkdir()
+    result = run_cli("info", folder)  # read as markup before: printed "IMG" in bold, the brackets lost
+    assert result.code == 2 and f"error: {folder}: holds no images" in result.err, result.err
+    result = run_cli("info", tmp_path, "IMG [edited].jpg")
+    assert result.code == 2 and "(IMG [edited].jpg)" in result.err, result.err
+    result = run_cli("[/x]")
+    assert result.code == 2 and "No such command '[/x]'" in result.err, result.err

@@ -1,3 +1,4 @@
+import logging
 import shutil
 
 import pytest
@@ -17,10 +18,12 @@ def _named(cameras, names):
     return cameras
 
 
-def test_buu_transforms_reproduce_the_dataset_cameras(buu):
+def test_buu_transforms_reproduce_the_dataset_cameras(buu, caplog):
     scene = read_lom_scene(buu, "low-light")
     names = [scene.degraded[frame].name for frame in scene.frames]
-    cameras = read_given_poses(buu, names, [(500, 375)] * len(names))
+    with caplog.at_level(logging.WARNING):
+        cameras = read_given_poses(buu, names, [(500, 375)] * len(names))
+    assert "distortion" not in caplog.text  # only poses and focal lengths are taken: nothing to warn of
     reference = lom_reference_extrinsics(scene)
     assert cameras.names == names and cameras.sizes == [(500, 375)] * 25
     torch.testing.assert_close(cameras.extrinsics, torch.stack([reference[f] for f in scene.frames]), atol=0, rtol=0)
@@ -78,3 +81,13 @@ def test_a_scene_folder_with_a_binary_model(tmp_path, buu):
     text = read_colmap_model(buu / "colmap_text")
     given = read_given_poses(tmp_path, text.names, text.sizes)
     torch.testing.assert_close(given.extrinsics, text.extrinsics, atol=1e-12, rtol=0)
+
+
+def test_a_scene_folder_gives_its_colmap_model_before_a_transforms_json(tmp_path, buu):
+    """`--poses d/` takes d/sparse/0 where d also holds a transforms.json, as it always has."""
+    (tmp_path / "sparse").mkdir()
+    shutil.copytree(buu / "colmap_text", tmp_path / "sparse" / "0")
+    shutil.copy(buu / "transforms_train.json", tmp_path / "transforms.json")  # 22 frames, under other names
+    names = [f"{i}.JPG" for i in range(1, 26)]
+    cameras = read_given_poses(tmp_path, names, [(500, 375)] * 25)
+    assert cameras.names == names

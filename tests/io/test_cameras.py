@@ -1,5 +1,6 @@
 import json
 import math
+import shutil
 
 import numpy as np
 import pytest
@@ -106,8 +107,21 @@ def test_every_camera_source_restore_reads_is_read_by_read_cameras(buu):
         torch.testing.assert_close(binary[order].extrinsics, text.extrinsics)
     lom = read_cameras(buu)
     splits = [read_transforms_json(buu / f"transforms_{split}.json") for split in ("test", "train", "val")]
-    assert lom.names == [name for split in splits for name in split.names]
-    torch.testing.assert_close(lom.extrinsics, torch.cat([split.extrinsics for split in splits]))
+    names = [name for split in splits for name in split.names]
+    assert len(names) == 26 and names.count("high/1.JPG") == 2  # LOM lists frame 1 in test and in val
+    assert lom.names == names[:-1] and len(set(lom.names)) == 25  # ...read once
+    torch.testing.assert_close(lom.extrinsics, torch.cat([split.extrinsics for split in splits])[:-1])
+
+
+def test_a_folder_names_its_cameras_in_one_order_and_stray_transforms_files_are_no_cameras(buu, tmp_path):
+    scene = tmp_path / "scene"
+    (scene / "sparse").mkdir(parents=True)
+    shutil.copytree(buu / "colmap_text", scene / "sparse" / "0")
+    shutil.copy(buu / "transforms_train.json", scene / "transforms.json")
+    assert find_camera_source(scene) == scene / "transforms.json"  # render, info and view: transforms.json first
+    (tmp_path / "graded").mkdir()
+    (tmp_path / "graded" / "transforms_grading.json").write_text('{"note": "a colour grade, no cameras"}')
+    assert find_camera_source(tmp_path / "graded") is None
 
 
 def test_scene_sparse_model_reprojects_its_points(shared_data):

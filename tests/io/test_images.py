@@ -228,3 +228,23 @@ def test_transparent_pixels_are_warned_of_since_alpha_is_ignored(tmp_path, caplo
         half = read_image(tmp_path / "half.png").pixels
     assert "half.png: 50.0 % of its pixels are transparent; alpha is ignored" in caplog.text
     assert np.allclose(half[..., 1], 200 / 255)  # the colour under the hidden pixels, as documented
+
+
+@pytest.mark.parametrize("name, channels, dtype", [
+    ("rgba.png", 4, "uint8"), ("rgba16.png", 4, "uint16"), ("ga.png", 2, "uint8"), ("ga16.png", 2, "uint16"),
+    ("rgba.tif", 4, "uint8"), ("rgba16.tif", 4, "uint16"), ("rgba.webp", 4, "uint8"),
+])
+def test_a_photo_with_alpha_reads_as_opencvs_colour_decoding_gives_it(tmp_path, name, channels, dtype):
+    """One decode with alpha kept, its colour as OpenCV's own colour decoding (the oracle) gives it."""
+    pixels = (np.random.default_rng(0).random((9, 11, channels)) * np.iinfo(dtype).max).astype(dtype)
+    path = tmp_path / name
+    if name.endswith(".webp"):
+        assert cv2.imwrite(str(path), pixels, [cv2.IMWRITE_WEBP_QUALITY, 101])
+    else:
+        out = oiio.ImageOutput.create(str(path))
+        out.open(str(path), oiio.ImageSpec(11, 9, channels, dtype))
+        out.write_image(pixels)
+        out.close()
+    colour = cv2.imread(str(path), cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH)[..., ::-1]
+    expected = colour.astype(np.float32) / np.iinfo(colour.dtype).max
+    np.testing.assert_array_equal(read_image(path).pixels, expected)

@@ -32,3 +32,10 @@ def test_a_finite_document_passes_unchanged_and_silent(caplog):
         assert finite_document(document, "x.json") == document
         assert _strict(json_text(document)) == document
     assert caplog.text == ""
+
+
+def test_numpy_numbers_are_numbers():
+    import numpy as np
+
+    text = json_text({"a": np.float32(0.5), "b": np.int64(3), "c": np.float64("nan"), "d": np.bool_(True)})
+    assert _strict(text) == {"a": 0.5, "b": 3, "c": None, "d": True}

@@ -57,6 +57,10 @@ def test_a_device_this_machine_lacks_is_refused_by_name_before_the_weights_load(
                             ("meta", "^device meta: lumos3d runs on cpu or cuda$")):
         with pytest.raises(InputError, match=message):
             load_model("low-light", device=device)
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
+    with pytest.raises(InputError, match="^device cuda:1: this machine has 1 CUDA device"):
+        load_model("low-light", device="cuda:1")
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
     for device in ("cuda", torch.device("cuda:0")):
         with pytest.raises(InputError, match="CUDA is not available on this machine; use cpu$"):

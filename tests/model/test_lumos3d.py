@@ -1,5 +1,6 @@
 import logging
 
+import numpy as np
 import pytest
 import torch
 
@@ -128,6 +129,7 @@ def test_fusion_settings_are_checked_by_name(model):
         with pytest.raises(InputError, match=r"^fuse_pixels must be a bool tensor of shape \[1, 2, 28, 28\]"):
             model.assemble(prediction, fuse_pixels=torch.ones(2, 28, 28, dtype=torch.bool))
         assert model.assemble(prediction, fuse_views=torch.tensor([True, False])).counts[0].pixels == 28 * 28
+        assert model.assemble(prediction, voxel_size=np.float32(0.002)).counts[0].voxels > 0  # numpy numbers are numbers
 
 
 @pytest.mark.parametrize("dtype", [torch.float64, torch.float16, torch.bfloat16])

@@ -69,6 +69,12 @@ def test_bad_inputs_are_refused():
             prepare_images(torch.rand(3, 20, 20), size, patch)
 
 
+def test_numpy_integers_are_sizes_too():
+    import numpy as np
+
+    assert prepare_images(torch.rand(3, 40, 60), np.int64(56), np.int32(14)).network_size == (56, 42)
+
+
 def test_values_beyond_one_are_clamped_whether_or_not_the_size_changes():
     for height, width in ((42, 56), (40, 40)):
         prepared = prepare_images(torch.full((3, height, width), 4.0), 56, 14)

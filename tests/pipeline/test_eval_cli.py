@@ -54,6 +54,8 @@ def test_eval_bad_inputs(run_cli, lom_copy, tmp_path, random_checkpoint):
                   "images have different sizes")
     expect_input_error(run_cli("eval", lom_copy.parent, "--scenes", "bike", "--checkpoint", random_checkpoint, "--out", out),
                   "no LOM scene(s) bike")
+    expect_input_error(run_cli("eval", lom_copy.parent, "--scenes", ",", "--checkpoint", random_checkpoint, "--out", out),
+                       "--scenes ',': names no scene")
     expect_input_error(run_cli("eval", tmp_path / "nowhere", "--checkpoint", random_checkpoint, "--out", out), "no such folder")
     expect_input_error(run_cli("eval", lom_copy.parent, "--protocol", "novel", "--checkpoint", random_checkpoint, "--out", out),
                   "--protocol 'novel'")

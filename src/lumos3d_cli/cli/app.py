@@ -90,6 +90,12 @@ _GLOBAL_FLAGS = ("--debug", "--quiet", "-q")
 _ARGUMENT_NAMES = {"photos": "PHOTOS", "root": "ROOT", "output": "-o"}
 
 
+def _error_line(label: str, message: str) -> None:
+    """`label: message` on stderr, the label in bold red; the message as plain text (it quotes
+    paths and values the user typed, which may hold rich markup such as "IMG [edited].jpg")."""
+    stderr_console().print(Text.assemble((f"{label}:", "bold red"), " ", message), highlight=False)
+
+
 def _for_command_line(error: InputError) -> str:
     """The error's message naming the command-line option or argument of its library parameter."""
     if error.parameter is None:
@@ -134,23 +140,23 @@ def _run(args: list[str], debug: bool, claim_signals: Callable[[], None]) -> int
     except SystemExit as done:
         return done.code if isinstance(done.code, int) else 0 if done.code is None else 1
     except typer.Abort:  # end of input at a prompt; a signal raises Interrupted instead
-        stderr_console().print("[bold red]error:[/bold red] aborted", highlight=False)
+        _error_line("error", "aborted")
         return 1
     except typer.TyperException as error:  # a usage error: unknown option, missing argument, a value of the wrong type
         where = error.ctx.command_path if getattr(error, "ctx", None) is not None else "lumos3d"
         message = error.format_message().rstrip(".")
         if message:  # `lumos3d` alone has shown its help: nothing is wrong to say
-            stderr_console().print(f"[bold red]error:[/bold red] {message}; see '{where} --help'", highlight=False)
+            _error_line("error", f"{message}; see '{where} --help'")
         return getattr(error, "exit_code", 2)
     except InputError as error:
         if debug:  # the traceback, then the same line and exit code as without --debug
             traceback.print_exc()
-        stderr_console().print(f"[bold red]error:[/bold red] {_for_command_line(error)}", highlight=False)
+        _error_line("error", _for_command_line(error))
         return 2
     except RunError as error:
         if debug:
             traceback.print_exc()
-        stderr_console().print(f"[bold red]error:[/bold red] {error}", highlight=False)
+        _error_line("error", str(error))
         return 1
     except Exception as error:  # noqa: BLE001 - the CLI's last line of defence
         stop = interruption_behind(error)
@@ -158,11 +164,8 @@ def _run(args: list[str], debug: bool, claim_signals: Callable[[], None]) -> int
             raise stop from error
         if debug:
             raise
-        stderr_console().print(
-            f"[bold red]internal error:[/bold red] {type(error).__name__}: {error} "
-            "(run with --debug for the traceback and report it)",
-            highlight=False,
-        )
+        _error_line("internal error",
+                    f"{type(error).__name__}: {error} (run with --debug for the traceback and report it)")
         return 1
     return 0
 

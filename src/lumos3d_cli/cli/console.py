@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 from rich.console import Console
 from rich.logging import RichHandler
+from rich.text import Text
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from lumos3d_cli.io.json_text import json_text
@@ -24,12 +25,14 @@ state = CliState()
 
 def stderr_console() -> Console:
     """Messages, logs and progress go to stderr so that stdout carries only results (--json).
-    The console looks up sys.stderr when it writes, so it follows later redirections."""
-    return Console(stderr=True, soft_wrap=True)
+    The console looks up sys.stderr when it writes, so it follows later redirections. No markup:
+    the lines quote paths and values as the user wrote them ("IMG [edited].jpg"); emphasis is
+    given as styled Text."""
+    return Console(stderr=True, soft_wrap=True, markup=False)
 
 
 def stdout_console() -> Console:
-    return Console(soft_wrap=True)
+    return Console(soft_wrap=True, markup=False)
 
 
 def configure_logging(debug: bool, quiet: bool) -> None:
@@ -80,8 +83,8 @@ def print_json(document: dict) -> None:
     sys.stdout.flush()
 
 
-def say(message: str) -> None:
-    """A human-readable line on stderr unless --quiet."""
+def say(message: str | Text) -> None:
+    """A human-readable line on stderr unless --quiet (plain text: see `stderr_console`)."""
     if not state.quiet:
         stderr_console().print(message)
 

@@ -14,6 +14,7 @@ from lumos3d_cli.cli import preset_options
 from lumos3d_cli.cli.console import print_json, progress_bar, stdout_console
 from lumos3d_cli.cli.interrupts import library_imports
 from lumos3d_cli.data.modes import MODES
+from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, GEOMETRY_SOURCES
 from lumos3d_cli.pipeline.eval_outputs import eval_outputs
@@ -82,7 +83,10 @@ def eval_command(
 ) -> None:
     """Evaluate restoration on LOM scenes (PSNR on [0,1], SSIM 11x11 sigma 1.5, LPIPS)."""
     check_output_path(out, "out", folder=True)
-    names = [n.strip() for n in scenes.split(",") if n.strip()] if scenes else None
+    names = [n.strip() for n in scenes.split(",") if n.strip()] if scenes is not None else None
+    if names == []:
+        raise InputError(f"{scenes!r}: names no scene; name scenes separated by commas, or leave --scenes out for "
+                         "every scene found", parameter="scenes")
     inputs = [root, checkpoint, lpips_weights]
     outputs = eval_outputs(out, names or [], inputs)
     outputs.check()  # a refusal comes before the libraries load; checked again under the lock
@@ -91,12 +95,13 @@ def eval_command(
     with library_imports():
         from lumos3d_cli.pipeline.evaluation import evaluate_lom, write_eval_report
     with outputs.reserved(), progress_bar() as bars:
-        task = bars.add_task(f"eval ({protocol})", total=len(names) if names else None)
+        tasks = []  # the bar appears once every setting is checked and the scenes are found
         report = evaluate_lom(
             root, names, mode=mode, protocol=protocol, checkpoint=checkpoint, preset=preset, geometry=geometry,
             max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, gaussian_grid=gaussian_grid,
             exposure_prior=exposure_prior, exposure_key=exposure_key, fill_unobserved=fill_unobserved, densify=densify, depth_sweep=depth_sweep, device=device, baseline=baseline, lpips_weights=lpips_weights,
-            on_scene=lambda _: bars.advance(task),
+            on_start=lambda count: tasks.append(bars.add_task(f"eval ({protocol})", total=count)),
+            on_scene=lambda _: bars.advance(tasks[0]),
         )
         write_eval_report(report, out, inputs)
     if json_output:

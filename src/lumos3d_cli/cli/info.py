@@ -94,7 +94,7 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
         suffix = path.suffix.lower()
         if suffix == ".ply":
             return [summarize_gaussian_file(path)]
-        if suffix in (".safetensors", ".pt", ".pth", ".bin"):
+        if suffix in (".safetensors", ".pt", ".pth", ".bin") and find_camera_source(path) is None:  # not a COLMAP images.bin
             return [summarize_checkpoint(path)]
         if suffix in IMAGE_SUFFIXES:
             return [_image_summary([path], deep)]

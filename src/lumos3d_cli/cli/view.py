@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 import typer
+from rich.text import Text
 
 from lumos3d_cli.cli.console import say
 from lumos3d_cli.cli.interrupts import library_imports
@@ -29,7 +30,7 @@ def announce(viewer: RunningViewer) -> None:
     """The URL on stdout (the command's result); the rest on stderr."""
     typer.echo(viewer.url)
     shown = f"{viewer.total:,} Gaussians" if viewer.shown == viewer.total else f"{viewer.shown:,} of {viewer.total:,} Gaussians"
-    say(f"viewer at [bold]{viewer.url}[/bold] ({shown}); open it in a browser, Ctrl-C to stop")
+    say(Text.assemble("viewer at ", (viewer.url, "bold"), f" ({shown}); open it in a browser, Ctrl-C to stop"))
 
 
 def view_command(

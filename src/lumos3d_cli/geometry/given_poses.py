@@ -19,8 +19,9 @@ from pathlib import Path
 import torch
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.camera_files import read_cameras
+from lumos3d_cli.io.camera_files import read_cameras, read_transforms_splits, transforms_splits
 from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.io.colmap import is_colmap_model, read_colmap_model
 
 logger = logging.getLogger(__name__)
 
@@ -30,6 +31,19 @@ _ASPECT_TOLERANCE = 0.01
 
 def _listed(items: Sequence[str], limit: int = 5) -> str:
     return ", ".join(items[:limit]) + (f" and {len(items) - limit} more" if len(items) > limit else "")
+
+
+def _read_pose_source(path: Path) -> Cameras:
+    """The cameras in PATH, whatever supported form it takes; in a scene folder a COLMAP model
+    first (the folder itself, sparse/0, colmap/), then LOM's splits, then what `read_cameras`
+    finds. The lens distortion is not warned of here: only the poses and focal lengths are used."""
+    if path.is_dir():
+        for folder in (path, path / "sparse" / "0", path / "colmap"):
+            if folder.is_dir() and is_colmap_model(folder):
+                return read_colmap_model(folder)
+        if transforms_splits(path):
+            return read_transforms_splits(path, warn_on_distortion=False)
+    return read_cameras(path)
 
 
 def read_given_poses(
@@ -48,7 +62,7 @@ def read_given_poses(
         raise InputError(f"{len(names)} photo names for {len(sizes)} photo sizes")
     if not path.exists():
         raise InputError(f"{path}: no such file or folder", parameter="poses")
-    given = read_cameras(path)
+    given = _read_pose_source(Path(path))
     stems = [Path(name).stem for name in given.names]
     row_of_stem: dict[str, int] = {}
     conflicting = []

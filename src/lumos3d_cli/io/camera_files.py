@@ -15,18 +15,41 @@ _HINT = ("pass a transforms.json, a COLMAP model folder (text or binary), a fold
          "transforms_{train,val,test}.json or a scene folder holding one of those")
 
 
-def _transforms_splits(folder: Path) -> list[Path]:
-    """A LOM-style folder's transforms_{train,val,test}.json (none where a transforms.json is
-    there: that file is the scene's cameras)."""
-    return [] if (folder / "transforms.json").is_file() else sorted(folder.glob("transforms_*.json"))
+LOM_SPLITS = ("test", "train", "val")
+
+
+def transforms_splits(folder: Path) -> list[Path]:
+    """A LOM-style folder's transforms_{test,train,val}.json that exist (none where a
+    transforms.json is there: that file is the scene's cameras)."""
+    if (folder / "transforms.json").is_file():
+        return []
+    return [folder / f"transforms_{split}.json" for split in LOM_SPLITS if (folder / f"transforms_{split}.json").is_file()]
+
+
+def read_transforms_splits(folder: Path, warn_on_distortion: bool = True) -> Cameras:
+    """The frames of `folder`'s splits together, in the order test, train, val; a frame in two
+    splits (LOM's buu lists 1.JPG in test and val) once, where both give it the same camera. The
+    splits share one lens: its distortion is warned of once."""
+    parts = [read_transforms_json(split, warn_on_distortion and index == 0)
+             for index, split in enumerate(transforms_splits(folder))]
+    cameras = Cameras(torch.cat([p.extrinsics for p in parts]), torch.cat([p.intrinsics for p in parts]),
+                      [s for p in parts for s in p.sizes], [n for p in parts for n in p.names])
+    first: dict[str, int] = {}
+    keep = []
+    for index, name in enumerate(cameras.names):
+        earlier = first.setdefault(name, index)
+        if earlier == index or not (torch.equal(cameras.extrinsics[earlier], cameras.extrinsics[index])
+                                    and torch.equal(cameras.intrinsics[earlier], cameras.intrinsics[index])):
+            keep.append(index)
+    return cameras[keep] if len(keep) < len(cameras) else cameras
 
 
 def find_camera_source(path: Path | str) -> Path | None:
     """The camera file or folder that `path` names or holds, or None.
 
     Accepted: a `.json` file; a COLMAP model folder, text or binary (or one of its cameras/images
-    files); a scene folder with `transforms.json`, `cameras.json`, `sparse/0/` or `colmap/`; a
-    folder of LOM-style transforms_{train,val,test}.json (read together).
+    files); a scene folder with `transforms.json`, `cameras.json`, `sparse/0/` or `colmap/` (in
+    that order); a folder of LOM-style transforms_{test,train,val}.json (read together).
     """
     path = Path(path)
     if path.is_file():
@@ -43,12 +66,11 @@ def find_camera_source(path: Path | str) -> Path | None:
         found = find_camera_source(candidate) if candidate.exists() else None
         if found is not None:
             return found
-    return path if _transforms_splits(path) else None
+    return path if transforms_splits(path) else None
 
 
 def read_cameras(path: Path | str, warn_on_distortion: bool = True) -> Cameras:
-    """Read cameras from any supported source (see `find_camera_source`); the frames of a LOM
-    folder's splits in the order train, test, val (file names sorted)."""
+    """Read cameras from any supported source (see `find_camera_source`)."""
     source = find_camera_source(path)
     if source is None:
         if not Path(path).exists():
@@ -57,7 +79,5 @@ def read_cameras(path: Path | str, warn_on_distortion: bool = True) -> Cameras:
     if source.is_dir():
         if is_colmap_model(source):
             return read_colmap_model(source)
-        parts = [read_transforms_json(split, warn_on_distortion) for split in _transforms_splits(source)]
-        return Cameras(torch.cat([p.extrinsics for p in parts]), torch.cat([p.intrinsics for p in parts]),
-                       [s for p in parts for s in p.sizes], [n for p in parts for n in p.names])
+        return read_transforms_splits(source, warn_on_distortion)
     return read_transforms_json(source, warn_on_distortion)

@@ -14,6 +14,8 @@ logger = logging.getLogger(__name__)
 
 
 def _finite(value: Any, where: str, replaced: list[str]) -> Any:
+    if type(value).__module__ == "numpy" and getattr(value, "ndim", None) == 0:
+        value = value.item()  # a numpy scalar as the Python number it holds (not its str(), as `default` would)
     if isinstance(value, float) and not math.isfinite(value):
         replaced.append(f"{where} ({value})")
         return None

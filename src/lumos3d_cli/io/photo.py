@@ -42,24 +42,47 @@ def require_finite_samples(path: Path, rgb: np.ndarray) -> None:
         raise NonFiniteError(f"{path}: {bad} of {rgb.size} samples are NaN or Inf; clamp or repair the file before use")
 
 
-def _warn_of_transparency(path: Path, data: np.ndarray) -> None:
-    """A warning when the photo has an alpha channel that hides some pixels: alpha is dropped, so
-    whatever colour lies under them is restored as part of the photo."""
+def _alpha_header(path: Path) -> tuple[bool, int]:
+    """(whether the file has an alpha channel, its EXIF orientation) from the header; (False, 1)
+    for formats without alpha and headers this library cannot read (the decoder judges those)."""
     if path.suffix.lower() not in _ALPHA_SUFFIXES:
-        return
-    source = oiio.ImageInput.open(str(path))  # the header only: most photos carry no alpha
+        return False, 1
+    source = oiio.ImageInput.open(str(path))
     if source is None:
-        return  # the decoder has read the file; a header this library cannot read says nothing of alpha
+        oiio.geterror()  # retrieved, or OpenImageIO prints it at exit
+        return False, 1
     try:
-        has_alpha = source.spec().alpha_channel >= 0 or source.spec().nchannels in (2, 4)
+        spec = source.spec()
+        return spec.alpha_channel >= 0 or spec.nchannels in (2, 4), spec.get_int_attribute("Orientation", 1)
     finally:
         source.close()
-    if not has_alpha:
+
+
+def _decode(path: Path, data: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """(BGR [H, W, 3] as OpenCV's colour decoding gives it, alpha [H, W] or None). A photo with
+    alpha is decoded once, unchanged, where no EXIF rotation applies (OpenCV's colour decoding
+    drops alpha and turns grey into three channels: the same done here); a rotated one twice."""
+    has_alpha, orientation = _alpha_header(path)
+    if has_alpha and orientation == 1:
+        pixels = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        if pixels is not None and pixels.ndim == 3 and pixels.shape[2] in (2, 4):
+            colour = pixels[..., :-1]
+            bgr = np.repeat(colour, 3, axis=2) if colour.shape[2] == 1 else np.ascontiguousarray(colour)
+            return bgr, pixels[..., -1]
+    bgr = cv2.imdecode(data, _READ_FLAGS)
+    alpha = None
+    if has_alpha and bgr is not None:
+        pixels = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        if pixels is not None and pixels.ndim == 3 and pixels.shape[2] in (2, 4):
+            alpha = pixels[..., -1]
+    return bgr, alpha
+
+
+def _warn_of_transparency(path: Path, alpha: np.ndarray | None) -> None:
+    """A warning when alpha hides some pixels: alpha is dropped, so whatever colour lies under
+    them is restored as part of the photo."""
+    if alpha is None:
         return
-    pixels = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
-    if pixels is None or pixels.ndim != 3 or pixels.shape[2] not in (2, 4):
-        return
-    alpha = pixels[..., -1]
     hidden = float(np.mean(alpha < np.iinfo(alpha.dtype).max if alpha.dtype.kind == "u" else alpha < 1))
     if hidden > 0:
         logger.warning("%s: %.1f %% of its pixels are transparent; alpha is ignored, so the colour under them is "
@@ -69,13 +92,13 @@ def _warn_of_transparency(path: Path, data: np.ndarray) -> None:
 def read_photo(path: Path) -> DecodedImage:
     """Decode a photo to RGB float32: [0, 1] sRGB for 8/16-bit files, linear for float TIFFs."""
     data = read_file_bytes(path)
-    bgr = cv2.imdecode(data, _READ_FLAGS)
+    bgr, alpha = _decode(path, data)
     if bgr is None:
         raise InputError(
             f"{path}: cannot decode as {path.suffix.lstrip('.').upper()} (corrupt, truncated or not an image); "
             "replace or remove the file"
         )
-    _warn_of_transparency(path, data)
+    _warn_of_transparency(path, alpha)
     rgb = np.ascontiguousarray(bgr[..., ::-1])
     if rgb.dtype == np.uint8:
         return DecodedImage(path, rgb.astype(np.float32) / 255.0, "srgb", 8, "photo")

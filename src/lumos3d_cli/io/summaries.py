@@ -11,6 +11,7 @@ import torch
 
 from lumos3d_cli.checks import count_non_finite
 from lumos3d_cli.io.camera_files import find_camera_source, read_cameras
+from lumos3d_cli.io.colmap import is_colmap_model
 from lumos3d_cli.io.images import probe_image
 from lumos3d_cli.io.ply import ply_fields_to_gaussians, read_ply_fields
 
@@ -63,7 +64,7 @@ def summarize_camera_file(path: Path | str) -> dict:
     return {
         "kind": "cameras",
         "path": str(source),
-        "format": "colmap" if source.is_dir() else "transforms.json",
+        "format": "transforms.json" if not source.is_dir() else "colmap" if is_colmap_model(source) else "transforms splits",
         "count": len(cameras),
         "image_sizes": {f"{w}x{h}": n for (w, h), n in Counter(cameras.sizes).items()},
         "focal_px": _stats(focal.numpy()),

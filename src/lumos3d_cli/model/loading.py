@@ -73,6 +73,9 @@ def usable_device(device: str | torch.device) -> torch.device:
         raise InputError(f"{device!r}: not a device; use cpu or cuda", parameter="device") from None
     if parsed.type == "cuda" and not torch.cuda.is_available():
         raise InputError(f"{device}: CUDA is not available on this machine; use cpu", parameter="device")
+    if parsed.type == "cuda" and parsed.index is not None and parsed.index >= torch.cuda.device_count():
+        raise InputError(f"{device}: this machine has {torch.cuda.device_count()} CUDA device(s), numbered from 0",
+                         parameter="device")
     if parsed.type not in ("cpu", "cuda"):
         raise InputError(f"{device}: lumos3d runs on cpu or cuda", parameter="device")
     return parsed

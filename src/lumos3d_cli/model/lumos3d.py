@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 from dataclasses import dataclass, field
 
 import torch
@@ -264,7 +265,8 @@ class Lumos3D(nn.Module):
         if footprint_scale is not None and voxel_size is not None:
             raise ValueError("give voxel_size or footprint_scale, not both")
         for name, value in (("voxel_size", voxel_size), ("footprint_scale", footprint_scale)):
-            if value is not None and not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            if value is not None and (isinstance(value, bool) or not isinstance(value, numbers.Real)
+                                      or not (math.isfinite(value) and value > 0)):
                 raise InputError(f"{value!r}: give a positive number (relative to the scene's scale)", parameter=name)
         placed_depth = prediction.depth if depth is None else depth
         for name, mask, shape in (("fuse_views", fuse_views, tuple(placed_depth.shape[1:2])),

@@ -3,6 +3,7 @@ size the network accepts, and map intrinsics between network pixels and original
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 
 import torch
@@ -71,7 +72,7 @@ def prepare_images(images: torch.Tensor, image_size: int, patch_size: int, mode:
     if images.dim() < 3 or images.shape[-3] != 3 or not images.is_floating_point():
         raise InputError(f"images must be float [..., 3, H, W], got {images.dtype} {tuple(images.shape)}")
     for name, value in (("patch_size", patch_size), ("image_size", image_size)):
-        if not isinstance(value, int) or value < (1 if name == "patch_size" else patch_size):
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < (1 if name == "patch_size" else patch_size):
             raise InputError(f"{value!r}: give a whole number of pixels, at least "
                              f"{1 if name == 'patch_size' else f'the patch size {patch_size}'}", parameter=name)
     require_finite("images", images)

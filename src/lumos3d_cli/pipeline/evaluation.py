@@ -66,9 +66,11 @@ def evaluate_lom(
     on_scene: Callable[[str], None] | None = None, refine_steps: int | None = None, max_gaussians: int | None = None,
     gaussian_grid: float | None = None, exposure_prior: float | None = None, fill_unobserved: bool | None = None,
     densify: bool | None = None, exposure_key: str | None = None, depth_sweep: bool | None = None,
+    on_start: Callable[[int], None] | None = None,
 ) -> EvalReport:
     """Evaluate restoration on the LOM-layout scenes under `root` (all, or those named) with the
-    paper's protocol; `on_scene(name)` is called after each scene. `refine_steps` overrides the
+    paper's protocol; `on_start(count)` is called once the scenes are found and the model is
+    loaded (every setting checked), `on_scene(name)` after each scene. `refine_steps` overrides the
     preset's test-time refinement (fitted to the views in the scene, never to held-out ones),
     `max_gaussians` its Gaussian cap, `gaussian_grid` its grid of pixel Gaussians,
     `exposure_prior` its exposure prior's strength, `fill_unobserved` whether the renders' uncovered
@@ -91,6 +93,8 @@ def evaluate_lom(
     weights = resolve_checkpoint(checkpoint, mode)
     meter = QualityMeter.create(lpips_weights)
     model = load_restoration_model(weights, device)
+    if on_start is not None:
+        on_start(len(found))
     results = []
     for scene in found:
         results.append(evaluate_lom_scene(scene, model, settings, protocol, limit, meter, geometry))
