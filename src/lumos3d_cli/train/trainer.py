@@ -11,6 +11,7 @@ import contextlib
 import logging
 import signal
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -309,7 +310,11 @@ class Trainer:
                     f"training stopped at step {step}: {self.nonfinite_in_a_row} steps in a row had a non-finite loss "
                     f"or gradient; lower optim.lr, check the data, or resume from the last checkpoint"
                 )
-        self.scheduler.step()
+        with warnings.catch_warnings():
+            # The schedule follows the step count, taken or skipped; torch warns when the first
+            # step of a run is a skipped one, as if the order of the two calls were wrong.
+            warnings.filterwarnings("ignore", message=r"Detected call of `lr_scheduler\.step\(\)` before")
+            self.scheduler.step()
         values = {name: float(all_reduce_mean(value.detach().float(), self.context)) for name, value in terms.items()}
         return StepReport(step, learning_rate, values, not finite, time.perf_counter() - started)
 
