@@ -8,8 +8,8 @@ from dataclasses import dataclass
 
 from rich.console import Console
 from rich.logging import RichHandler
-from rich.text import Text
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.text import Text
 
 from lumos3d_cli.io.json_text import json_text
 

@@ -82,8 +82,8 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
     # and in `_image_summary`, when the command runs, so that `--help` stays fast.
     with library_imports():
         from lumos3d_cli.io.camera_files import find_camera_source
-        from lumos3d_cli.io.weight_files import FOLDER_FILES
         from lumos3d_cli.io.summaries import summarize_camera_file, summarize_gaussian_file
+        from lumos3d_cli.io.weight_files import FOLDER_FILES
         from lumos3d_cli.model.checkpoints import summarize_checkpoint
     if not path.exists():
         raise InputError(f"{path}: no such file or folder")
