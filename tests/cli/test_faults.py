@@ -368,3 +368,10 @@ def test_metrics_against_a_featureless_reference_are_null_in_strict_json(tmp_pat
     for text in (result.out, (tmp_path / "out" / "summary.json").read_text()):
         views = json.loads(text, parse_constant=refuse)["metrics"]["views"]
         assert views["1.JPG"]["sharpness"] is None and isinstance(views["1.JPG"]["psnr"], float)
+
+
+def test_info_summarises_a_bundled_model_by_name(run_cli):
+    result = run_cli("info", "over-exposure", "--json")
+    assert result.code == 0, result.err
+    summary = json.loads(result.out)
+    assert summary["format"] == "lumos3d" and summary["path"].endswith("lumos3d-over-exposure.safetensors")

@@ -84,8 +84,11 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
         from lumos3d_cli.io.camera_files import find_camera_source
         from lumos3d_cli.io.summaries import summarize_camera_file, summarize_gaussian_file
         from lumos3d_cli.io.weight_files import FOLDER_FILES
+        from lumos3d_cli.model.bundled_models import BUNDLED_MODELS, resolve_checkpoint
         from lumos3d_cli.model.checkpoints import summarize_checkpoint
     if not path.exists():
+        if str(path) in BUNDLED_MODELS:  # `info low-light`: a bundled model by name, as restore --checkpoint takes it
+            return [summarize_checkpoint(resolve_checkpoint(str(path)))]
         raise InputError(f"{path}: no such file or folder")
     if not (path.is_file() or path.is_dir()):
         raise InputError(f"{path}: is neither a file nor a folder (a device, pipe or socket); pass a .ply, checkpoint, "
