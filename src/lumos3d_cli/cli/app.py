@@ -85,6 +85,16 @@ def add_commands(args: list[str] | None = None) -> typer.Typer:
     return app
 
 
+def _hide_flag_metavars(command) -> None:
+    """Flags take no value: `--help` shows none for them (typer shows `<bool>`, which reads as if
+    `--view` wanted one)."""
+    for param in command.params:
+        if getattr(param, "is_flag", False):
+            param.metavar = ""
+    for sub in getattr(command, "commands", {}).values():
+        _hide_flag_metavars(sub)
+
+
 _GLOBAL_FLAGS = ("--debug", "--quiet", "-q")
 # Library parameters whose command-line name is not "--" + the parameter with dashes.
 _ARGUMENT_NAMES = {"photos": "PHOTOS", "root": "ROOT", "output": "-o"}
@@ -135,7 +145,9 @@ def _run(args: list[str], debug: bool, claim_signals: Callable[[], None]) -> int
         claim_signals()
         # Not standalone: click returns the code of typer.Exit and `--help`, and raises its usage
         # errors here, so that they read as one line like every other bad input.
-        result = command_line(args=args, prog_name="lumos3d", standalone_mode=False)
+        command = typer.main.get_command(command_line)
+        _hide_flag_metavars(command)
+        result = command.main(args=args, prog_name="lumos3d", standalone_mode=False)
         return result if isinstance(result, int) else 0
     except SystemExit as done:
         return done.code if isinstance(done.code, int) else 0 if done.code is None else 1
