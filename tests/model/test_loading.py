@@ -65,3 +65,16 @@ def test_a_device_this_machine_lacks_is_refused_by_name_before_the_weights_load(
     for device in ("cuda", torch.device("cuda:0")):
         with pytest.raises(InputError, match="CUDA is not available on this machine; use cpu$"):
             load_model("low-light", device=device)
+
+
+def test_a_training_run_folder_points_to_its_weights(tmp_path, random_checkpoint):
+    import shutil
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "run.json").write_text("{}")
+    with pytest.raises(InputError, match="a training run's folder, not a checkpoint; give one of its checkpoints/step_"):
+        load_model(run)
+    shutil.copy(random_checkpoint, run / "final.safetensors")
+    with pytest.raises(InputError, match=f"give {run / 'final.safetensors'}"):
+        load_model(run)

@@ -35,7 +35,12 @@ def test_overrides_and_errors(tmp_path):
         load_config(tmp_path / "student.yaml")
     for override, message in (("data.width=0", "data.width x data.height = 0x168"), ("log_every=0", "log_every: 0"),
                               ("validate_every=-1", "validate_every: -1"), ("max_nonfinite_steps=0", "max_nonfinite_steps: 0"),
-                              ("checkpoint_every=-5", "checkpoint_every: -5")):
+                              ("checkpoint_every=-5", "checkpoint_every: -5"), ("seed=-1", "seed: -1 must be"),
+                              ("seed=99999999999999999999999", "seed: 99999999999999999999999 must be"),
+                              ("data.samples_per_scene=0", "data.samples_per_scene=0 must be at least 1"),
+                              ("loss.lumos=-1", "loss.lumos: -1.0 must be a weight of at least 0"),
+                              ("loss.reconstruction=.nan", "loss.reconstruction: nan must be"),
+                              ("degrade.white_balance=[1.2,0.8]", r"white_balance=\(1.2, 0.8\) must satisfy")):
         with pytest.raises(InputError, match=message):  # once an internal error or silently accepted
             load_config(CONFIGS / "low-light.yaml", [override])
     (tmp_path / "bad.yaml").write_text("stage: [unclosed")

@@ -84,6 +84,21 @@ def test_max_steps_below_one_is_refused(tiny_config):
     assert not _output(config).exists()
 
 
+def test_a_validation_of_diverged_weights_ends_the_run_as_diverged_not_as_bad_input(tiny_config):
+    config = tiny_config(name="diverged", optim__steps=6, optim__warmup_steps=0, validate_every=2)
+    result = run_lumos3d("train", config, "optim.lr=1e30")
+    assert result.code == 1, result.err  # once exit 2, as if the data were at fault
+    assert result.err.strip().splitlines()[-1].startswith("error: validation after step 2: the model's output is not finite")
+    assert "training diverged" in result.err
+
+
+def test_a_misspelt_exclusion_is_refused_before_the_run_starts(tiny_config):
+    config = tiny_config(name="exclude")
+    expect_input_error(run_lumos3d("train", config, "data.exclude=[stattue]"),
+                       "data.exclude: no scene stattue under")  # it would have trained on `statue`
+    assert not _output(config).exists()
+
+
 def test_cuda_on_a_machine_without_it_is_refused_naming_the_setting(tiny_config, monkeypatch):
     import pytest
     import torch

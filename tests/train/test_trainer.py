@@ -186,9 +186,11 @@ def test_sigterm_saves_a_checkpoint_and_stops(tiny_config):
 
 @pytest.mark.slow
 def test_tiny_model_overfits_one_scene(tiny_config):
-    """The teacher stage fits one small scene (seven LLFF photos) in 200 steps on the CPU:
-    the sparse-depth loss falls more than 10x (about 25x measured) and the rendering loss by
-    more than 1.3x (1.5-2x measured). The pose term does not settle in so few steps (docs/training.md)."""
+    """The teacher stage fits one small scene (seven LLFF photos) in 200 steps on the CPU
+    (medians of the first 20 steps and the last 50, measured 2026-11-27): the rendering MSE falls
+    about 10x (required: 5x), the pose term about 5x (required: 2x), and the sparse-depth term,
+    confidence-weighted with -0.2 log c and so able to go below 0, from 0.33 to about -0.1
+    (required: a drop of 0.3)."""
     config = tiny_config(name="overfit", data__scenes=["video_llff_fortress"], data__crop_scale=[1.0, 1.0],
                          data__flip=False, data__width=112, data__height=84, optim__steps=200, optim__warmup_steps=10,
                          optim__lr=3e-4)
@@ -197,10 +199,10 @@ def test_tiny_model_overfits_one_scene(tiny_config):
     def median(term, rows):
         return statistics.median(r.terms[term] for r in rows)
 
-    depth_first, depth_last = median("depth", result.history[:20]), median("depth", result.history[-50:])
-    mse_first, mse_last = median("mse", result.history[:20]), median("mse", result.history[-50:])
-    assert depth_last < depth_first / 10, (depth_first, depth_last)
-    assert mse_last < mse_first / 1.3, (mse_first, mse_last)
+    first, last = ({term: median(term, rows) for term in ("depth", "mse", "pose")}
+                   for rows in (result.history[:20], result.history[-50:]))
+    assert first["depth"] - last["depth"] > 0.3, (first, last)
+    assert last["mse"] < first["mse"] / 5 and last["pose"] < first["pose"] / 2, (first, last)
 
 
 def test_a_fresh_run_that_fails_before_its_first_checkpoint_leaves_nothing(tiny_config, monkeypatch):

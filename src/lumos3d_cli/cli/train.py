@@ -4,6 +4,7 @@ under torchrun)."""
 from __future__ import annotations
 
 import logging
+import os
 import signal
 from dataclasses import replace
 from pathlib import Path
@@ -53,6 +54,8 @@ def train_command(
         from lumos3d_cli.train.config import load_config, training_inputs
         from lumos3d_cli.train.distributed import setup_distributed, shutdown_distributed
         from lumos3d_cli.train.trainer import Trainer, check_max_steps
+    if os.environ.get("RANK", "0") != "0":  # under torchrun only rank 0 speaks (progress, notes); errors still show
+        state.quiet = True
     check_max_steps(max_steps)
     if resume and new_run:
         raise InputError("--resume continues the run in the output folder and --new-run starts another: give one")

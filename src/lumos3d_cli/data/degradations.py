@@ -111,6 +111,8 @@ class Degradation:
             raise ValueError(f"unknown degradation mode {self.mode!r}; use one of {', '.join(MODES)} or mixed")
         if not 0 < self.colour_cast[0] <= self.colour_cast[1]:
             raise ValueError(f"colour_cast={self.colour_cast} must satisfy 0 < low <= high")
+        if not 0 < self.white_balance[0] <= self.white_balance[1]:
+            raise ValueError(f"white_balance={self.white_balance} must satisfy 0 < low <= high")
         if self.jpeg_quality is not None and not 1 <= self.jpeg_quality[0] <= self.jpeg_quality[1] <= 100:
             raise ValueError(f"jpeg_quality={self.jpeg_quality} must satisfy 1 <= low <= high <= 100")
         for name, bounds in (("exposure", self.exposure), ("gamma", self.gamma), ("low_light.exposure", self.low_light.exposure),

@@ -41,6 +41,10 @@ def resolve_weights_file(path: Path) -> Path:
         for name in FOLDER_FILES:
             if (path / name).is_file():
                 return path / name
+        written = [name for name in ("selected.safetensors", "final.safetensors") if (path / name).is_file()]
+        if (path / "run.json").is_file() or written:  # a training run's folder: point to its weights
+            hint = f"; give {path / written[0]}" if written else "; give one of its checkpoints/step_* folders"
+            raise InputError(f"{path}: a training run's folder, not a checkpoint{hint}")
         raise InputError(f"{path}: folder holds none of {', '.join(FOLDER_FILES)}")
     if path.suffix != ".safetensors" and path.suffix not in TORCH_SUFFIXES:
         raise InputError(f"{path}: not a checkpoint; expected .safetensors or a torch state dict ({', '.join(TORCH_SUFFIXES)})")

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -27,4 +28,16 @@ class LossConfig:
     voxel_size: float = 0.002  # relative to the scene scale, at full resolution
     supervised_pose: float = 5.0  # teacher stage; VGGT's camera-loss weight
     supervised_depth: float = 1.0  # teacher stage, sparse COLMAP depth
+
+    def __post_init__(self) -> None:
+        # a negative weight would reward its term's error (a negative total, the term "optimised" away)
+        for name in ("reconstruction", "lpips", "distill", "distill_pose", "distill_depth", "lumos", "content", "image",
+                     "voxel", "supervised_pose", "supervised_depth"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"loss.{name}: {value} must be a weight of at least 0 (0 turns the term off)")
+        if not all(weight >= 0 for weight in self.voxel_scale_weights):
+            raise ValueError(f"loss.voxel_scale_weights: {list(self.voxel_scale_weights)} must be weights of at least 0")
+        if not self.voxel_size > 0:
+            raise ValueError(f"loss.voxel_size: {self.voxel_size} must be positive")
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)

@@ -47,6 +47,9 @@ class DataConfig:
                              "patch size")
         if not 0 < self.crop_scale[0] <= self.crop_scale[1] <= 1:
             raise ValueError(f"data.crop_scale={self.crop_scale} must satisfy 0 < low <= high <= 1")
+        for key in ("samples_per_scene", "dl3dv_downsample"):
+            if getattr(self, key) < 1:
+                raise ValueError(f"data.{key}={getattr(self, key)} must be at least 1")
 
 
 @dataclass
@@ -155,6 +158,8 @@ class TrainConfig:
             raise ValueError("stage 'student' needs `teacher`: a checkpoint of the normal-light model")
         if self.multiview_loss == "appearance" and self.stage != "student":
             raise ValueError("multiview_loss: appearance scores a restoration: it needs stage 'student'")
+        if not 0 <= self.seed < 2**63:  # torch.manual_seed's range
+            raise ValueError(f"seed: {self.seed} must be a whole number from 0 to 2**63 - 1")
         if self.batch_size < 1 or self.optim.steps < 1 or self.validation_samples < 1:
             raise ValueError("batch_size, optim.steps and validation_samples must be at least 1")
         for key in ("log_every", "max_nonfinite_steps", "validation_views"):

@@ -123,7 +123,10 @@ class Trainer:
         self.teacher = self._teacher()
         self.brackets = self._brackets()
         self._check_multiview_loss()
-        self.objective = TrainingObjective(config.loss, config.stage).to(self.device)
+        # the stage's full objective scores multi-view samples only there: a bracket-only or
+        # appearance-only stage builds none (nor warns of its terms)
+        uses_objective = config.multiview and config.multiview_loss == "objective"
+        self.objective = TrainingObjective(config.loss, config.stage).to(self.device) if uses_objective else None
         self.optimizer = torch.optim.AdamW(
             self._parameter_groups(), lr=config.optim.lr, betas=config.optim.betas, weight_decay=config.optim.weight_decay
         )
@@ -155,6 +158,9 @@ class Trainer:
             records = scan_dl3dv(data.root, data.dl3dv_downsample, data.scenes or None)
         else:
             records = scan_scene_folders(data.root, data.scenes or None)
+        unknown = sorted(set(data.exclude) - {record.name for record in records})
+        if unknown:  # a misspelt exclusion would train on the scene it meant to leave out
+            raise InputError(f"data.exclude: no scene {', '.join(unknown)} under {data.root}; correct the names")
         records = [r for r in records if r.name not in set(data.exclude)]
         if not records:
             raise InputError(f"{data.root}: no training scenes left after data.scenes/data.exclude")
@@ -392,9 +398,13 @@ class Trainer:
         the best step so far (train/selection.py); returns the picture's path."""
         if not self.context.is_main:
             return None
-        extra = self.brackets.scores(self.model.eval(), self.device) if self.brackets is not None else None
-        line, path = validate(self.model, self._validation_samples(), step, self.output, self.config.validation_views,
-                              self.config.loss.background, self._autocast, extra)
+        try:
+            extra = self.brackets.scores(self.model.eval(), self.device) if self.brackets is not None else None
+            line, path = validate(self.model, self._validation_samples(), step, self.output, self.config.validation_views,
+                                  self.config.loss.background, self._autocast, extra)
+        except NonFiniteError as error:  # the weights, not the data: the run diverged (exit 1, not bad input)
+            raise RunError(f"validation after step {step}: the model's output is not finite ({error}); training "
+                           "diverged: lower optim.lr, or resume from an earlier checkpoint") from error
         self._kept_work = True
         self._files.record(path)
         self.model.train()
