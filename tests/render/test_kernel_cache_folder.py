@@ -7,7 +7,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from lumos3d_cli.render.kernels.cache_folder import fallback_cache_folder, writable
+from lumos3d_cli.render.kernels.cache_folder import fallback_cache_folder, private_temporary_folder, writable
 
 KERNELS = Path("/site-packages/lumos3d_cli/render/kernels")
 
@@ -21,9 +21,25 @@ def test_numba_keeps_its_choice_where_it_can_write():
     assert fallback_cache_folder(KERNELS, {"HOME": "/home/u", "XDG_CACHE_HOME": "/xdg"}, lambda f: f == xdg) is None
 
 
-def test_a_read_only_install_without_a_home_caches_in_the_temporary_folder():
+def test_a_read_only_install_without_a_home_caches_in_a_private_temporary_folder(tmp_path, monkeypatch):
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     folder = fallback_cache_folder(KERNELS, {"HOME": "/nonexistent"}, lambda _: False)
-    assert folder == Path(tempfile.gettempdir()) / f"lumos3d-numba-{os.getuid()}"
+    assert folder == tmp_path / f"lumos3d-numba-{os.getuid()}"
+    assert folder.is_dir() and folder.stat().st_mode & 0o777 == 0o700
+
+
+def test_a_temporary_folder_others_could_have_planted_is_never_used(tmp_path, monkeypatch):
+    """numba unpickles what it finds there: a folder open to others, or a file in its place, is
+    passed over for a fresh private one."""
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    shared = tmp_path / f"lumos3d-numba-{os.getuid()}"
+    shared.mkdir(mode=0o777)
+    shared.chmod(0o777)
+    folder = private_temporary_folder()
+    assert folder != shared and folder.parent == tmp_path and folder.stat().st_mode & 0o777 == 0o700
+    shared.rmdir()
+    shared.write_text("not a folder")
+    assert private_temporary_folder() not in (shared, folder)
 
 
 def test_writable_looks_at_the_nearest_existing_folder(tmp_path):

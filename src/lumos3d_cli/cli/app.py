@@ -87,10 +87,19 @@ def add_commands(args: list[str] | None = None) -> typer.Typer:
 
 def _hide_flag_metavars(command) -> None:
     """Flags take no value: `--help` shows none for them (typer shows `<bool>`, which reads as if
-    `--view` wanted one)."""
+    `--view` wanted one), `--help` itself included (click makes it when the help is drawn)."""
     for param in command.params:
         if getattr(param, "is_flag", False):
             param.metavar = ""
+    make_help_option = command.get_help_option
+
+    def help_option(context):
+        option = make_help_option(context)
+        if option is not None:
+            option.metavar = ""
+        return option
+
+    command.get_help_option = help_option
     for sub in getattr(command, "commands", {}).values():
         _hide_flag_metavars(sub)
 

@@ -36,8 +36,8 @@ class LossConfig:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"loss.{name}: {value} must be a weight of at least 0 (0 turns the term off)")
-        if not all(weight >= 0 for weight in self.voxel_scale_weights):
+        if not all(math.isfinite(weight) and weight >= 0 for weight in self.voxel_scale_weights):
             raise ValueError(f"loss.voxel_scale_weights: {list(self.voxel_scale_weights)} must be weights of at least 0")
-        if not self.voxel_size > 0:
+        if not (math.isfinite(self.voxel_size) and self.voxel_size > 0):
             raise ValueError(f"loss.voxel_size: {self.voxel_size} must be positive")
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)

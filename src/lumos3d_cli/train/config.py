@@ -158,7 +158,7 @@ class TrainConfig:
             raise ValueError("stage 'student' needs `teacher`: a checkpoint of the normal-light model")
         if self.multiview_loss == "appearance" and self.stage != "student":
             raise ValueError("multiview_loss: appearance scores a restoration: it needs stage 'student'")
-        if not 0 <= self.seed < 2**63:  # torch.manual_seed's range
+        if not 0 <= self.seed < 2**63:  # what numpy's and torch's generators both take, and an int64 holds
             raise ValueError(f"seed: {self.seed} must be a whole number from 0 to 2**63 - 1")
         if self.batch_size < 1 or self.optim.steps < 1 or self.validation_samples < 1:
             raise ValueError("batch_size, optim.steps and validation_samples must be at least 1")

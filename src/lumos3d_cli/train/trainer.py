@@ -58,6 +58,9 @@ from lumos3d_cli.train.trainable import restrict_training
 from lumos3d_cli.train.validation import render_views, validate, validation_picture
 
 logger = logging.getLogger(__name__)
+# The schedule follows the step count, taken or skipped (`_step`): torch warns when a run's first
+# step is a skipped one, as if the two calls came in the wrong order.
+warnings.filterwarnings("ignore", message=r"Detected call of `lr_scheduler\.step\(\)` before", category=UserWarning)
 
 
 @dataclass
@@ -159,8 +162,9 @@ class Trainer:
         else:
             records = scan_scene_folders(data.root, data.scenes or None)
         unknown = sorted(set(data.exclude) - {record.name for record in records})
-        if unknown:  # a misspelt exclusion would train on the scene it meant to leave out
-            raise InputError(f"data.exclude: no scene {', '.join(unknown)} under {data.root}; correct the names")
+        if unknown:  # a misspelt exclusion trains on the scene it meant to leave out; a partial copy has none
+            logger.warning("data.exclude: %s: no such training scene under %s (misspelt? nothing is left out for "
+                           "it)", ", ".join(unknown), data.root)
         records = [r for r in records if r.name not in set(data.exclude)]
         if not records:
             raise InputError(f"{data.root}: no training scenes left after data.scenes/data.exclude")
@@ -316,11 +320,7 @@ class Trainer:
                     f"training stopped at step {step}: {self.nonfinite_in_a_row} steps in a row had a non-finite loss "
                     f"or gradient; lower optim.lr, check the data, or resume from the last checkpoint"
                 )
-        with warnings.catch_warnings():
-            # The schedule follows the step count, taken or skipped; torch warns when the first
-            # step of a run is a skipped one, as if the order of the two calls were wrong.
-            warnings.filterwarnings("ignore", message=r"Detected call of `lr_scheduler\.step\(\)` before")
-            self.scheduler.step()
+        self.scheduler.step()
         values = {name: float(all_reduce_mean(value.detach().float(), self.context)) for name, value in terms.items()}
         return StepReport(step, learning_rate, values, not finite, time.perf_counter() - started)
 
@@ -398,9 +398,10 @@ class Trainer:
         the best step so far (train/selection.py); returns the picture's path."""
         if not self.context.is_main:
             return None
+        extra = self.brackets.scores(self.model.eval(), self.device) if self.brackets is not None else None
+        samples = self._validation_samples()  # read first: NaN in an image file is the data's, exit 2
         try:
-            extra = self.brackets.scores(self.model.eval(), self.device) if self.brackets is not None else None
-            line, path = validate(self.model, self._validation_samples(), step, self.output, self.config.validation_views,
+            line, path = validate(self.model, samples, step, self.output, self.config.validation_views,
                                   self.config.loss.background, self._autocast, extra)
         except NonFiniteError as error:  # the weights, not the data: the run diverged (exit 1, not bad input)
             raise RunError(f"validation after step {step}: the model's output is not finite ({error}); training "
