@@ -58,7 +58,7 @@ from lumos3d_cli.train.trainable import restrict_training
 from lumos3d_cli.train.validation import render_views, validate, validation_picture
 
 logger = logging.getLogger(__name__)
-# The schedule follows the step count, taken or skipped (`_step`): torch warns when a run's first
+# The schedule follows the step count, taken or skipped (`Trainer.step`): torch warns when a run's first
 # step is a skipped one, as if the two calls came in the wrong order.
 warnings.filterwarnings("ignore", message=r"Detected call of `lr_scheduler\.step\(\)` before", category=UserWarning)
 
