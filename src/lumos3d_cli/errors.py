@@ -1,12 +1,18 @@
 """Exceptions that the CLI turns into one-line messages and exit codes: bad input (2), a failed
-run (1), a run stopped by a signal (128 + the signal's number)."""
+run (1), a run stopped by a signal (128 + the signal's number); and how those messages list names."""
 
 from __future__ import annotations
 
 import signal
+from collections.abc import Sequence
 
 # The signals that stop a command cleanly (Ctrl-C, `kill`, a closed terminal).
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def listed(items: Sequence[str], limit: int = 5) -> str:
+    """The first `limit` items, comma-separated, and how many more: for one-line messages."""
+    return ", ".join(items[:limit]) + (f" and {len(items) - limit} more" if len(items) > limit else "")
 
 
 class InputError(Exception):

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import torch
 
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import InputError, listed
 from lumos3d_cli.io.camera_files import read_cameras, read_transforms_splits, transforms_splits
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.colmap import is_colmap_model, read_colmap_model
@@ -28,9 +28,6 @@ logger = logging.getLogger(__name__)
 # Aspect ratios that differ by more than this mean the photos were cropped, not resized.
 _ASPECT_TOLERANCE = 0.01
 
-
-def _listed(items: Sequence[str], limit: int = 5) -> str:
-    return ", ".join(items[:limit]) + (f" and {len(items) - limit} more" if len(items) > limit else "")
 
 
 def _read_pose_source(path: Path) -> Cameras:
@@ -76,16 +73,16 @@ def read_given_poses(
                 and torch.allclose(given.intrinsics[first], given.intrinsics[row], atol=1e-9)):
             conflicting.append(given.names[row])
     if conflicting:
-        raise InputError(f"{path}: differing poses for one photo ({_listed(conflicting)}); keep one pose per photo",
+        raise InputError(f"{path}: differing poses for one photo ({listed(conflicting)}); keep one pose per photo",
                          parameter="poses")
     photo_stems = [Path(name).stem for name in names]
     missing = [name for name, stem in zip(names, photo_stems) if stem not in row_of_stem]
     if missing:
-        raise InputError(f"{path}: no pose for {len(missing)} of {len(names)} photos ({_listed(missing)}); "
+        raise InputError(f"{path}: no pose for {len(missing)} of {len(names)} photos ({listed(missing)}); "
                          "poses are matched to photos by file name without suffix", parameter="poses")
     extra = [given.names[row] for stem, row in row_of_stem.items() if stem not in set(photo_stems)]
     if extra and not allow_extra_poses:
-        raise InputError(f"{path}: {len(extra)} poses have no photo ({_listed(extra)}); "
+        raise InputError(f"{path}: {len(extra)} poses have no photo ({listed(extra)}); "
                          "pass the photos of every pose, or a camera file of these photos only", parameter="poses")
     rows = [row_of_stem[stem] for stem in photo_stems]
     chosen = given[rows]

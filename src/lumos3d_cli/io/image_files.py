@@ -7,7 +7,7 @@ import re
 from collections.abc import Sequence
 from pathlib import Path
 
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import InputError, listed
 
 logger = logging.getLogger(__name__)
 
@@ -47,10 +47,6 @@ def image_kind(path: Path) -> str:
     raise InputError(f"{path}: unsupported file type '{path.suffix}'; use one of: {supported}")
 
 
-def _listed(names: Sequence[str], limit: int = 5) -> str:
-    return ", ".join(names[:limit]) + (f" and {len(names) - limit} more" if len(names) > limit else "")
-
-
 def list_images(inputs: Path | str | Sequence[Path | str]) -> list[Path]:
     """Expand a folder (its image files, naturally sorted) or a list of files and folders.
 
@@ -74,11 +70,11 @@ def list_images(inputs: Path | str | Sequence[Path | str]) -> list[Path]:
                                path, ", ".join(unreadable))
             unread = sorted((p.name for p in entries if p.suffix.lower() in UNREAD_IMAGE_SUFFIXES), key=natural_sort_key)
             if not found:
-                also = f"; {_listed(unread)} cannot be read: convert them to JPEG or PNG" if unread else ""
+                also = f"; {listed(unread)} cannot be read: convert them to JPEG or PNG" if unread else ""
                 raise InputError(f"{path}: folder holds no images ({', '.join(sorted(IMAGE_SUFFIXES))}){also}")
             if unread:
                 logger.warning("%s: skipped %s: a format lumos3d does not read; convert to JPEG or PNG to include them",
-                               path, _listed(unread))
+                               path, listed(unread))
             paths.extend(sorted(found, key=natural_sort_key))
         elif path.is_file():
             image_kind(path)

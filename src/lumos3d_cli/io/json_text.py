@@ -10,6 +10,8 @@ import logging
 import math
 from typing import Any
 
+from lumos3d_cli.errors import listed
+
 logger = logging.getLogger(__name__)
 
 
@@ -33,8 +35,7 @@ def finite_document(document: Any, name: str | None = None) -> Any:
     replaced: list[str] = []
     cleaned = _finite(document, "", replaced)
     if replaced and name is not None:
-        shown = ", ".join(replaced[:4]) + (f" and {len(replaced) - 4} more" if len(replaced) > 4 else "")
-        logger.warning("%s: %d value(s) are not finite, written as null: %s", name, len(replaced), shown)
+        logger.warning("%s: %d value(s) are not finite, written as null: %s", name, len(replaced), listed(replaced, 4))
     return cleaned
 
 
