@@ -57,6 +57,7 @@ import torch
 import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from cli_runs import SHARED  # noqa: E402
 from report import machine_description, markdown_table, table_section, write_section  # noqa: E402
 
 from lumos3d_cli.data.augment import crop_box  # noqa: E402
@@ -66,6 +67,7 @@ from lumos3d_cli.eval.appearance_stats import appearance_stats  # noqa: E402
 from lumos3d_cli.eval.contact_sheet import contact_sheet  # noqa: E402
 from lumos3d_cli.eval.metrics import auto_gamma  # noqa: E402
 from lumos3d_cli.io.image_files import list_images  # noqa: E402
+from lumos3d_cli.io.json_text import json_text  # noqa: E402
 from lumos3d_cli.io.images import ImageBatch  # noqa: E402
 from lumos3d_cli.model.bundled_models import resolve_checkpoint  # noqa: E402
 from lumos3d_cli.model.lumos3d import Lumos3D  # noqa: E402
@@ -73,14 +75,13 @@ from lumos3d_cli.pipeline.evaluation import eval_contact_sheet, evaluate_lom  # 
 from lumos3d_cli.pipeline.lom_eval import PROTOCOLS  # noqa: E402
 from lumos3d_cli.pipeline.model_loading import load_restoration_model  # noqa: E402
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, EXPOSURE_KEYS  # noqa: E402
-from lumos3d_cli.pipeline.presets import RestorePreset, get_restore_preset  # noqa: E402
+from lumos3d_cli.pipeline.presets import RESTORE_PRESETS, RestorePreset, get_restore_preset  # noqa: E402
 from lumos3d_cli.pipeline.quality import QualityMeter  # noqa: E402
 from lumos3d_cli.pipeline.restore import restore_scene  # noqa: E402
 from lumos3d_cli.train.bracket_samples import VALIDATION_SEED, validation_indices  # noqa: E402
 from lumos3d_cli.train.config import load_config  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED = Path(os.environ.get("LUMOS3D_SHARED_DATA", REPO.parent / "shared" / "data"))
 MODEL_CARD = REPO / "docs" / "model-card.md"
 SECTION = "appearance-dev"
 DEFAULT_JSON = REPO / "out" / "appearance_dev.json"
@@ -418,7 +419,7 @@ def main() -> None:
                         default=["buu", "shrub", "lol", "brackets"])
     parser.add_argument("--checkpoint-low-light", default=None, help="checkpoint for low light (default: bundled)")
     parser.add_argument("--checkpoint-over-exposure", default=None, help="checkpoint for over-exposure (default: bundled)")
-    parser.add_argument("--preset", default=DEFAULT_RESTORE_PRESET)
+    parser.add_argument("--preset", choices=tuple(RESTORE_PRESETS), default=DEFAULT_RESTORE_PRESET)
     parser.add_argument("--refine-steps", type=int, default=None)
     parser.add_argument("--max-gaussians", type=int, default=None)
     parser.add_argument("--gaussian-grid", type=float, default=None)
@@ -434,6 +435,11 @@ def main() -> None:
     parser.add_argument("--from-json", type=Path, default=None,
                         help="run nothing: print the table of an earlier run's JSON (and write the doc if it was a full default run)")
     args = parser.parse_args()
+    if args.from_json is not None and not args.from_json.is_file():
+        parser.error(f"--from-json {args.from_json}: no such file")
+    if args.from_json is None and not any(source in SOURCES[mode] for mode in args.modes for source in args.sources):
+        parser.error(f"--modes {' '.join(args.modes)} with --sources {' '.join(args.sources)} select nothing "
+                     f"(over-exposure has no {SOURCE_LABELS['lol']} photos)")
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(message)s")
     logger.setLevel(logging.INFO)
     options = RestoreOptions(args.checkpoint_low_light, args.checkpoint_over_exposure, args.preset, args.refine_steps,
@@ -454,7 +460,7 @@ def main() -> None:
     else:
         document = run_dev_benchmark(options, subset, on_entry=progress, sheets=args.sheets)
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(document, indent=1) + "\n")
+        args.json.write_text(json_text(document, str(args.json)))
         print(f"wrote {args.json}")
     table = report_table(document)
     print(table)

@@ -11,7 +11,8 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-LOM = REPO.parent / "shared" / "data" / "lom"
+SHARED = Path(os.environ.get("LUMOS3D_SHARED_DATA", REPO.parent / "shared" / "data"))
+LOM = SHARED / "lom"
 LUMOS3D = str(Path(sys.executable).with_name("lumos3d"))
 
 

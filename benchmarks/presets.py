@@ -27,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cli_runs import LOM, REPO, evaluate_buu, run_lumos3d_json  # noqa: E402
 from report import machine_description, markdown_table, write_section  # noqa: E402
 
+from lumos3d_cli.io.json_text import finite_document, json_text  # noqa: E402
 from lumos3d_cli.pipeline.presets import RESTORE_PRESETS  # noqa: E402
 
 STEPS = (0, 25, 50, 100, 200, 400)
@@ -374,11 +375,11 @@ def table(results: list[dict]) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--presets", nargs="*", default=list(COLOURS))
+    parser.add_argument("--presets", nargs="+", choices=tuple(COLOURS), default=list(COLOURS))
     parser.add_argument("--steps", nargs="*", type=int, default=list(STEPS))
     parser.add_argument("--grids", nargs="*", type=float, default=[2.0],
                         help="Gaussian grids to measure besides the presets' own (each preset at its default steps)")
-    parser.add_argument("--grid-presets", nargs="*", default=["fast"],
+    parser.add_argument("--grid-presets", nargs="*", choices=tuple(COLOURS), default=["fast"],
                         help="the presets measured at --grids (a denser grid refined at the photos' full size, as "
                              "balanced and best refine, takes about 8 minutes)")
     parser.add_argument("--results", type=Path, help="a JSON file of results to reuse (written after each configuration)")
@@ -386,6 +387,10 @@ def main() -> None:
     parser.add_argument("--no-doc", action="store_true", help="print only")
     parser.add_argument("--no-run", action="store_true", help="only the table and plot of the --results file")
     args = parser.parse_args()
+    if args.no_run and not (args.results and args.results.is_file()):
+        parser.error("--no-run tables the results of an earlier run: give their file with --results")
+    # The docs' section and plots hold every preset at every step count: a partial run prints only.
+    whole = set(args.presets) == set(COLOURS) and set(args.steps) >= set(STEPS) and not args.no_dev
     results = json.loads(args.results.read_text()) if args.results and args.results.exists() else []
     done = {(r["preset"], r["steps"], r["grid_option"]) for r in results if not r.get("dev")}
     configurations = [(preset, steps, None) for preset in args.presets
@@ -402,17 +407,17 @@ def main() -> None:
             if configuration in done or args.no_run:
                 continue
             results.append(measure(*configuration[:2], folder, configuration[2]))
-            print(json.dumps(results[-1]), flush=True)
+            print(json.dumps(finite_document(results[-1]), allow_nan=False), flush=True)
             if args.results:
-                args.results.write_text(json.dumps(results, indent=1))
+                args.results.write_text(json_text(results))
         dev_results = [r for r in results if r.get("dev")]
         for preset in [] if args.no_dev or args.no_run else args.presets:
             if not any(r["preset"] == preset for r in dev_results):
                 dev_results.append(measure_dev(preset, folder) | {"dev": True})
                 results.append(dev_results[-1])
-                print(json.dumps(dev_results[-1]), flush=True)
+                print(json.dumps(finite_document(dev_results[-1]), allow_nan=False), flush=True)
                 if args.results:
-                    args.results.write_text(json.dumps(results, indent=1))
+                    args.results.write_text(json_text(results))
     results = [r for r in results if not r.get("dev")]
     order = {name: index for index, name in enumerate(COLOURS)}
     results.sort(key=lambda r: (order[r["preset"]], r["grid_option"] or 0, r["steps"]))
@@ -436,7 +441,10 @@ def main() -> None:
         DEV_REASON,
     ] if dev_results else []))
     print(text)
-    if not args.no_doc:
+    if not args.no_doc and not whole:
+        print("docs/performance.md not updated: only a run of every preset at every step count, with the development "
+              "scenes, writes it (or give --no-doc)")
+    elif not args.no_doc:
         plot(results, PLOT)
         plot_detail(results, dev_results, DETAIL_PLOT)
         write_section("presets", text)

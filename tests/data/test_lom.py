@@ -74,6 +74,23 @@ def test_missing_and_ambiguous_views(mixed_case_scene):
         read_lom_scene(mixed_case_scene, "low-light")
 
 
+def test_a_frame_listed_twice_is_scored_once_and_unpaired_photos_are_named(mixed_case_scene, caplog):
+    _write(mixed_case_scene / "transforms_test.json", [_frame("high/img_2.jpg", 2.0), _frame("high/IMG_10.JPG", 10.0),
+                                                     _frame("high/IMG_2.JPG", 2.0)])
+    scene = read_lom_scene(mixed_case_scene, "over-exposure")
+    assert scene.test == ["IMG_2", "IMG_10"]
+    assert "lists img_2 more than once" in caplog.text
+    # view 3 has no over-exposed photo: the scene goes on without it, and says so
+    assert "3" not in scene.frames and "high/img_3.png has no photo in over_exp/" in caplog.text
+    caplog.clear()
+    read_lom_scene(mixed_case_scene, "low-light")
+    assert "no photo" not in caplog.text
+
+
+def test_a_scene_name_as_a_shell_completes_it(mixed_case_scene):
+    assert [scene.name for scene in find_lom_scenes(mixed_case_scene.parent, "low-light", ["mixed/", "mixed"])] == ["mixed"]
+
+
 def test_shrub_reads_in_both_modes(shared_data):
     shrub = shared_data / "lom" / "shrub"
     if not shrub.is_dir():

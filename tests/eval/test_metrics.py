@@ -82,6 +82,24 @@ def test_gt_mean_psnr_of_a_black_image_is_its_plain_psnr(pairs):
     assert torch.isfinite(value) and value.item() == pytest.approx(psnr(black, high).item())
 
 
+def test_gt_mean_psnr_against_a_black_reference_is_undefined(pairs):
+    """Scaled to a reference without light, any image would match it: no score, not infinity."""
+    low, high = pairs[0]
+    scores = psnr_gt_mean(torch.stack([low, low]), torch.stack([torch.zeros_like(high), high]))
+    assert scores[0].isnan() and torch.isfinite(scores[1])
+
+
+@pytest.mark.parametrize("metric", [psnr, psnr_gt_mean, ssim, sharpness])
+def test_metrics_refuse_images_that_are_not_their_references_size_or_not_floats(pairs, metric):
+    low, high = pairs[0]
+    with pytest.raises(ValueError, match=r"differ in shape"):
+        metric(torch.stack([low, low]), high)  # broadcast, a batch would be scored against one reference
+    with pytest.raises(ValueError, match=r"differ in shape"):
+        metric(low[:, :20, :20], high)
+    with pytest.raises(ValueError, match=r"torch.uint8; the metrics take floating-point values"):
+        metric((low * 255).to(torch.uint8), high)
+
+
 def _luminance(image):
     return np.tensordot(np.array([0.2126, 0.7152, 0.0722]), image.numpy(), axes=1)
 

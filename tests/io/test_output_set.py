@@ -218,6 +218,10 @@ def test_a_second_run_into_the_same_folder_is_refused_naming_the_first(tmp_path)
         with pytest.raises(InputError, match=rf"out: `lumos3d restore`, process {holder.pid} .* is writing its outputs here"):
             with OutputSet(out, "render").add_file("00000.png").staged():
                 pass
+        # the check a command makes before loading its libraries refuses too, and leaves the lock as it was
+        with pytest.raises(InputError, match=rf"out: `lumos3d restore`, process {holder.pid} .* is writing its outputs here"):
+            OutputSet(out, "render").add_file("00000.png").check()
+        assert json.loads((out / LOCK_NAME).read_text())["pid"] == holder.pid
     finally:
         holder.kill()
         holder.wait()

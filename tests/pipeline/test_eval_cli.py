@@ -1,5 +1,6 @@
 import csv
 import json
+import shutil
 
 import cv2
 import numpy as np
@@ -51,7 +52,7 @@ def test_eval_bad_inputs(run_cli, lom_copy, tmp_path, random_checkpoint):
     cv2.imwrite(str(lom_copy / "high" / "13.JPG"), np.zeros((100, 120, 3), np.uint8))
     expect_input_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out, "--max-views", 4,
                                  "--geometry", "network"),
-                  "images have different sizes")
+                  "high/13.JPG: 120x100, but the scene's photos are 500x375")
     expect_input_error(run_cli("eval", lom_copy.parent, "--scenes", "bike", "--checkpoint", random_checkpoint, "--out", out),
                   "no LOM scene(s) bike")
     expect_input_error(run_cli("eval", lom_copy.parent, "--scenes", ",", "--checkpoint", random_checkpoint, "--out", out),
@@ -68,3 +69,45 @@ def test_cameras_are_not_scored_without_reference_poses(run_cli, lom_copy, tmp_p
                      "--max-views", 4, "--geometry", "network", "--refine-steps", 0, "--json")
     assert result.code == 0, result.err
     assert json.loads(result.out)["cameras"] == {}
+
+
+def test_what_is_in_the_way_is_refused_before_any_scene_is_read(run_cli, lom_copy, tmp_path, random_checkpoint):
+    """Without --scenes the contact sheets' names come from the scenes found: a file of the user's
+    under one of them is refused before the photos are read (a damaged photo would be named
+    otherwise), and a damaged photo in the last scene is named before the first is evaluated."""
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / "contact_sheet_buu.png").write_text("the user's")
+    (lom_copy / "low" / "5.JPG").write_bytes(b"not a photo")
+    expect_input_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out),
+                       "contact_sheet_buu.png: exists and was not written by lumos3d")
+    (out / "contact_sheet_buu.png").unlink()
+    (lom_copy / "low" / "5.JPG").unlink()
+    later = lom_copy.parent / "zz"
+    shutil.copytree(lom_copy, later)
+    (later / "low" / "13.JPG").write_bytes(b"not a photo")
+    result = run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out, "--geometry", "network",
+                     "--max-views", 4, "--refine-steps", 0)
+    expect_input_error(result, "zz/low/13.JPG")
+    assert "eval (context)" not in result.err  # refused before the evaluation's progress began
+    assert sorted(p.name for p in out.iterdir()) == []
+
+
+def test_a_model_trained_for_the_other_mode_is_named(run_cli, buu, tmp_path, caplog):
+    result = run_cli("eval", buu, "--mode", "over-exposure", "--checkpoint", "low-light", "--out", tmp_path / "report",
+                     "--max-views", 4, "--geometry", "network", "--refine-steps", 0, "--baseline", "none")
+    assert result.code == 0, result.err
+    assert "was trained for low-light photos but the mode is over-exposure" in result.err + caplog.text
+
+
+def test_scores_that_are_not_finite_are_empty_cells_in_metrics_csv(tmp_path, caplog):
+    from lumos3d_cli.pipeline.evaluation import EvalReport, write_eval_report
+
+    rows = [{"scene": "flat", "method": "lumos3d", "psnr": float("inf"), "psnr_gt_mean": float("nan"), "ssim": 1.0,
+             "sharpness": float("nan"), "lpips": None, "seconds": 1.0}]
+    write_eval_report(EvalReport({"mode": "low-light", "rows": rows}, rows, [], ["lumos3d"]), tmp_path / "report")
+    with open(tmp_path / "report" / "metrics.csv") as handle:
+        written = next(csv.DictReader(handle))
+    assert written["psnr"] == written["psnr_gt_mean"] == written["sharpness"] == "" and written["ssim"] == "1.0"
+    assert json.loads((tmp_path / "report" / "metrics.json").read_text())["rows"][0]["psnr"] is None
+    assert "metrics.csv: 3 value(s) are not finite, written as empty cells" in caplog.text

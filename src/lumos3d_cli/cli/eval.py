@@ -13,6 +13,7 @@ from rich.table import Table
 from lumos3d_cli.cli import preset_options
 from lumos3d_cli.cli.console import print_json, progress_bar, stdout_console
 from lumos3d_cli.cli.interrupts import library_imports
+from lumos3d_cli.data.lom_layout import lom_scene_folders, scene_name
 from lumos3d_cli.data.modes import MODES
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.output_paths import check_output_path
@@ -83,12 +84,13 @@ def eval_command(
 ) -> None:
     """Evaluate restoration on LOM scenes (PSNR on [0,1], SSIM 11x11 sigma 1.5, LPIPS)."""
     check_output_path(out, "out", folder=True)
-    names = [n.strip() for n in scenes.split(",") if n.strip()] if scenes is not None else None
+    names = [scene_name(n) for n in scenes.split(",") if scene_name(n)] if scenes is not None else None
     if names == []:
         raise InputError(f"{scenes!r}: names no scene; name scenes separated by commas, or leave --scenes out for "
                          "every scene found", parameter="scenes")
     inputs = [root, checkpoint, lpips_weights]
-    outputs = eval_outputs(out, names or [], inputs)
+    # the contact sheets' names too, so that a file of the user's in their way is refused now, not after the work
+    outputs = eval_outputs(out, names if names is not None else [p.name for p in lom_scene_folders(root)], inputs)
     outputs.check()  # a refusal comes before the libraries load; checked again under the lock
     # The evaluation imports torch, pycolmap and the whole restore job (seconds): imported here,
     # when the command runs, so that `--help` and a refused command line stay fast.

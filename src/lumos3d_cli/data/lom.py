@@ -7,17 +7,20 @@ A view is its file stem, matched case-insensitively between the folders and the 
 from __future__ import annotations
 
 import json
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import torch
 
-from lumos3d_cli.data.lom_layout import DEGRADED_FOLDERS, is_lom_scene
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.data.lom_layout import DEGRADED_FOLDERS, lom_scene_folders, scene_name
+from lumos3d_cli.errors import InputError, listed
 from lumos3d_cli.io.image_files import IMAGE_SUFFIXES, natural_sort_key
 from lumos3d_cli.io.input_folders import require_folder
 from lumos3d_cli.io.transforms_json import read_transforms_json
+
+logger = logging.getLogger(__name__)
 
 CAMERA_FILES = ("transforms_train.json", "transforms_val.json", "transforms_test.json")
 
@@ -68,6 +71,13 @@ def read_lom_scene(folder: Path, mode: str) -> LomScene:
         raise InputError(f"{folder / 'transforms_test.json'}: a frame without a file_path ({error})") from error
     if not test_keys:
         raise InputError(f"{folder / 'transforms_test.json'}: lists no test frames; eval scores the frames it lists")
+    folded = [key.casefold() for key in test_keys]
+    unique = list(dict.fromkeys(folded))
+    if len(unique) < len(test_keys):  # scored twice, a frame would weigh twice in the scene's mean
+        test_keys = [test_keys[folded.index(key)] for key in unique]  # each frame as first spelt
+        twice = [key for key in test_keys if folded.count(key.casefold()) > 1]
+        logger.warning("%s: lists %s more than once; each test frame is scored once",
+                       folder / "transforms_test.json", listed(twice, 4))
     for frame in test_keys:
         if frame.casefold() not in reference:
             raise InputError(f"{folder}: test frame {frame!r} has no normal-light photo in high/")
@@ -75,13 +85,21 @@ def read_lom_scene(folder: Path, mode: str) -> LomScene:
             raise InputError(f"{folder}: test frame {frame!r} has no photo in {DEGRADED_FOLDERS[mode]}/")
     ids = {key: reference[key].stem for key in reference}  # case-folded stem -> the view's id
     shared = sorted(set(reference) & set(degraded), key=lambda key: natural_sort_key(ids[key]))
+    for lacking, present, name in ((degraded, reference, DEGRADED_FOLDERS[mode]), (reference, degraded, "high")):
+        unmatched = sorted((f"{present[key].parent.name}/{present[key].name}" for key in set(present) - set(lacking)),
+                           key=natural_sort_key)
+        if unmatched:
+            logger.warning("%s: %s %s no photo in %s/; the scene is evaluated without %s", folder, listed(unmatched, 4),
+                           "has" if len(unmatched) == 1 else "have", name, "it" if len(unmatched) == 1 else "them")
     return LomScene(folder.name, folder, mode, [ids[k] for k in shared], [ids[f.casefold()] for f in test_keys],
                     {ids[k]: degraded[k] for k in shared}, {ids[k]: reference[k] for k in shared})
 
 
 def _missing_parts(folder: Path) -> str:
     """What `folder` lacks of a LOM scene, in words (e.g. "transforms_test.json")."""
-    parts = [name for name in ("high/", "transforms_test.json") if not (folder / name.rstrip("/")).exists()]
+    parts = [] if (folder / "high").is_dir() else ["high/"]
+    if not (folder / "transforms_test.json").is_file():
+        parts.append("transforms_test.json")
     if not any((folder / f).is_dir() for f in DEGRADED_FOLDERS.values()):
         parts.append("low/ or over_exp/")
     return " and ".join(str(folder / part) for part in parts)
@@ -95,7 +113,8 @@ def find_lom_scenes(root: Path | str, mode: str, names: str | Sequence[str] | No
     names = [names] if isinstance(names, str) else names
     if names is not None and len(names) == 0:
         raise InputError("[]: name at least one scene, or none at all for every scene found", parameter="scenes")
-    folders = [root] if is_lom_scene(root) else sorted(p for p in root.iterdir() if p.is_dir() and is_lom_scene(p))
+    names = None if names is None else list(dict.fromkeys(scene_name(name) for name in names))
+    folders = lom_scene_folders(root)
     if names:
         available = {p.name for p in folders}
         missing = [n for n in names if n not in available]

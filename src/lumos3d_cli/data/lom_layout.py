@@ -15,3 +15,19 @@ def is_lom_scene(folder: Path) -> bool:
     return (folder / REFERENCE_FOLDER).is_dir() and (folder / TEST_CAMERAS).is_file() and any(
         (folder / name).is_dir() for name in DEGRADED_FOLDERS.values()
     )
+
+
+def lom_scene_folders(root: Path) -> list[Path]:
+    """The LOM scenes `root` holds, in name order: `root` itself when it is one, else its
+    sub-folders that are; none when `root` is no folder."""
+    if is_lom_scene(root):
+        return [root]
+    if not root.is_dir():
+        return []
+    return sorted(path for path in root.iterdir() if path.is_dir() and is_lom_scene(path))
+
+
+def scene_name(name: str) -> str:
+    """A scene's name as typed on a command line: without the separator a shell's completion of
+    the folder adds (`buu/`)."""
+    return name.strip().rstrip("/\\")

@@ -24,9 +24,22 @@ def _flatten(images: torch.Tensor) -> torch.Tensor:
     return images.reshape(-1, *images.shape[-3:]).double()
 
 
+def _pair(images: torch.Tensor, references: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Both [N, 3, H, W] float64; ValueError unless they are floating-point images of one shape
+    (broadcasting would score a batch against one reference, or one row against a whole image)."""
+    if images.shape != references.shape:
+        raise ValueError(f"images {tuple(images.shape)} and references {tuple(references.shape)} differ in shape; "
+                         "score images of their references' size")
+    for name, tensor in (("images", images), ("references", references)):
+        if not tensor.is_floating_point():
+            raise ValueError(f"{name} are {tensor.dtype}; the metrics take floating-point values in [0, 1]")
+    return _flatten(images), _flatten(references)
+
+
 def psnr(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor:
     """[..., 3, H, W] in [0, 1] -> [...] PSNR in dB (inf for identical images)."""
-    mse = ((_flatten(images) - _flatten(references)) ** 2).mean(dim=(1, 2, 3))
+    ours, theirs = _pair(images, references)
+    mse = ((ours - theirs) ** 2).mean(dim=(1, 2, 3))
     return (10 * torch.log10(1.0 / mse)).reshape(images.shape[:-3])
 
 
@@ -36,20 +49,22 @@ def psnr_gt_mean(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor
     enhancement papers report beside PSNR (LLFlow, Retinexformer). It leaves out one number, the
     overall exposure, which the reference fixes by the photographer's choice and a dark photo
     does not reveal; what remains scores colour, contrast and detail. An image with no light
-    (mean grey 0) is scored as it is.
+    (mean grey 0) is scored as it is; against a reference with no light the score is NaN (scaled
+    to black, any image would match it perfectly).
     """
-    ours, theirs = _flatten(images), _flatten(references)
+    ours, theirs = _pair(images, references)
     our_grey = luma(ours).mean(dim=(1, 2, 3))  # OpenCV's grey, as the GT-mean protocol uses it
     their_grey = luma(theirs).mean(dim=(1, 2, 3))
     scale = torch.where(our_grey > 0, their_grey / our_grey.clamp_min(1e-12), torch.ones_like(our_grey))
     matched = (ours * scale[:, None, None, None]).clamp(0.0, 1.0)
-    return psnr(matched, theirs).reshape(images.shape[:-3])
+    scores = psnr(matched, theirs)
+    return torch.where(their_grey > 0, scores, torch.full_like(scores, math.nan)).reshape(images.shape[:-3])
 
 
 def ssim(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor:
     """[..., 3, H, W] in [0, 1] (H, W > 11) -> [...] mean SSIM over channels and pixels, in float64
     (the training loss's definition, losses/ssim.py, so that training optimises what is reported)."""
-    a, b = _flatten(images), _flatten(references)
+    a, b = _pair(images, references)
     return ssim_map_mean(a, b).reshape(images.shape[:-3])
 
 
@@ -83,8 +98,7 @@ def sharpness(images: torch.Tensor, references: torch.Tensor) -> torch.Tensor:
     1 is as sharp as the reference; a blur scores below 1, noise or ringing above. A flat image
     scores 0; a flat reference gives NaN (nothing to compare against).
     """
-    ours = luminance(_flatten(images))[:, 0].numpy()  # Rec. 709 weights on the encoded values
-    theirs = luminance(_flatten(references))[:, 0].numpy()
+    ours, theirs = (luminance(batch)[:, 0].numpy() for batch in _pair(images, references))  # Rec. 709 weights
     ratios = []
     for image, reference in zip(ours, theirs):
         spread = image.std()

@@ -28,14 +28,15 @@ def _finite(value: Any, where: str, replaced: list[str]) -> Any:
     return value
 
 
-def finite_document(document: Any, name: str | None = None) -> Any:
+def finite_document(document: Any, name: str | None = None, written_as: str = "null") -> Any:
     """`document` with every non-finite float replaced by None; `name` (the file it goes to):
-    a warning lists the values replaced (None: replaced without a word, for a copy of a document
-    already written and warned about)."""
+    a warning lists the values replaced, saying they are `written_as` (None: replaced without a
+    word, for a copy of a document already written and warned about)."""
     replaced: list[str] = []
     cleaned = _finite(document, "", replaced)
     if replaced and name is not None:
-        logger.warning("%s: %d value(s) are not finite, written as null: %s", name, len(replaced), listed(replaced, 4))
+        logger.warning("%s: %d value(s) are not finite, written as %s: %s", name, len(replaced), written_as,
+                       listed(replaced, 4))
     return cleaned
 
 

@@ -39,6 +39,15 @@ def describe_file(path: Path, command: str, output_set: str) -> WrittenFile:
     return WrittenFile(path.stat().st_size, file_sha256(path), command, output_set)
 
 
+_warned: set[str] = set()  # a command reads a manifest more than once (checked early, again under the lock)
+
+
+def _warn_once(message: str) -> None:
+    if message not in _warned:
+        _warned.add(message)
+        logger.warning("%s", message)
+
+
 class Manifest:
     """The manifest of `folder`: relative POSIX path -> WrittenFile."""
 
@@ -60,12 +69,12 @@ class Manifest:
         except FileNotFoundError:
             return cls(folder)
         except (OSError, ValueError, KeyError, TypeError, AttributeError) as error:
-            logger.warning("%s cannot be read (%s): no file in %s counts as written by lumos3d", path, error, folder)
+            _warn_once(f"{path} cannot be read ({error}): no file in {folder} counts as written by lumos3d")
             return cls(folder)
         outside = [name for name in files if not _inside_name(name)]
         if outside:
             # lumos3d lists only files inside the folder: such a name was edited in, and is not trusted
-            logger.warning("%s lists %s, outside its folder: not counted as written by lumos3d", path, ", ".join(outside))
+            _warn_once(f"{path} lists {', '.join(outside)}, outside its folder: not counted as written by lumos3d")
         return cls(folder, {name: entry for name, entry in files.items() if _inside_name(name)})
 
     @staticmethod

@@ -87,6 +87,28 @@ def _acquire(folder: Path, command: str) -> int:
     return descriptor
 
 
+def refuse_if_locked(folder: Path | str) -> None:
+    """InputError naming the run that holds `folder`'s lock, if another one does: the check a
+    command makes before its libraries load, so that a second run is refused at once (it takes
+    the lock itself later; this creates nothing)."""
+    folder = Path(folder).resolve()
+    if folder in _held:
+        return
+    try:
+        descriptor = os.open(folder / LOCK_NAME, os.O_RDONLY | os.O_NOFOLLOW)
+    except OSError:  # no lock file (or one that is not ours: `folder_lock` names it)
+        return
+    try:
+        if stat.S_ISREG(os.fstat(descriptor).st_mode):
+            try:
+                fcntl.flock(descriptor, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            except BlockingIOError:
+                raise InputError(f"{folder}: {_describe_holder(descriptor)} is writing its outputs here; wait for it to "
+                                 "end or choose another output folder") from None
+    finally:
+        os.close(descriptor)  # closing releases a shared lock taken here
+
+
 @contextlib.contextmanager
 def folder_lock(folder: Path | str, command: str) -> Iterator[None]:
     """Hold the lock of `folder` (which must exist) while inside; InputError naming the other

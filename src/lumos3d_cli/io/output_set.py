@@ -48,7 +48,7 @@ from lumos3d_cli.io.atomic import (
     write_commit_journal,
 )
 from lumos3d_cli.io.manifest import MANIFEST_NAME, Manifest, describe_file
-from lumos3d_cli.io.output_lock import LOCK_NAME, folder_lock
+from lumos3d_cli.io.output_lock import LOCK_NAME, folder_lock, refuse_if_locked
 from lumos3d_cli.io.output_paths import check_output_path
 
 logger = logging.getLogger(__name__)
@@ -197,6 +197,8 @@ class OutputSet:
         lumos3d did not write, or touch an input. (`reserved` checks the same under the folders'
         locks: a command enters it before any work.)"""
         self.check_paths()
+        for folder in self._folders_written():
+            refuse_if_locked(folder)
         self._check_ownership()
 
     def check_paths(self) -> None:

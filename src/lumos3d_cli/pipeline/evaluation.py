@@ -17,12 +17,12 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.eval.contact_sheet import contact_sheet
 from lumos3d_cli.io.file_digest import file_sha256
 from lumos3d_cli.io.image_write import write_image
-from lumos3d_cli.io.json_text import json_text
+from lumos3d_cli.io.json_text import finite_document, json_text
 from lumos3d_cli.model.appearance.exposure_prior import prior_strength
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET
 from lumos3d_cli.pipeline.eval_outputs import eval_outputs
-from lumos3d_cli.pipeline.lom_eval import PROTOCOLS, SceneEvaluation, evaluate_lom_scene
+from lumos3d_cli.pipeline.lom_eval import PROTOCOLS, SceneEvaluation, evaluate_lom_scene, read_lom_photos
 from lumos3d_cli.pipeline.model_loading import load_restoration_model
 from lumos3d_cli.pipeline.presets import get_restore_preset
 from lumos3d_cli.pipeline.quality import QualityMeter, mean_metrics
@@ -92,12 +92,13 @@ def evaluate_lom(
     found = find_lom_scenes(root, mode, scenes)
     weights = resolve_checkpoint(checkpoint, mode)
     meter = QualityMeter.create(lpips_weights)
-    model = load_restoration_model(weights, device)
+    photos = [read_lom_photos(scene) for scene in found]  # a bad photo in the last scene is refused before the first's work
+    model = load_restoration_model(weights, device, mode)
     if on_start is not None:
         on_start(len(found))
     results = []
-    for scene in found:
-        results.append(evaluate_lom_scene(scene, model, settings, protocol, limit, meter, geometry))
+    for scene, scene_photos in zip(found, photos):
+        results.append(evaluate_lom_scene(scene, model, settings, protocol, limit, meter, geometry, scene_photos))
         if on_scene is not None:
             on_scene(scene.name)
     methods = ["lumos3d"] + (["gamma"] if baseline == "gamma" else [])
@@ -144,7 +145,7 @@ def write_eval_report(report: EvalReport, out: Path | str, inputs: Sequence[Path
         buffer = io.StringIO()
         writer = csv.DictWriter(buffer, fieldnames=["scene", "method", *METRIC_KEYS])
         writer.writeheader()
-        writer.writerows(report.rows)
+        writer.writerows(finite_document(report.rows, "metrics.csv", written_as="empty cells"))
         (staging.root / "metrics.csv").write_text(buffer.getvalue())
         for result in report.scenes:
             sheet = eval_contact_sheet(result, report.mode, "gamma" in report.methods)

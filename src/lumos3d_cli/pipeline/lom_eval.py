@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import torch
 
@@ -72,32 +73,48 @@ def _pose_accuracy(scene: LomScene, frames: list[str], predicted: torch.Tensor) 
     return pose_accuracy(predicted, torch.stack([reference[f] for f in frames]))
 
 
-def _load_same_size(paths, what: str) -> torch.Tensor:
+@dataclass
+class LomPhotos:
+    """A scene's photos, read and checked: `degraded` [V, 3, H, W] (every frame, in the scene's
+    order), `references` [T, 3, H, W] (the test frames' normal-light photos)."""
+
+    degraded: torch.Tensor
+    references: torch.Tensor
+
+
+def _load_same_size(paths: list[Path], size: tuple[int, int] | None = None) -> torch.Tensor:
+    """[N, 3, H, W]; InputError naming the first photo whose size differs from the first's (or
+    from `size`, width and height)."""
     batch = load_images(paths)
-    sizes = sorted(set(batch.original_sizes))
-    if len(sizes) != 1:
-        raise InputError(f"{what}: images have different sizes {sizes}; LOM frames must share one size")
+    expected = batch.original_sizes[0] if size is None else size
+    for path, found in zip(paths, batch.original_sizes):
+        if found != expected:
+            raise InputError(f"{path}: {found[0]}x{found[1]}, but the scene's photos are {expected[0]}x{expected[1]}; "
+                             "a LOM scene's frames must share one size")
     return batch.images
+
+
+def read_lom_photos(scene: LomScene) -> LomPhotos:
+    """Decode and check a scene's photos (InputError naming a photo that cannot be read or is of
+    another size): `eval` reads every scene's before it loads the model and evaluates the first."""
+    degraded = _load_same_size([scene.degraded[f] for f in scene.frames])
+    size = (degraded.shape[-1], degraded.shape[-2])
+    return LomPhotos(degraded, _load_same_size([scene.reference[f] for f in scene.test], size))
 
 
 def evaluate_lom_scene(
     scene: LomScene, model: Lumos3D, preset: RestorePreset, protocol: str, max_views: int, meter: QualityMeter,
-    geometry: str = "auto",
+    geometry: str = "auto", photos: LomPhotos | None = None,
 ) -> SceneEvaluation:
     """One scene under `protocol` with cameras from `geometry` (see pipeline.scene_stages.build_scene);
     every frame of the scene takes part in the registration, `max_views` of them (always the test
-    frames) go through the network."""
+    frames) go through the network. `photos`: the scene's, already read (`read_lom_photos`)."""
     if protocol not in PROTOCOLS:
         raise InputError(f"{protocol!r}: use one of {', '.join(PROTOCOLS)}", parameter="protocol")
     started = time.perf_counter()
     frames = list(scene.frames)
-    images = _load_same_size([scene.degraded[f] for f in frames], f"{scene.root} ({scene.mode})")
-    references = _load_same_size([scene.reference[f] for f in scene.test], f"{scene.root / 'high'}")
-    if references.shape[-2:] != images.shape[-2:]:
-        raise InputError(
-            f"{scene.root}: high/ photos are {references.shape[-1]}x{references.shape[-2]} but the degraded ones "
-            f"{images.shape[-1]}x{images.shape[-2]}; they must match"
-        )
+    photos = read_lom_photos(scene) if photos is None else photos
+    images, references = photos.degraded, photos.references
     test_positions = [frames.index(frame) for frame in scene.test]
     fuse_views = [frame not in scene.test for frame in frames] if protocol == "holdout" else None
     if fuse_views is not None and not any(fuse_views):

@@ -2,18 +2,29 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
+from lumos3d_cli.data.modes import MODES
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import Lumos3D
 
+logger = logging.getLogger(__name__)
+
 DEVICES = ("cpu", "cuda")
 
 
-def load_restoration_model(checkpoint: Path, device: str) -> Lumos3D:
-    """The network of `checkpoint` in eval mode on `device` ("cpu" or "cuda")."""
+def load_restoration_model(checkpoint: Path, device: str, mode: str | None = None) -> Lumos3D:
+    """The network of `checkpoint` in eval mode on `device` ("cpu" or "cuda"); a warning when the
+    checkpoint says it was trained for another degradation than `mode` (the low-light model
+    brightens what the over-exposure mode asks to darken)."""
     if device not in DEVICES:
         raise InputError(f"{device!r}: use cpu or cuda", parameter="device")
-    return load_model(checkpoint, device=device)
+    model = load_model(checkpoint, device=device)
+    trained_for = model.provenance.get("degradation")
+    if mode is not None and trained_for in MODES and trained_for != mode:
+        logger.warning("%s: was trained for %s photos but the mode is %s; use the %s model (--checkpoint %s) or "
+                       "--mode %s", checkpoint, trained_for, mode, mode, mode, trained_for)
+    return model
 

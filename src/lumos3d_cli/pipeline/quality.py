@@ -31,7 +31,8 @@ class QualityMeter:
     @staticmethod
     def create(lpips_weights: Path | str | None, network: str = "vgg") -> QualityMeter:
         if lpips_weights is None:
-            return QualityMeter(None, "LPIPS n/a: no LPIPS trunk weights given (a torchvision vgg16/alexnet weight file)")
+            trunk = "vgg16" if network == "vgg" else network
+            return QualityMeter(None, f"LPIPS n/a: no LPIPS trunk weights given (a torchvision {trunk} weight file)")
         try:
             return QualityMeter(LPIPS(network, lpips_weights), f"LPIPS ({network})")
         except InputError:
@@ -45,6 +46,10 @@ class QualityMeter:
         one batch."""
         if len(images) != len(references):
             raise ValueError(f"{len(images)} images for {len(references)} references")
+        for index, (image, reference) in enumerate(zip(images, references)):
+            if image.shape != reference.shape:
+                raise ValueError(f"image {index} is {tuple(image.shape)} but its reference {tuple(reference.shape)}; "
+                                 "each image must have its reference's size")
         rows: list[dict[str, float | None]] = [{} for _ in images]
         for size in dict.fromkeys(tuple(image.shape) for image in images):
             group = [i for i, image in enumerate(images) if tuple(image.shape) == size]
@@ -55,7 +60,8 @@ class QualityMeter:
         return rows
 
     def _measure_batch(self, images: torch.Tensor, references: torch.Tensor) -> list[dict[str, float | None]]:
-        """images, references [N, 3, H, W]."""
+        """images, references [N, 3, H, W]; the images are scored as written, clipped to [0, 1]."""
+        images = images.clamp(0.0, 1.0)
         values_psnr = psnr(images, references).tolist()
         values_gt_mean = psnr_gt_mean(images, references).tolist()
         values_ssim = ssim(images, references).tolist()

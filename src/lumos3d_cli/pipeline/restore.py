@@ -287,7 +287,7 @@ neighbouring photos (`geometry.photo_consistency`). `early_registration`: the ph
         (path.name for path in paths), load_references(reference, [path.name for path in paths], batch.original_sizes)))
     timings["load"] = time.perf_counter() - stage_started
     stage_started = time.perf_counter()
-    model = load_restoration_model(weights, device)
+    model = load_restoration_model(weights, device, mode)
     timings["load_model"] = time.perf_counter() - stage_started
     check_photo_contents(batch, model.architecture.patch_size, mode)
     scene = restore_scene(batch, model, settings, geometry, poses, max_views, mode, progress, early_registration)
