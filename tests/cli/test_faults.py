@@ -14,6 +14,7 @@ import OpenImageIO as oiio
 import pytest
 from safetensors import safe_open
 from safetensors.torch import save_file
+from skimage.metrics import peak_signal_noise_ratio
 
 from lumos3d_cli.io.ply import write_ply
 from lumos3d_cli.model.checkpoints import save_checkpoint
@@ -375,3 +376,23 @@ def test_info_summarises_a_bundled_model_by_name(run_cli):
     assert result.code == 0, result.err
     summary = json.loads(result.out)
     assert summary["format"] == "lumos3d" and summary["path"].endswith("lumos3d-over-exposure.safetensors")
+
+
+def test_photos_with_nothing_in_them_add_nothing_to_the_scene(tmp_path, buu, run_cli):
+    """All-black and all-white photos among real ones: their made-up depth and colours are not
+    fused (they laid black and white wedges over the other views, one at 15 dB against the run
+    without them), and their own views stay the photos they are."""
+    clean = _photos(buu, tmp_path / "clean", ["1.JPG", "4.JPG", "7.JPG", "10.JPG", "13.JPG", "16.JPG"])
+    mixed = tmp_path / "mixed"
+    shutil.copytree(clean, mixed)
+    cv2.imwrite(str(mixed / "z0.png"), np.zeros((375, 500, 3), np.uint8))
+    cv2.imwrite(str(mixed / "z1.png"), np.full((375, 500, 3), 255, np.uint8))
+    options = ("--geometry", "network", "--preset", "fast", "--refine-steps", 0)
+    for folder in (clean, mixed):
+        result = run_cli("restore", folder, "-o", tmp_path / f"out-{folder.name}" / "scene.ply", *options)
+        assert result.code == 0, result.err
+    restored = {folder: {path.stem: cv2.imread(str(path)).astype(np.float64) / 255
+                         for path in (tmp_path / f"out-{folder}" / "restored").glob("*.png")} for folder in ("clean", "mixed")}
+    assert restored["mixed"]["z0"].max() == 0 and restored["mixed"]["z1"].min() == 1
+    for name, view in restored["clean"].items():
+        assert peak_signal_noise_ratio(view, restored["mixed"][name], data_range=1) > 22, name

@@ -150,8 +150,13 @@ def restore_scene(
         logger.warning("%d of %d photos differ in size from %dx%d (%s): the network sees them stretched to it, their "
                        "cameras and restored views keep each photo's own size and aspect ratio", len(odd), len(names),
                        *batch.size, ", ".join(odd[:5]) + (" ..." if len(odd) > 5 else ""))
+    # A photo with nothing in it (all black or all saturated) gives no Gaussian and is fitted by no
+    # refinement step: its depth and colours are made up, and fused they laid black or white wedges
+    # over the other views. Its view is the photo as it is.
+    empty = set().union(*frames_without_content(batch.images))
+    fuse_views = [index not in empty for index in range(len(names))] if empty and len(empty) < len(names) else None
     built = build_scene(batch.images, names, model, preset, geometry, poses, max_views, mode, progress,
-                        sizes=batch.original_sizes, early_registration=early_registration)
+                        fuse_views=fuse_views, sizes=batch.original_sizes, early_registration=early_registration)
     cameras = built.geometry.cameras
     missing = [name for name in names if name not in cameras.names]
     if missing:
@@ -166,6 +171,9 @@ def restore_scene(
     else:
         rendered = render_views(built.gaussians, cameras, preset.sh_degree, progress, fill=preset.fill_unobserved)
         views, uncovered, view_source = rendered.images, rendered.summary(), "render"
+        if fuse_views is not None:
+            views = [view if fuse_views[names.index(name)] else batch.photo(names.index(name))
+                     for view, name in zip(views, cameras.names)]
     timings = built.timings | {"render": time.perf_counter() - started}
     inputs = [batch.photo(names.index(name)) for name in cameras.names]
     return RestoredScene(
