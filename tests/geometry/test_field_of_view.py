@@ -44,3 +44,14 @@ def test_degenerate_predictions_get_the_fallback_lens():
     assert (fixed[replaced, 0, 0] == fixed[replaced, 1, 1]).all()  # square pixels
     assert torch.equal(fixed[:, :2, 2], intrinsics[:, :2, 2])  # principal points kept
     assert torch.equal(fixed[1], intrinsics[1])
+
+
+def test_views_no_lens_has_are_named_with_their_own_sizes():
+    from lumos3d_cli.geometry.field_of_view import implausible_views
+
+    intrinsics = torch.stack([_intrinsics(f, f, (500, 375)) for f in (400.0, 1e5, 0.5, float("nan"))])
+    found = implausible_views(intrinsics, [(500, 375), (500, 375), (500, 375), (500, 375)])
+    assert list(found) == [1, 2, 3] and found[1] == pytest.approx(math.degrees(2 * math.atan(250 / 1e5)))
+    # a portrait photo measures along its height: 60 degrees for the landscape one, 90 for it
+    assert implausible_views(torch.stack([_intrinsics(250 * 3 ** 0.5, 250 * 3 ** 0.5, (500, 375)),
+                                          _intrinsics(250, 250, (375, 500))]), [(500, 375), (375, 500)]) == {}

@@ -172,3 +172,43 @@ def test_poses_in_units_that_put_the_scene_out_of_the_renderers_range_are_refuse
                                tmp_path / "poses.json", "--refine-steps", 0),
                        "--poses", "no camera sees the scene", "outside the renderer's range")
     assert not out.parent.exists()
+
+
+def test_cameras_with_a_field_of_view_no_lens_has(run_cli, buu, tmp_path, random_checkpoint, monkeypatch):
+    """Structure-from-motion on few features can settle on focal lengths of tens of thousands of
+    pixels (a quarter of a degree): that model counts as failed. Given poses in another unit are
+    the user's to judge: a warning, and, where no Gaussian then lands in any view, a refusal."""
+    from lumos3d_cli.pipeline import scene_geometry
+
+    real = scene_geometry.register_photos
+
+    def telescopic(*args, **kwargs):
+        registration = real(*args, **kwargs)
+        registration.cameras.intrinsics[:, :2, :2] *= 200
+        return registration
+
+    monkeypatch.setattr(scene_geometry, "register_photos", telescopic)
+    photos = _photos(buu, tmp_path)
+    out = tmp_path / "out" / "scene.ply"
+    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "sfm"),
+                       "--geometry sfm: structure-from-motion gave 5 view(s) a field of view no lens has (3.JPG 0.")
+    result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--refine-steps", 0, "--json")
+    assert result.code == 0, result.err
+    assert json.loads(result.out)["geometry"]["source"] == "network"
+    assert "using the network's cameras instead" in " ".join(result.err.split())
+    monkeypatch.setattr(scene_geometry, "register_photos", real)
+    given = read_transforms_json(buu / "transforms_train.json")
+    stems = [name.rsplit("/", 1)[-1].split(".")[0] for name in given.names]
+    given = given[[stems.index(n[:-4]) for n in FRAMES]]
+    for focal, refused in ((1e5, False), (1e30, True)):
+        intrinsics = given.intrinsics.clone()
+        intrinsics[:, 0, 0] = intrinsics[:, 1, 1] = focal
+        write_transforms_json(tmp_path / "poses.json", Cameras(given.extrinsics, intrinsics, given.sizes, given.names))
+        result = run_cli("restore", photos, "-o", tmp_path / f"given-{focal:g}" / "scene.ply", "--checkpoint",
+                         random_checkpoint, "--poses", tmp_path / "poses.json", "--geometry", "network", "--refine-steps", 0)
+        said = " ".join(result.err.split())
+        assert "poses.json: 5 view(s) have a field of view no ordinary lens has (3.JPG " in said, said
+        if refused:
+            expect_input_error(result, "--poses", "no Gaussian of the scene falls inside any camera's view")
+        else:
+            assert result.code == 0, result.err

@@ -29,6 +29,19 @@ def longer_side_fov(intrinsics: torch.Tensor, size: tuple[int, int]) -> torch.Te
     return torch.rad2deg(2 * torch.atan(side / 2 / focal.clamp_min(1e-12)))
 
 
+def implausible_views(intrinsics: torch.Tensor, sizes: list[tuple[int, int]]) -> dict[int, float]:
+    """intrinsics [V, 3, 3] of images of `sizes` (width, height, one per view) -> {view: field of
+    view of its longer side in degrees} for the views outside PLAUSIBLE_FOV_DEGREES (or not finite):
+    cameras that structure-from-motion or a camera file gave, which no lens has."""
+    low, high = PLAUSIBLE_FOV_DEGREES
+    found = {}
+    for view, size in enumerate(sizes):
+        degrees = float(longer_side_fov(intrinsics[view: view + 1].double(), size)[0])
+        if not (math.isfinite(degrees) and low <= degrees <= high):
+            found[view] = degrees
+    return found
+
+
 def plausible_intrinsics(intrinsics: torch.Tensor, size: tuple[int, int]) -> tuple[torch.Tensor, torch.Tensor]:
     """intrinsics [V, 3, 3] of images of size (width, height) -> (intrinsics [V, 3, 3], replaced
     [V] bool): views whose field of view is outside PLAUSIBLE_FOV_DEGREES (or not finite) get

@@ -40,7 +40,7 @@ def _read_pose_source(path: Path) -> Cameras:
                 return read_colmap_model(folder)
         if transforms_splits(path):
             return read_transforms_splits(path, warn_on_distortion=False)
-    return read_cameras(path)
+    return read_cameras(path, warn_on_distortion=False)
 
 
 def read_given_poses(

@@ -24,13 +24,14 @@ from pathlib import Path
 
 import torch
 
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import InputError, listed
 from lumos3d_cli.eval.metrics import auto_gamma
 from lumos3d_cli.geometry.confirmed_depth import confirmed_pixels
 from lumos3d_cli.geometry.consistency import depth_consistency
 from lumos3d_cli.geometry.depth_alignment import MIN_POINTS, align_depth
 from lumos3d_cli.geometry.depth_correction import GRID as DEPTH_CORRECTION_GRID
 from lumos3d_cli.geometry.depth_correction import correct_depth
+from lumos3d_cli.geometry.field_of_view import implausible_views
 from lumos3d_cli.geometry.given_poses import read_given_poses
 from lumos3d_cli.geometry.photo_consistency import sweep_depth
 from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
@@ -103,6 +104,11 @@ def _structure_from_motion(images: torch.Tensor, names: list[str], sizes: list[t
     return registration
 
 
+def _fields_of_view(names: Sequence[str], degrees: dict[int, float]) -> str:
+    """'1.JPG 0.25 degrees, 2.JPG 0.25 degrees' for a warning (a few of them)."""
+    return listed([f"{names[view]} {value:.3g} degrees" for view, value in degrees.items()], 3)
+
+
 @dataclass
 class Brightened:
     """The photos as structure-from-motion sees them: images [V, 3, H, W] and how they were made
@@ -137,6 +143,11 @@ def register_views(
     started = time.perf_counter()
     if poses is not None:
         given = read_given_poses(poses, names, sizes)
+        odd = implausible_views(given.intrinsics, given.sizes)
+        if odd:  # a telescope or a fisheye may be meant; a focal length in the wrong unit more likely
+            logger.warning("%s: %d view(s) have a field of view no ordinary lens has (%s); if the focal lengths are "
+                           "in another unit than pixels of the photos, the scene will be empty or blurred", poses,
+                           len(odd), _fields_of_view(names, odd))
         sfm = _structure_from_motion(images, names, sizes, progress, sfm_long_side) if geometry != "network" and count > 1 else None
         return ViewRegistration(geometry, sizes, "poses", torch.ones(count, dtype=torch.bool), given, sfm,
                                 {"sfm": time.perf_counter() - started}, brightened.method)
@@ -150,13 +161,20 @@ def register_views(
     run = blind_run() if blind_run is not None and brightened.method == BRIGHTENING else None
     registration = _structure_from_motion(images, names, sizes, progress, sfm_long_side, run)
     seconds = {"sfm": time.perf_counter() - started}
+    outcome = registration.describe()
     if registration.registered_count > AUTO_MIN_REGISTERED_SHARE * count:
-        return ViewRegistration(geometry, sizes, "sfm", registration.registered.clone(), registration.cameras,
-                                registration, seconds, brightened.method)
+        # a model of few features can settle on a focal length no lens has (tens of thousands of
+        # pixels for a photo of hundreds): its scene is a blur, so it counts as a failure
+        odd = implausible_views(registration.cameras.intrinsics, registration.cameras.sizes)
+        if not odd:
+            return ViewRegistration(geometry, sizes, "sfm", registration.registered.clone(), registration.cameras,
+                                    registration, seconds, brightened.method)
+        outcome = (f"gave {len(odd)} view(s) a field of view no lens has "
+                   f"({_fields_of_view(registration.cameras.names, odd)})")
     if geometry == "sfm":
-        raise InputError(f"sfm: structure-from-motion {registration.describe()}; use the network's cameras (geometry network) or give poses",
-                         parameter="geometry")
-    logger.warning("structure-from-motion %s; using the network's cameras instead", registration.describe())
+        raise InputError(f"sfm: structure-from-motion {outcome}; use the network's cameras (geometry network) or give "
+                         "poses", parameter="geometry")
+    logger.warning("structure-from-motion %s; using the network's cameras instead", outcome)
     return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, registration,
                             seconds, brightened.method)
 

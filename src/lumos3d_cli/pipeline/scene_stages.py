@@ -215,9 +215,12 @@ def budget(job: SceneJob) -> SceneJob:
     preset = job.preset
     gaussians, report = fit_budget(job.gaussians, job.geometry.cameras, preset.max_gaussians,
                                    resolution=preset.budget_resolution)
-    if report.kept == 0 and report.dropped_unseen > 0:  # poses in extreme units: every view would be black
-        require_drawable(job.gaussians.means, job.geometry.cameras, None if job.poses is None else str(job.poses),
-                         parameter=None if job.poses is None else "poses")
+    if report.kept == 0 and report.dropped_unseen > 0:  # every view would be black
+        where, parameter = (None, None) if job.poses is None else (str(job.poses), "poses")
+        require_drawable(job.gaussians.means, job.geometry.cameras, where, parameter=parameter)  # extreme units
+        # in range, yet outside every view: cameras that look elsewhere, or focal lengths in another unit
+        raise InputError(f"{where + ': ' if where else ''}no Gaussian of the scene falls inside any camera's view; check "
+                         "the cameras' focal lengths (pixels of the photos) and directions", parameter=parameter)
     job.gaussians = gaussians if preset.sh_degree is None else gaussians.with_sh_degree(preset.sh_degree)
     job.budget = report.as_dict() | {
         "max_gaussians": preset.max_gaussians, "min_weight_px": DEFAULT_MIN_WEIGHT, "grid": list(job.grid_size),
