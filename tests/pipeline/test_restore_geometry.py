@@ -212,3 +212,20 @@ def test_cameras_with_a_field_of_view_no_lens_has(run_cli, buu, tmp_path, random
             expect_input_error(result, "--poses", "no Gaussian of the scene falls inside any camera's view")
         else:
             assert result.code == 0, result.err
+
+
+def test_a_camera_file_that_overflows_the_scene_is_named(run_cli, buu, tmp_path, random_checkpoint):
+    """One camera placed 1e30 units away: every footprint overflows. The refusal named only
+    `gaussians.scales`; it names the camera file now."""
+    photos = _photos(buu, tmp_path)
+    given = read_transforms_json(buu / "transforms_train.json")
+    stems = [name.rsplit("/", 1)[-1].split(".")[0] for name in given.names]
+    given = given[[stems.index(n[:-4]) for n in FRAMES]]
+    extrinsics = given.extrinsics.clone()
+    extrinsics[0, :, 3] = 1e30
+    write_transforms_json(tmp_path / "poses.json", Cameras(extrinsics, given.intrinsics, given.sizes, given.names))
+    out = tmp_path / "out" / "scene.ply"
+    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--poses",
+                               tmp_path / "poses.json", "--refine-steps", 0),
+                       "--poses", "poses.json: the fused scene's Gaussians", "NaN or Inf; check the camera file's positions")
+    assert not out.parent.exists()

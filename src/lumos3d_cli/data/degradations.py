@@ -65,6 +65,9 @@ DOCUMENTED_RANGES = {
 # The widest exposure and gamma ranges: 20 stops either way, and curves from nearly flat to nearly
 # a step; beyond them float32 overflows (an exposure of 1e308 is Inf, and Inf times a black pixel NaN).
 RANGE_LIMITS = {"exposure": (1e-6, 1e6), "gamma": (1e-2, 1e2)}
+# The largest red/blue gain `degrade --colour-cast` draws from: far beyond any white balance (a
+# tungsten photo on a daylight setting is about 2), short of what overflows float32 sRGB.
+MAX_COLOUR_CAST = 100.0
 
 
 def is_valid_range(bounds: tuple[float, float], kind: str) -> bool:

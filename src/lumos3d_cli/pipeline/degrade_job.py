@@ -11,7 +11,9 @@ from pathlib import Path
 
 import torch
 
-from lumos3d_cli.data.degradations import MODES, Degradation, apply_degradation, is_valid_range, range_rule, sample_parameters
+from lumos3d_cli.data.degradations import (
+    MAX_COLOUR_CAST, MODES, Degradation, apply_degradation, is_valid_range, range_rule, sample_parameters,
+)
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.image_write import write_image
 from lumos3d_cli.io.images import read_image, to_srgb
@@ -39,8 +41,8 @@ def degrade_files(
     outputs = degrade_outputs(paths, output, bit_depth, given)
     outputs.check()
     single_file = is_single_file(output)
-    if not (math.isfinite(colour_cast) and colour_cast >= 1):
-        raise InputError(f"{colour_cast}: the largest colour-cast gain must be finite and at least 1 (1: no cast)",
+    if not (math.isfinite(colour_cast) and 1 <= colour_cast <= MAX_COLOUR_CAST):
+        raise InputError(f"{colour_cast}: the largest colour-cast gain must be from 1 (no cast) to {MAX_COLOUR_CAST:g}",
                          parameter="colour_cast")
     if jpeg_quality is not None and not 1 <= jpeg_quality <= 100:
         raise InputError(f"{jpeg_quality}: use a JPEG quality from 1 to 100", parameter="jpeg_quality")

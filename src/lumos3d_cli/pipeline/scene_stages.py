@@ -25,7 +25,7 @@ from pathlib import Path
 
 import torch
 
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import InputError, NonFiniteError
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.appearance.amplified_noise import denoise_photo
 from lumos3d_cli.model.appearance.footprint import footprint_colours
@@ -204,8 +204,24 @@ def fusion(job: SceneJob) -> SceneJob:
     grid_cameras = Cameras(grid_geometry.network_extrinsics.float(), grid_geometry.network_intrinsics.float(),
                            [job.grid_size] * len(job.selected))
     job.gaussians = apply_sampling_filter(output.gaussians[0].detach(), grid_cameras)
+    _require_finite_scene(job)
     job.counts = output.counts[0]
     return job
+
+
+def _require_finite_scene(job: SceneJob) -> None:
+    """InputError naming what most likely made the fused Gaussians non-finite: the camera file
+    (a position in extreme units overflows the footprints), else the weights (the network's
+    output itself was checked, but a head that gives extreme depths or scales overflows them)."""
+    try:
+        job.gaussians.require_finite("the fused scene's Gaussians")
+    except NonFiniteError as error:
+        if job.poses is not None:
+            raise InputError(f"{job.poses}: {error}; check the camera file's positions and units",
+                             parameter="poses") from None
+        source = job.model.provenance.get("path", "the model's weights")
+        raise InputError(f"{source}: {error}, on these photos: damaged or diverged weights; use another "
+                         "checkpoint") from None
 
 
 def budget(job: SceneJob) -> SceneJob:
