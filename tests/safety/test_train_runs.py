@@ -43,6 +43,24 @@ def test_row5_a_fresh_run_into_another_runs_folder_is_refused_and_new_run_starts
     assert read_run(output.with_name("run-2")).run_id != read_run(output).run_id
 
 
+def test_a_fresh_run_into_another_commands_output_folder_is_refused(tiny_config):
+    """`train output=out/demo` (a restore's folder) was accepted: the run wrote its checkpoints
+    beside the scene and added itself to the restore's manifest."""
+    from lumos3d_cli.io.output_set import OutputSet
+
+    config = tiny_config(name="restored", optim__steps=1)
+    output = _output(config)
+    with OutputSet(output, "restore", "restore scene.ply").add_file("scene.ply").staged() as staging:
+        (staging.root / "scene.ply").write_text("a scene")
+    before = snapshot(output)
+    expect_input_error(run_lumos3d("train", config), f"output {output}: holds the outputs of `restore scene.ply`",
+                       "a training run needs a folder of its own")
+    assert snapshot(output) == before
+    beside = run_lumos3d("train", config, "--new-run", "--json")
+    assert beside.code == 0, beside.err[-3000:]
+    assert json.loads(beside.out)["output"] == str(output.with_name("restored-2")) and snapshot(output) == before
+
+
 def test_row5_resume_continues_the_run_the_folder_holds_and_says_which(tiny_config):
     config = tiny_config(name="resumed", optim__steps=2, checkpoint_every=1)
     assert run_lumos3d("train", config).code == 0

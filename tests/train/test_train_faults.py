@@ -118,3 +118,23 @@ def test_cuda_on_a_machine_without_it_is_refused_naming_the_setting(tiny_config,
     if not machine_has_cuda:  # the command line, end to end, where the machine really has none
         expect_input_error(run_lumos3d("train", config, "device=cuda"), "device cuda: CUDA is not available")
         assert not _output(config).exists()
+
+
+def test_a_resume_refuses_a_config_that_changes_what_the_run_learns(tiny_config):
+    """The optimizer's saved state carries the run's learning rate, betas and parameter groups: a
+    resume with another `optim.lr` went on at the old rate while config.yaml recorded the new one,
+    and another `trainable` ended in an internal error. How long the run goes and how it reports
+    may change."""
+    config = tiny_config(name="changed", optim__steps=4, checkpoint_every=2)
+    checkpoints = _trained(config)
+    saved = (checkpoints / "step_00000004" / "config.yaml").read_text()
+    for override, named in (("optim.lr=0.05", "optim.lr 0.0002 -> 0.05"),
+                            ("trainable=[camera_head]", "trainable [] -> ['camera_head']"),
+                            ("model=small", "model 'tiny' -> 'small'")):
+        result = run_lumos3d("train", config, override, "optim.steps=6", "--resume")
+        expect_input_error(result, f"{checkpoints / 'step_00000004'}: this config differs from the run's in {named}",
+                           "resume with its config.yaml, or start a new run with --new-run")
+        assert (checkpoints / "step_00000004" / "config.yaml").read_text() == saved
+    result = run_lumos3d("train", config, "optim.steps=6", "log_every=2", "checkpoint_every=3", "--resume", "--json")
+    assert result.code == 0, result.err[-3000:]
+    assert json.loads(result.out)["steps_done"] == 6

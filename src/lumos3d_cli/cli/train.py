@@ -15,7 +15,7 @@ import typer
 from lumos3d_cli.cli.console import print_json, progress_bar, say, state
 from lumos3d_cli.cli.interrupts import library_imports
 from lumos3d_cli.errors import InputError, Interrupted
-from lumos3d_cli.train.run_folder import check_run_folder, earlier_run, numbered_folder, read_run
+from lumos3d_cli.train.run_folder import check_run_folder, earlier_run, numbered_folder, other_outputs, read_run
 
 if TYPE_CHECKING:
     from lumos3d_cli.train.trainer import StepReport, TrainResult
@@ -61,9 +61,10 @@ def train_command(
         raise InputError("--resume continues the run in the output folder and --new-run starts another: give one")
     settings = load_config(config, overrides or [])
     output = Path(settings.output)
-    if new_run and earlier_run(output) is not None:
+    held = (earlier_run(output) or other_outputs(output)) if new_run else None
+    if held is not None:
         output = numbered_folder(output)
-        say(f"{settings.output} holds {earlier_run(Path(settings.output))}; this run starts in {output}")
+        say(f"{settings.output} holds {held}; this run starts in {output}")
         settings = replace(settings, output=str(output))
     check_run_folder(output, training_inputs(settings, config), resume)
     if resume:

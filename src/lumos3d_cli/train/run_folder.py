@@ -63,10 +63,20 @@ def earlier_run(output: Path) -> str | None:
     return what + (f", checkpoints up to {steps[-1].name}" if steps else f" ({', '.join(found)})")
 
 
+def other_outputs(output: Path) -> str | None:
+    """The output sets of other lumos3d commands `output` holds (a restore's scene.ply, views,
+    summary.json ...), in words (None: none): a training run needs a folder of its own."""
+    manifest = Manifest.read(Path(output))
+    sets = sorted({entry.output_set for name, entry in manifest.files.items()
+                   if entry.command != "train" and (Path(output) / name).exists()})
+    return ", ".join(f"the outputs of `{entry}`" for entry in sets) or None
+
+
 def numbered_folder(output: Path) -> Path:
-    """The first of `output`-2, `output`-3 ... that holds no run."""
+    """The first of `output`-2, `output`-3 ... that holds no run and no other command's outputs."""
     number = 2
-    while earlier_run(output.with_name(f"{output.name}-{number}")) is not None:
+    while (earlier_run(output.with_name(f"{output.name}-{number}")) is not None
+           or other_outputs(output.with_name(f"{output.name}-{number}")) is not None):
         number += 1
     return output.with_name(f"{output.name}-{number}")
 
@@ -91,6 +101,10 @@ def check_run_folder(output: Path, inputs: list[Path | None], resume: bool) -> N
     if resume and not checkpointed:
         raise InputError(f"output {output}: holds {earlier}, which saved no checkpoint, so there is nothing to resume; "
                          "start a new numbered run folder beside it with --new-run, or choose another output")
+    others = None if resume else other_outputs(output)
+    if others is not None:
+        raise InputError(f"output {output}: holds {others}; a training run needs a folder of its own: choose another "
+                         "output")
     if not resume and earlier is not None:
         continuing = "continue it with --resume, " if checkpointed else "it saved no checkpoint to resume from; "
         raise InputError(f"output {output}: holds {earlier}; {continuing}start a new numbered run folder beside it with "

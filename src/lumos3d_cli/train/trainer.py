@@ -33,6 +33,7 @@ from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import Lumos3D, build_model
 from lumos3d_cli.train.bracket_samples import BracketSamples, check_bracket_model
 from lumos3d_cli.train.checkpointing import (
+    CONFIG_FILE,
     TrainingState,
     load_training_checkpoint,
     resume_candidates,
@@ -51,6 +52,7 @@ from lumos3d_cli.train.run_folder import (
     remove_unfinished_run,
     start_run,
 )
+from lumos3d_cli.train.resume_config import require_same_training
 from lumos3d_cli.train.run_logs import RunLogs
 from lumos3d_cli.train.schedule import learning_rate_factor
 from lumos3d_cli.train.selection import SELECTED_FILE, best_earlier_score, drop_stale_selection, is_improvement
@@ -359,6 +361,7 @@ class Trainer:
         problems = []
         run_id = self.run_identity.run_id if self.run_identity is not None else None
         for folder in resume_candidates(self.output, run_id):
+            require_same_training(folder / CONFIG_FILE, config_to_yaml(self.config))
             try:
                 state = load_training_checkpoint(folder, self.model)
             except InputError as error:
