@@ -98,3 +98,10 @@ def test_scene_and_checkpoint_suffixes_do_not_mix(tmp_path, run_cli):
         run_cli("convert", str(tmp_path / "scene.ply"), "-o", str(tmp_path / "x.splat"), "--dtype", "float16"), "--dtype", "checkpoints"
     )
     assert listing(tmp_path) == ["full.safetensors", "scene.ply"]
+
+
+def test_an_empty_scene_is_not_converted(tmp_path, run_cli):
+    write_ply(tmp_path / "empty.ply", random_gaussians(0, 0))
+    expect_input_error(run_cli("convert", tmp_path / "empty.ply", "-o", tmp_path / "empty.splat"),
+                       "empty.ply: holds no Gaussians; there is nothing to convert")
+    assert listing(tmp_path) == ["empty.ply"]

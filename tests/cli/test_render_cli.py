@@ -125,3 +125,43 @@ def test_render_bad_inputs_leave_nothing(run_cli, tmp_path):
     (tmp_path / "bad.ply").write_text("not a ply")
     expect_input_error(run_cli("render", tmp_path / "bad.ply", "-o", out, "--orbit", 2), "not a PLY file")
     assert not out.exists()
+
+
+def test_camera_files_with_sizes_of_their_own(run_cli, tmp_path):
+    """A camera larger than the renderer's side limit is refused by name (it asked for 112 GiB);
+    with one side given each camera keeps its own aspect ratio (a portrait view was stretched to
+    the first camera's)."""
+    path, gaussians = _scene(tmp_path)
+    cameras = orbit_from_gaussians(gaussians, 2, 48, 32)
+    huge = cameras.rescaled_to([(48, 32), (100000, 100000)])
+    write_transforms_json(tmp_path / "huge.json", huge)
+    expect_input_error(run_cli("render", path, "--poses", tmp_path / "huge.json", "-o", tmp_path / "a"),
+                       "--poses", "huge.json: cameras larger than 16384 pixels a side: 1 (100000x100000)", "give width or height")
+    small = run_cli("render", path, "--poses", tmp_path / "huge.json", "-o", tmp_path / "b", "--width", 50)
+    assert small.code == 0, small.err
+    write_transforms_json(tmp_path / "mixed.json", cameras.rescaled_to([(48, 32), (16, 32)]))
+    result = run_cli("render", path, "--poses", tmp_path / "mixed.json", "-o", tmp_path / "c", "--width", 96)
+    assert result.code == 0, result.err
+    sizes = [cv2.imread(str(tmp_path / "c" / name)).shape[1::-1] for name in ("00000.png", "00001.png")]
+    assert sizes == [(96, 64), (96, 192)]
+
+
+def test_an_orbit_ignores_a_file_beside_the_scene_that_holds_no_cameras(run_cli, tmp_path):
+    path, _ = _scene(tmp_path)
+    (path.parent / "cameras.json").write_text('{"cameras": []}')
+    result = run_cli("render", path, "--orbit", 2, "-o", tmp_path / "frames", "--width", 64, "--json")
+    assert result.code == 0, result.err
+    assert "cameras.json" in result.err and "orbiting around the scene's bounds instead" in " ".join(result.err.split())
+    assert json.loads(result.out)["cameras"] == "orbit around the scene bounds"
+
+
+def test_an_orbit_around_one_gaussian_sees_it(run_cli, tmp_path):
+    """The orbit's radius came from the spread of the centres alone: 1e-6 around one Gaussian."""
+    one = random_scene(1, 0, degree=0, dtype=torch.float32)
+    one.means.zero_()
+    one.scales.fill_(0.05)
+    one.opacities.fill_(0.9)
+    write_ply(tmp_path / "one.ply", one)
+    result = run_cli("render", tmp_path / "one.ply", "--orbit", 2, "-o", tmp_path / "frames", "--width", 64)
+    assert result.code == 0, result.err
+    assert cv2.imread(str(tmp_path / "frames" / "00000.png")).max() > 0

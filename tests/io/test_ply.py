@@ -94,6 +94,36 @@ def test_a_log_scale_too_large_for_float32_is_named_as_such(tmp_path):
     assert bool(torch.isfinite(read_ply(tmp_path / "large.ply").scales).all())
 
 
+def test_values_that_activate_to_finite_ones_are_refused_and_counted_alike(tmp_path):
+    """An Inf opacity (sigmoid 1) or a -Inf log-scale (exp 0) is finite once activated: read_ply
+    checks the file's values, and `info` counts what read_ply refuses (NaN normals aside, which
+    nothing reads)."""
+    from lumos3d_cli.io.summaries import summarize_gaussian_file
+
+    for name, value in (("opacity", np.inf), ("opacity", -np.inf), ("scale_2", -np.inf), ("scale_0", 200.0)):
+        records = np.zeros(4, dtype=[(n, "f4") for n in ply_property_names(0)])
+        records[name][1] = value
+        records["nx"][2] = np.nan
+        PlyData([PlyElement.describe(records, "vertex")]).write(str(tmp_path / "odd.ply"))
+        with pytest.raises(InputError, match=rf"odd.ply: (1 value\(s\) are NaN or Inf \({name}: 1\)|holds log-scales)"):
+            read_ply(tmp_path / "odd.ply")
+        summary = summarize_gaussian_file(tmp_path / "odd.ply")
+        assert summary["non_finite_values"] == 1 and summary["count"] == 4
+        assert summary["scale"]["max"] == 1.0  # the other three Gaussians' exp(0)
+
+
+def test_headers_that_claim_what_the_file_cannot_hold(tmp_path):
+    header = "ply\nformat binary_little_endian 1.0\nelement vertex {count}\n{properties}end_header\n"
+    properties = "".join(f"property float {name}\n" for name in ply_property_names(0))
+    (tmp_path / "twice.ply").write_bytes(header.format(count=1, properties=properties + "property float x\n").encode())
+    with pytest.raises(InputError, match=r"twice.ply: PLY header lists property 'x' of 'vertex' twice"):
+        read_ply_fields(tmp_path / "twice.ply")
+    # a count of 10^15 is refused from the file's size, before any memory is asked for
+    (tmp_path / "count.ply").write_bytes(header.format(count=10**15, properties=properties).encode() + bytes(68))
+    with pytest.raises(InputError, match=r"count.ply: PLY data is truncated \(68 of 68000000000000000 bytes"):
+        read_ply_fields(tmp_path / "count.ply")
+
+
 def _plyfile_scene(names, n=3, text=False, byte_order="<", dtype="f4"):
     records = np.zeros(n, dtype=[(name, dtype) for name in names])
     for i, name in enumerate(names):

@@ -50,6 +50,8 @@ def _scene_to_splat(source: Path, output: Path, as_json: bool) -> None:
         from lumos3d_cli.io.splat import write_splat
     with outputs.reserved():
         gaussians = read_ply(source)
+        if len(gaussians) == 0:  # a 0-byte .splat is no scene a viewer can open (`render` refuses it too)
+            raise InputError(f"{source}: holds no Gaussians; there is nothing to convert")
         with outputs.staged() as staging:
             write_splat(staging.root / output.name, gaussians)
     summary = {"output": str(output), "format": "splat", "gaussians": len(gaussians), "bytes": output.stat().st_size,

@@ -8,13 +8,15 @@ written once round-trips bit-exactly from then on (see docs/formats.md).
 
 from __future__ import annotations
 
+import math
+import os
 import re
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import InputError, NonFiniteError, listed
 from lumos3d_cli.io.atomic import atomic_path
 from lumos3d_cli.io.gaussians import MAX_SH_DEGREE, Gaussians, sh_coefficient_count
 
@@ -60,6 +62,7 @@ def gaussians_to_ply_fields(gaussians: Gaussians) -> np.ndarray:
     return torch.cat(columns, dim=1).numpy().astype(np.float32)
 
 
+_NORMALS = ("nx", "ny", "nz")
 _MAX_LOG_SCALE = float(np.log(np.finfo(np.float32).max))  # 88.7: exp of more is Inf in float32
 
 
@@ -121,6 +124,9 @@ def _parse_header(path: Path, handle) -> tuple[str, list[tuple[str, int, list[tu
                 raise InputError(f"{path}: element '{elements[-1][0]}' has list properties; not a Gaussian scene")
             if len(words) != 3 or words[1] not in _PLY_TYPES:
                 raise InputError(f"{path}: cannot parse PLY header line {' '.join(words)!r}")
+            if any(name == words[2] for name, _ in elements[-1][2]):
+                raise InputError(f"{path}: PLY header lists property {words[2]!r} of '{elements[-1][0]}' twice; the "
+                                 "file is corrupt")
             elements[-1][2].append((words[2], _PLY_TYPES[words[1]]))
         else:
             raise InputError(f"{path}: cannot parse PLY header line {' '.join(words)!r}")
@@ -159,7 +165,7 @@ def read_ply_fields(path: Path | str) -> tuple[np.ndarray, int]:
         present = {name for name, _ in properties}
         degree = _sh_degree_from_properties(path, present)
         wanted = ply_property_names(degree)
-        missing = [name for name in wanted if name not in present and name not in ("nx", "ny", "nz")]
+        missing = [name for name in wanted if name not in present and name not in _NORMALS]
         if missing:
             raise InputError(
                 f"{path}: not a 3D Gaussian scene; missing vertex properties: {', '.join(missing)}"
@@ -177,28 +183,58 @@ def read_ply_fields(path: Path | str) -> tuple[np.ndarray, int]:
             columns = {name: table[:, i] for i, (name, _) in enumerate(properties)}
         else:
             dtype = np.dtype([(name, byte_order + code) for name, code in properties])
-            data = handle.read(dtype.itemsize * count)
-            if len(data) < dtype.itemsize * count:
-                raise InputError(
-                    f"{path}: PLY data is truncated ({len(data)} of {dtype.itemsize * count} bytes for {count} Gaussians)"
-                )
-            records = np.frombuffer(data, dtype=dtype, count=count)
+            needed = dtype.itemsize * count
+            left = max(0, os.fstat(handle.fileno()).st_size - handle.tell())  # before reading: a count can claim petabytes
+            if left < needed:
+                raise InputError(f"{path}: PLY data is truncated ({left} of {needed} bytes for {count} Gaussians)")
+            records = np.frombuffer(handle.read(needed), dtype=dtype, count=count)
             columns = {name: records[name] for name, _ in properties}
     zeros = np.zeros(count, dtype=np.float32)
     table = np.stack([columns[name] if name in columns else zeros for name in wanted], axis=1).astype(np.float32)
     return table, degree
 
 
+def _unusable(table: np.ndarray, degree: int) -> np.ndarray:
+    """[N, P] bool: the values of `table` (in `ply_property_names(degree)` order) that no scene can
+    use: NaN or Inf (normals aside: nothing reads them; an Inf opacity or a -Inf scale activates
+    to a finite value, so they are found here, in the file's values) and log-scales whose exp
+    overflows float32."""
+    names = ply_property_names(degree)
+    unusable = ~np.isfinite(table)
+    unusable[:, [names.index(name) for name in _NORMALS]] = False
+    scales = [names.index(f"scale_{axis}") for axis in range(3)]
+    unusable[:, scales] |= np.nan_to_num(table[:, scales], nan=0.0) > _MAX_LOG_SCALE
+    return unusable
+
+
+def unusable_values(table: np.ndarray, degree: int) -> dict[str, int]:
+    """{property: how many of its values no scene can use} (see `_unusable`), for the properties
+    that hold any."""
+    counts = _unusable(table, degree).sum(axis=0)
+    return {name: int(count) for name, count in zip(ply_property_names(degree), counts) if count}
+
+
+def usable_rows(table: np.ndarray, degree: int) -> np.ndarray:
+    """[N] bool: the Gaussians of `table` whose values a scene can use."""
+    return ~_unusable(table, degree).any(axis=1)
+
+
 def read_ply(path: Path | str) -> Gaussians:
-    """Read a Gaussian `.ply` (any 3DGS-layout file) into activated Gaussians. NaN or Inf (also
-    from an overflowing log-scale) is an error naming the file (`info` counts them instead)."""
+    """Read a Gaussian `.ply` (any 3DGS-layout file) into activated Gaussians. NaN or Inf in a
+    property a scene uses, or a log-scale whose exp overflows, is an error naming the file and the
+    properties (`info` counts them instead)."""
     table, degree = read_ply_fields(path)
     names = ply_property_names(degree)
     log_scales = table[:, [names.index(f"scale_{axis}") for axis in range(3)]]
     largest = float(np.nanmax(log_scales, initial=-np.inf))
-    if largest > _MAX_LOG_SCALE:  # a finite file value whose exp is Inf in float32: name it as what it is
+    if math.isfinite(largest) and largest > _MAX_LOG_SCALE:  # finite in the file, Inf once activated
         raise InputError(f"{path}: holds log-scales (scale_*) up to {largest:g}, a Gaussian larger than float32 holds "
                          f"(exp overflows above {_MAX_LOG_SCALE:.1f}); correct or drop those Gaussians")
+    unusable = unusable_values(table, degree)
+    if unusable:
+        raise NonFiniteError(f"{path}: {sum(unusable.values())} value(s) are NaN or Inf "
+                             f"({listed([f'{name}: {count}' for name, count in unusable.items()], 4)}); correct or "
+                             "drop those Gaussians")
     gaussians = ply_fields_to_gaussians(table, degree)
     gaussians.require_finite(f"{path}: gaussians")
     return gaussians

@@ -9,11 +9,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from lumos3d_cli.checks import count_non_finite
 from lumos3d_cli.io.camera_files import find_camera_source, read_cameras
 from lumos3d_cli.io.colmap import is_colmap_model
 from lumos3d_cli.io.images import probe_image
-from lumos3d_cli.io.ply import ply_fields_to_gaussians, read_ply_fields
+from lumos3d_cli.io.ply import ply_fields_to_gaussians, read_ply_fields, unusable_values, usable_rows
 
 
 def _stats(values: np.ndarray) -> dict[str, float | None]:
@@ -32,9 +31,8 @@ def summarize_gaussian_file(path: Path | str) -> dict:
     """Count, SH degree, bounds, opacity/scale statistics and non-finite count of a `.ply`."""
     path = Path(path)
     fields, degree = read_ply_fields(path)
-    non_finite = count_non_finite(fields)
-    finite_rows = np.isfinite(fields).all(axis=1)
-    gaussians = ply_fields_to_gaussians(fields[finite_rows], degree)
+    non_finite = sum(unusable_values(fields, degree).values())  # what `render` and `convert` refuse
+    gaussians = ply_fields_to_gaussians(fields[usable_rows(fields, degree)], degree)
     means = gaussians.means.numpy()
     bounds = (
         {"min": means.min(axis=0).tolist(), "max": means.max(axis=0).tolist()} if len(means) else {"min": None, "max": None}

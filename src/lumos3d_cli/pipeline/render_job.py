@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import InputError, listed
 from lumos3d_cli.io.camera_files import find_camera_source, read_cameras
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
@@ -52,15 +52,25 @@ def render_cameras(
     if (poses is None) == (orbit is None):
         raise InputError("give exactly one of poses (a camera file) or orbit (a frame count)", parameter="poses")
     if poses is not None:
-        cameras = read_cameras(poses)
+        cameras, source = read_cameras(poses), str(find_camera_source(poses))
         if width is None and height is None:  # every camera at its own size (photos may differ)
-            return cameras, str(find_camera_source(poses))
-        return cameras.rescaled(*output_size(cameras.sizes[0], width, height)), str(find_camera_source(poses))
+            too_large = [f"{name or index} ({w}x{h})" for index, (name, (w, h)) in enumerate(zip(cameras.names, cameras.sizes))
+                         if max(w, h) > MAX_SIDE]
+            if too_large:
+                raise InputError(f"{source}: cameras larger than {MAX_SIDE} pixels a side: {listed(too_large, 3)}; give "
+                                 "width or height to render them smaller", parameter="poses")
+            return cameras, source
+        # each camera keeps its own aspect ratio when one side is given (photos may differ)
+        return cameras.rescaled_to([output_size(size, width, height) for size in cameras.sizes]), source
     nearby = find_camera_source(scene.parent)
     if nearby is not None:
-        scene_cameras = read_cameras(nearby)
-        size = output_size(scene_cameras.sizes[0], width, height)
-        return orbit_from_cameras(scene_cameras, orbit, *size, gaussians), f"orbit around the cameras in {nearby}"
+        try:
+            scene_cameras = read_cameras(nearby)
+        except InputError as error:  # a file the user did not name: not a reason to refuse the orbit
+            logger.warning("%s; orbiting around the scene's bounds instead of those cameras", error)
+        else:
+            size = output_size(scene_cameras.sizes[0], width, height)
+            return orbit_from_cameras(scene_cameras, orbit, *size, gaussians), f"orbit around the cameras in {nearby}"
     if len(gaussians) == 0:
         raise InputError(f"{scene}: the scene is empty and has no cameras beside it; give poses", parameter="scene")
     size = output_size((DEFAULT_ORBIT_SIZE,) * 2, width, height)

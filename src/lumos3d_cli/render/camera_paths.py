@@ -101,7 +101,11 @@ def orbit_from_gaussians(gaussians: Gaussians, frames: int, width: int, height: 
         raise ValueError("cannot derive an orbit from an empty scene; pass cameras instead")
     centre = scene_centre(gaussians)
     distances = (gaussians.means.detach().double() - centre).norm(dim=1)
-    extent = float(torch.quantile(distances, 0.9).clamp_min(1e-6))
+    # the 90th-percentile distance (kthvalue: torch.quantile refuses more than 2^24 values), and no
+    # less than the Gaussians' own size: one Gaussian, or many at one point, is a scene too
+    reach = distances.kthvalue(max(1, math.ceil(0.9 * len(distances)))).values
+    size = 3 * gaussians.scales.detach().double().amax(dim=1).median()
+    extent = float(torch.maximum(reach, size).clamp_min(1e-6))
     up = torch.tensor([0.0, -1.0, 0.0], dtype=torch.float64)
     angles = torch.arange(frames, dtype=torch.float64) * (2 * math.pi / frames)
     first, second = torch.tensor([0.0, 0.0, -1.0], dtype=torch.float64), torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64)
