@@ -50,3 +50,12 @@ def test_unreadable_model_is_an_input_error(tmp_path):
     (tmp_path / "images.bin").write_bytes(b"garbage")
     with pytest.raises(InputError):
         read_colmap_model(tmp_path)
+
+
+def test_a_point_that_is_not_a_position_is_refused_by_its_id(tmp_path):
+    """A NaN point reached the viewer's browser and training's depth supervision unnamed."""
+    from lumos3d_cli.io.colmap import read_colmap_points
+
+    (tmp_path / "points3D.txt").write_text("# 2 points\n1 0.5 0.25 2.0 10 20 30 0.4 1 0\n7 nan 0 1 10 20 30 0.4 1 1\n")
+    with pytest.raises(InputError, match=r"points3D.txt: point 7 lies at nan 0 1, which is not a position"):
+        read_colmap_points(tmp_path / "points3D.txt")

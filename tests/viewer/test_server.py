@@ -1,3 +1,4 @@
+import urllib.request
 import time
 
 import cv2
@@ -120,3 +121,14 @@ def test_clicking_a_frustum_moves_that_browsers_view_to_the_camera(viewer, viser
 
         positions = moves(_messages_until(socket, viser_wire, moves))
     assert positions and np.allclose(positions[0], target, atol=1e-4)
+
+
+def test_an_ipv6_address_is_announced_in_brackets(restore_folder):
+    """`--host ::1` announced http://::1:PORT, which no browser or curl opens."""
+    running = start_viewer(restore_folder, host="::1", port=0)
+    try:
+        assert running.url.startswith("http://[::1]:")
+        with urllib.request.urlopen(running.url, timeout=10) as response:
+            assert response.status == 200
+    finally:
+        running.stop()

@@ -54,6 +54,15 @@ def test_a_huge_gaussian_reaches_the_browser_as_finite_float16():
     np.testing.assert_array_equal(rest.covariances, arrays.covariances[1:])  # ordinary splats untouched
 
 
+def test_a_gaussian_too_far_for_float32_is_left_out_not_sent_as_infinity(caplog):
+    gaussians = random_gaussians(50, 0)
+    gaussians.means[4] = torch.tensor([1e38, 0.0, 0.0])
+    frame = frame_scene(gaussians, None)
+    arrays = splat_arrays(gaussians, frame.centre, frame.scale)
+    assert len(arrays) == 49 and arrays.total == 50 and np.isfinite(arrays.centers).all()
+    assert "1 Gaussian(s) lie too far from the scene for the viewer" in caplog.text
+
+
 def test_up_is_the_cameras_minus_y():
     # Cameras rolled upside down (180 degrees about z): their -y points along world +y.
     extrinsics = torch.diag(torch.tensor([-1.0, -1.0, 1.0], dtype=torch.float64))[None].expand(2, 3, 3)

@@ -103,3 +103,19 @@ def test_restore_with_view_refuses_a_bad_port_before_restoring(run_cli, tmp_path
     # a port without --view would be ignored: refused, so the user learns the viewer was not asked for
     expect_input_error(run_cli("restore", photos, "-o", output, "--port", "8090"), "--port 8090", "add --view")
     assert not output.parent.exists()
+
+
+def test_a_missing_viser_is_named_before_any_work(run_cli, restore_folder, tmp_path, monkeypatch):
+    """Installed without its dependencies, the viewer ended in an internal error, and
+    `restore --view` first restored the whole scene."""
+    import importlib.util
+
+    found = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *rest: None if name == "viser" else found(name, *rest))
+    expect_input_error(run_cli("view", restore_folder, "--port", "0"), "the viewer needs viser", "pip install viser")
+    photos = tmp_path / "one-photo"
+    photos.mkdir()
+    cv2.imwrite(str(photos / "0.png"), np.zeros((96, 128, 3), np.uint8))
+    output = tmp_path / "refused" / "scene.ply"
+    expect_input_error(run_cli("restore", photos, "-o", output, "--view", "--port", "0"), "the viewer needs viser")
+    assert not output.parent.exists()

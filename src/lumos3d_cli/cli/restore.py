@@ -18,6 +18,7 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, GEOMETRY_SOURCES
 from lumos3d_cli.pipeline.restore_paths import check_lpips_weights, check_view_format, list_photos, restore_outputs
+from lumos3d_cli.viewer.availability import require_viser
 from lumos3d_cli.viewer.defaults import DEFAULT_HOST, DEFAULT_MAX_SPLATS, DEFAULT_PORT
 from lumos3d_cli.viewer.port import require_free_port
 
@@ -72,6 +73,7 @@ def restore_command(
         raise InputError(f"{port}: the viewer's port is used only with --view; add --view, or leave --port out", parameter="port")
     port = DEFAULT_PORT if port is None else port
     if view:  # refused before the restore, not after it has written a scene no viewer can show
+        require_viser()
         require_free_port(DEFAULT_HOST, port)
     # Everything the outputs must stay clear of; checked, with what is already in the way, before any
     # work (and before the libraries load: a refusal ends at once), and again while the output

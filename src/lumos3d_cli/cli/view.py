@@ -11,6 +11,7 @@ from rich.text import Text
 from lumos3d_cli.cli.console import say
 from lumos3d_cli.cli.interrupts import library_imports
 from lumos3d_cli.errors import Interrupted
+from lumos3d_cli.viewer.availability import require_viser
 from lumos3d_cli.viewer.defaults import DEFAULT_HOST, DEFAULT_MAX_SPLATS, DEFAULT_PORT
 
 if TYPE_CHECKING:
@@ -48,6 +49,7 @@ def serve_until_stopped(path: Path, host: str, port: int, max_splats: int, stopp
     (Ctrl-C is how a viewer ends, not a failure: there is nothing half-written to speak of)."""
     # The viewer imports viser, torch and the scene readers (seconds): imported here, when the
     # command runs, so that `--help` (which needs only the defaults above) stays fast.
+    require_viser()
     with library_imports():
         from lumos3d_cli.viewer.server import serve_scene
     try:

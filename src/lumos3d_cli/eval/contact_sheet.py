@@ -10,12 +10,18 @@ _LABEL_HEIGHT = 22
 _PADDING = 4
 
 
+_TALLEST = 2  # a tile is at most this many tile widths tall: a 14x2000 strip once made a 137,220-px sheet
+
+
 def _tile(image: torch.Tensor, width: int) -> np.ndarray:
-    """[3, H, W] in [0, 1] -> uint8 [h, width, 3] (RGB)."""
+    """[3, H, W] in [0, 1] -> uint8 [h, width, 3] (RGB): scaled to `width`, or to _TALLEST widths
+    tall (a portrait strip), padded to `width` on the right."""
     pixels = image.detach().float().clamp(0, 1).permute(1, 2, 0).cpu().numpy()
-    height = max(1, round(pixels.shape[0] * width / pixels.shape[1]))
-    resized = cv2.resize(pixels, (width, height), interpolation=cv2.INTER_AREA)
-    return np.round(resized * 255).astype(np.uint8)
+    scale = min(width / pixels.shape[1], _TALLEST * width / pixels.shape[0])
+    size = (max(1, min(width, round(pixels.shape[1] * scale))), max(1, round(pixels.shape[0] * scale)))
+    resized = cv2.resize(pixels, size, interpolation=cv2.INTER_AREA)
+    tile = np.round(resized * 255).astype(np.uint8)
+    return np.pad(tile, ((0, 0), (0, width - tile.shape[1]), (0, 0)))
 
 
 def _label(text: str, width: int) -> np.ndarray:

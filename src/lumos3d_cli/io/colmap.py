@@ -210,6 +210,9 @@ def read_colmap_points(path: Path | str) -> ColmapPoints:
             tracks.append(np.asarray(words[8::2], dtype=np.int64))
         except (IndexError, ValueError) as exc:
             raise InputError(f"{path}: cannot parse point line {line[:80]!r}") from exc
+        if not all(math.isfinite(v) for v in xyz[-1]):
+            raise InputError(f"{path}: point {ids[-1]} lies at {' '.join(words[1:4])}, which is not a position; "
+                             "correct or remove its line")
     return ColmapPoints(
         np.asarray(ids, dtype=np.int64), np.asarray(xyz, dtype=np.float64).reshape(-1, 3),
         np.asarray(rgb, dtype=np.uint8).reshape(-1, 3), np.asarray(error, dtype=np.float64), tracks,

@@ -195,7 +195,8 @@ def start_viewer(
         # Another program took the port between our check and viser's bind.
         RunningViewer(server, "", 0, 0).stop()
         raise port_in_use(host, port)
-    viewer = RunningViewer(server, f"http://{'localhost' if host in ('0.0.0.0', '::') else host}:{bound}", 0, len(scene.gaussians))
+    shown_host = "localhost" if host in ("0.0.0.0", "::") else f"[{host}]" if ":" in host else host  # IPv6 in brackets
+    viewer = RunningViewer(server, f"http://{shown_host}:{bound}", 0, len(scene.gaussians))
     try:
         viewer.shown = build_viewer(server, scene, max_splats)
     except BaseException:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -10,6 +11,8 @@ import torch
 from lumos3d_cli.io.gaussians import Gaussians, sh_dc_to_rgb
 from lumos3d_cli.rotations import quaternion_to_matrix
 from lumos3d_cli.viewer.defaults import DEFAULT_MAX_SPLATS
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass
@@ -59,6 +62,9 @@ def covariances(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
 # frame (the scene's cameras about a unit apart) is capped below its square root, so that a huge
 # Gaussian reaches the browser as a very large splat, not as infinity.
 MAX_SPLAT_SCALE = 255.0
+# The farthest centre sent (in viewer units, the scene's radius about 1): well inside float32, and
+# far past anything a camera of the scene can show.
+_FARTHEST = 1e30
 
 
 def splat_arrays(gaussians: Gaussians, centre: torch.Tensor, scale: float, max_splats: int = DEFAULT_MAX_SPLATS) -> SplatArrays:
@@ -68,6 +74,11 @@ def splat_arrays(gaussians: Gaussians, centre: torch.Tensor, scale: float, max_s
     degree-0 colour 0.5 + C0 * f_dc is shown."""
     shown = select_splats(gaussians, max_splats).map(lambda t: t.detach().to("cpu", torch.float64))
     centers = (shown.means - centre.to(shown.means)) * scale
+    beyond = ~(centers.abs() <= _FARTHEST).all(dim=1)
+    if bool(beyond.any()):  # float32 would send them as Inf, which the browser cannot place
+        logger.warning("%d Gaussian(s) lie too far from the scene for the viewer (beyond %g times its radius); not "
+                       "shown", int(beyond.sum()), _FARTHEST)
+        shown, centers = shown.select(torch.nonzero(~beyond).flatten()), centers[~beyond]
     sigma = covariances(shown.quats, (shown.scales * scale).clamp(max=MAX_SPLAT_SCALE))
     rgbs = sh_dc_to_rgb(shown.sh[:, 0, :]).clamp(0.0, 1.0)
     return SplatArrays(
