@@ -138,3 +138,21 @@ def test_a_resume_refuses_a_config_that_changes_what_the_run_learns(tiny_config)
     result = run_lumos3d("train", config, "optim.steps=6", "log_every=2", "checkpoint_every=3", "--resume", "--json")
     assert result.code == 0, result.err[-3000:]
     assert json.loads(result.out)["steps_done"] == 6
+
+
+def test_a_resume_from_an_older_checkpoint_drops_what_later_steps_wrote(tiny_config):
+    """The newest checkpoint damaged, the run goes on from the one before: the final weights and
+    the validation picture of the step it no longer reaches were left beside its own."""
+    config = tiny_config(name="older", optim__steps=6, checkpoint_every=3, validate_every=3, validation_samples=1)
+    Trainer(load_config(config, []), setup_distributed("cpu")).run()
+    output = _output(config)
+    assert (output / "final.safetensors").is_file() and (output / "validation" / "step_00000006.png").is_file()
+    damaged = output / "checkpoints" / "step_00000006" / "training_state.pt"
+    damaged.write_bytes(damaged.read_bytes()[:100])
+    result = run_lumos3d("train", config, "--resume", "--max-steps", 5, "--json")
+    assert result.code == 0, result.err[-3000:]
+    assert not (output / "final.safetensors").exists() and not (output / "validation" / "step_00000006.png").exists()
+    assert (output / "validation" / "step_00000003.png").is_file()
+    assert [json.loads(line)["step"] for line in (output / "validation.jsonl").read_text().splitlines()] == [3]
+    manifest = json.loads((output / ".lumos3d-manifest.json").read_text())["files"]
+    assert "final.safetensors" not in manifest and "validation/step_00000006.png" not in manifest

@@ -182,6 +182,14 @@ def read_checkpoint(path: Path | str, architecture: Architecture | None = None) 
     return Checkpoint(path, layout.format, layout.architecture, tensors, layout.provenance, layout.ignored, layout.fresh_modules)
 
 
+def read_provenance(path: Path | str) -> dict:
+    """What a checkpoint file records of how it was made (its training steps, stage ...), from its
+    header alone: no weight is read."""
+    path = resolve_weights_file(Path(path))
+    shapes, _, metadata = read_header(path)
+    return _interpret(path, shapes, metadata, None).provenance
+
+
 def summarize_checkpoint(path: Path | str) -> dict:
     """Format, architecture, parameter count, tensor names by module, dtypes and provenance (for
     `lumos3d info`). The values are read too, to refuse NaN or Inf as loading would: one pass at

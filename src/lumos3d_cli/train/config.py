@@ -203,11 +203,37 @@ def _override_value(text: str):
         raise InputError(f"override value {text!r}: invalid YAML{_yaml_problem(error)}; quote it or correct it") from None
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """YAML's safe loader, refusing a key given twice in one mapping (a second `optim:` block
+    replaced the first without a word: 6 steps became 30,000)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(None, None, f"key {key!r} given twice in one mapping",
+                                                        key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def _non_finite(values, prefix: str = "") -> list[str]:
+    """The keys of `values` (nested mappings and lists) whose number is NaN or infinite."""
+    if isinstance(values, dict):
+        return [key for name, value in values.items() for key in _non_finite(value, f"{prefix}{name}.")]
+    if isinstance(values, list):
+        return [key for index, value in enumerate(values) for key in _non_finite(value, f"{prefix}{index}.")]
+    return [prefix.rstrip(".")] if isinstance(values, float) and not math.isfinite(values) else []
+
+
 def load_config(path: Path | str, overrides: list[str] = ()) -> TrainConfig:
-    """Read a YAML config, apply `key=value` overrides, validate."""
+    """Read a YAML config, apply `key=value` overrides, validate (every number finite: a NaN
+    background or an infinite colour cast skipped every step, and a run that trained nothing
+    wrote its final weights)."""
     path = Path(path)
     try:
-        values = yaml.safe_load(path.read_text()) or {}
+        values = yaml.load(path.read_text(), Loader=_UniqueKeyLoader) or {}
     except OSError as error:
         raise InputError(f"{path}: cannot read config ({error.strerror})") from error
     except yaml.YAMLError as error:
@@ -216,7 +242,12 @@ def load_config(path: Path | str, overrides: list[str] = ()) -> TrainConfig:
         raise InputError(f"{path}: a config must be a YAML mapping")
     for assignment in overrides:
         apply_override(values, assignment, _override_value)
-    return from_dict(TrainConfig, values)
+    config = from_dict(TrainConfig, values)
+    non_finite = _non_finite(to_dict(config))  # after conversion: `nan` written as a string is a float here
+    if non_finite:
+        raise InputError(f"{path}: {', '.join(non_finite)}: not a finite number; give one (NaN and infinity train "
+                         "nothing)")
+    return config
 
 
 def config_to_yaml(config: TrainConfig) -> str:

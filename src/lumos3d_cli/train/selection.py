@@ -10,7 +10,7 @@ import logging
 import math
 from pathlib import Path
 
-from lumos3d_cli.model.checkpoints import read_checkpoint
+from lumos3d_cli.model.checkpoints import read_provenance
 
 logger = logging.getLogger(__name__)
 
@@ -41,7 +41,7 @@ def drop_stale_selection(output: Path, start: int) -> bool:
     path = output / SELECTED_FILE
     if not path.is_file():
         return False
-    if start == 0 or int(read_checkpoint(path).provenance.get("steps", start + 1)) > start:
+    if start == 0 or int(read_provenance(path).get("steps", start + 1)) > start:
         logger.info("removing %s: chosen by a run or steps this one does not continue", path)
         path.unlink()
         return True

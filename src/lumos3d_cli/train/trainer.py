@@ -28,7 +28,7 @@ from lumos3d_cli.losses.appearance import appearance_loss
 from lumos3d_cli.losses.objective import StageBatch, TrainingObjective
 from lumos3d_cli.model.appearance.conversion import with_appearance
 from lumos3d_cli.model.architectures import ARCHITECTURES
-from lumos3d_cli.model.checkpoints import save_checkpoint
+from lumos3d_cli.model.checkpoints import read_provenance, save_checkpoint
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import Lumos3D, build_model
 from lumos3d_cli.train.bracket_samples import BracketSamples, check_bracket_model
@@ -444,6 +444,16 @@ class Trainer:
         final = [self.output / FINAL_FILE] if end >= self.config.optim.steps else []
         return [self.output / "config.yaml", self.output / SELECTED_FILE, *final, *redone]
 
+    def _abandoned_on_resume(self, start: int) -> list[Path]:
+        """The files of steps after `start` that a resume from an older checkpoint leaves behind
+        (the newest was damaged): final weights saved later, the pictures of later validations.
+        The resume removes them: they are the work of steps it does again, or not at all."""
+        pictures = [path for path in self._written_by_a_run() if path.parent.name == "validation"
+                    and int(path.stem.removeprefix("step_")) > start]
+        final = self.output / FINAL_FILE
+        later_final = final.is_file() and int(read_provenance(final).get("steps", start + 1)) > start
+        return [*([final] if later_final else []), *pictures]
+
     def _request_stop(self, signum, frame) -> None:
         logger.warning("%s: saving a checkpoint and stopping after this step", signal.Signals(signum).name)
         self._stop_requested = True
@@ -497,7 +507,12 @@ class Trainer:
             if self.context.is_main:
                 try:
                     self._files.adopt_if_unlisted(self._written_by_a_run())
-                    self._files.require_replaceable(self._replaced_on_resume(start, end))
+                    abandoned = self._abandoned_on_resume(start)
+                    self._files.require_replaceable([*self._replaced_on_resume(start, end), *abandoned])
+                    for path in abandoned:
+                        logger.info("removing %s: written after step %d, which this run continues from", path, start)
+                        path.unlink()
+                        self._files.forget(path)
                 except Exception as error:  # an unreadable file too: every rank must hear of it
                     refusal = error
             if any_rank(refusal is not None, self.context):  # every rank stops, not only the one that checked
