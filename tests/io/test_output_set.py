@@ -292,6 +292,9 @@ def test_the_next_run_of_the_same_command_finishes_a_killed_commit_then_runs(tmp
     _kill_mid_commit(out, monkeypatch)
     monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)
     monkeypatch.setattr(atomic, "_cleaned", set())
+    # the check a command makes before loading its libraries leaves the half-moved set to the
+    # recovery under the lock (it called the killed run's new files "changed since lumos3d wrote them")
+    OutputSet(out, "restore", "restore scene.ply").add_file("scene.ply").add_file("summary.json").add_folder("views").check()
     _restore_like(out, ["1.png"], text="third")  # no "was changed since lumos3d wrote it"
     assert _tree(out) == [MANIFEST_NAME, "scene.ply", "summary.json", "views", "views/1.png"]
 
@@ -306,6 +309,54 @@ def test_a_copied_folder_never_replays_the_journal_it_carries(tmp_path, monkeypa
     monkeypatch.setattr(atomic, "_cleaned", set())
     atomic.remove_leftovers(copy)
     assert snapshot(out) == before and any(p.name.startswith(".staging.") for p in copy.iterdir())
+
+
+def test_a_commit_with_a_video_elsewhere_killed_at_any_move_loses_nothing(tmp_path, monkeypatch):
+    """A restore whose video lies in another folder, killed (SIGKILL) after any number of its
+    moves; then a run into the video's folder, then one into the output folder. The video's
+    folder once lost the video: the other run took the killed commit's temporaries there (the old
+    video moved aside, the new one staged) for leftovers, and the commit's recovery then moved
+    the new video aside. Now the run into the video's folder finishes the killed commit first:
+    every folder holds the complete new set, whatever the moment of the kill."""
+    for after in range(9):
+        out, videos = tmp_path / f"out{after}", tmp_path / f"videos{after}"
+        videos.mkdir()
+        _restore_like(out, ["1.png"], text="first", video=videos / "orbit.mp4")
+        original_replace, original_journal, calls = os.replace, output_set_module.write_commit_journal, []
+        armed = []
+
+        def journal(*args, **kwargs):
+            original_journal(*args, **kwargs)
+            armed.append(True)
+
+        def killed(source, destination):
+            if armed:
+                if len(calls) == after:
+                    raise SystemExit("killed")
+                calls.append(destination)
+            original_replace(source, destination)
+
+        with monkeypatch.context() as patch:
+            patch.setattr(output_set_module, "write_commit_journal", journal)
+            patch.setattr(os, "replace", killed)
+            patch.setattr(sys.modules["shutil"], "rmtree", lambda *args, **kwargs: None)
+            patch.setattr(output_set_module, "remove_path", lambda *args, **kwargs: None)
+            patch.setattr(Path, "unlink", lambda *args, **kwargs: None)  # a killed run cleans nothing up
+            with pytest.raises(SystemExit):
+                _restore_like(out, ["1.png"], text="second", video=videos / "orbit.mp4")
+        with monkeypatch.context() as patch:
+            patch.setattr(atomic, "_process_exists", lambda pid: pid == os.getpid())  # the killed run has ended
+            patch.setattr(os, "getpid", lambda: 1)  # the next runs are other processes
+            patch.setattr(atomic, "_cleaned", set())
+            poster = OutputSet(videos, "degrade", "degrade poster.png").add_file("poster.png")
+            poster.check()  # not refused over the half-moved set
+            with poster.staged() as staging:
+                (staging.root / "poster.png").write_text("poster")
+            assert (videos / "orbit.mp4").read_text() == "second", after
+            _restore_like(out, ["1.png"], text="third", video=videos / "orbit.mp4")
+        assert (videos / "orbit.mp4").read_text() == "third" and (videos / "poster.png").read_text() == "poster"
+        assert hidden_entries(videos) == [] and hidden_entries(out) == [], after
+        assert {(out / name).read_text() for name in ("scene.ply", "summary.json", "views/1.png")} == {"third"}
 
 
 def test_a_move_that_fails_during_the_commit_puts_the_old_set_back(tmp_path, monkeypatch):

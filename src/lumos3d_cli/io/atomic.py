@@ -120,6 +120,61 @@ def _journal_moves(staging: Path) -> list[tuple[Path, Path, str]] | None:
     return moves
 
 
+def mark_pending_commit(folder: Path, staging: Path) -> Path:
+    """Write into `folder` (another folder a commit touches: a video's) a marker naming the commit
+    journal of `staging`, before the journal is written. While that journal exists, a run into
+    `folder` keeps this process's temporaries there (the old video moved aside, the new one
+    staged, the staged manifest): the killed commit still needs them (`remove_leftovers`)."""
+    handle, name = tempfile.mkstemp(prefix=temporary_prefix("commit"), suffix=".tmp", dir=folder)
+    with os.fdopen(handle, "w") as marker:
+        json.dump({"journal": str(staging.absolute() / COMMIT_JOURNAL)}, marker)
+        marker.flush()
+        os.fsync(marker.fileno())
+    return Path(name)
+
+
+def _pending_journals(entries: list[Path]) -> dict[str, Path]:
+    """{process id (as written in temporary names): its commit journal} of the killed runs whose
+    commit, begun in another folder, is unfinished: their markers (`mark_pending_commit`) among
+    `entries` name a journal that still exists."""
+    journals = {}
+    for entry in entries:
+        if entry.name.startswith(".commit.") and _is_leftover(entry.name):
+            try:
+                journal = Path(json.loads(entry.read_text())["journal"])
+            except (OSError, ValueError, KeyError, TypeError):
+                continue
+            if journal.name == COMMIT_JOURNAL and journal.is_file():
+                journals[_OWNER.search(entry.name)["pid"]] = journal
+    return journals
+
+
+def _pending_owners(entries: list[Path]) -> set[str]:
+    return set(_pending_journals(entries))
+
+
+def folders_of_pending_commits(folder: Path | str) -> list[Path]:
+    """The output folders whose killed commit still needs temporaries in `folder` (a video's):
+    a run writing into `folder` finishes those commits first (`remove_leftovers` of each, under
+    its lock)."""
+    try:
+        entries = list(Path(folder).iterdir())
+    except (FileNotFoundError, NotADirectoryError):
+        return []
+    return list(dict.fromkeys(journal.parent.parent for journal in _pending_journals(entries).values()))
+
+
+def holds_unfinished_commit(folder: Path | str) -> bool:
+    """Whether a killed run left `folder` mid-commit: a staging folder of its with a journal, or a
+    marker of a journal in another folder that still exists. Its files are then neither the old
+    set nor the new one until `remove_leftovers` finishes the commit, under the folder's lock."""
+    try:
+        entries = [entry for entry in Path(folder).iterdir() if _is_leftover(entry.name)]
+    except (FileNotFoundError, NotADirectoryError):
+        return False
+    return any((entry / COMMIT_JOURNAL).is_file() for entry in entries) or bool(_pending_owners(entries))
+
+
 def finish_commit(staging: Path) -> bool:
     """Carry out the moves that `staging`'s commit journal lists and that have not happened;
     False (nothing moved) when the journal cannot be trusted (`_journal_moves`).
@@ -132,9 +187,13 @@ def finish_commit(staging: Path) -> bool:
         return False
     for source, destination, done_when in moves:
         done = destination.exists() if done_when == "destination-exists" else not (source.exists() or source.is_symlink())
-        if not done:
-            destination.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(source, destination)
+        if done:
+            continue
+        if not (source.exists() or source.is_symlink()):  # removed since by hand: nothing to move
+            logger.warning("%s: missing, so it cannot be moved to %s to finish a killed run's commit", source, destination)
+            continue
+        destination.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(source, destination)
     return True
 
 
@@ -151,7 +210,11 @@ def remove_leftovers(folder: Path | str) -> list[Path]:
         return []
     _cleaned.add(folder)
     removed = []
+    pending = _pending_owners(entries)
     for entry in (entry for entry in entries if _is_leftover(entry.name)):
+        if _OWNER.search(entry.name)["pid"] in pending:
+            logger.info("%s: kept for the unfinished commit of a killed run into another folder", entry)
+            continue
         if (entry / COMMIT_JOURNAL).is_file():
             if not finish_commit(entry):
                 logger.warning("%s: a commit journal of a killed run that does not belong here (a copied folder?) or "

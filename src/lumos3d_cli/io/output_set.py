@@ -40,7 +40,10 @@ from lumos3d_cli.errors import STOP_SIGNALS, InputError, Interrupted
 from lumos3d_cli.io.atomic import (
     COMMIT_JOURNAL,
     current_umask,
+    folders_of_pending_commits,
+    holds_unfinished_commit,
     make_folders,
+    mark_pending_commit,
     remove_created_folders,
     remove_leftovers,
     remove_path,
@@ -199,7 +202,9 @@ class OutputSet:
         self.check_paths()
         for folder in self._folders_written():
             refuse_if_locked(folder)
-        self._check_ownership()
+        # a killed run's commit half done: its files are judged once `reserved` has finished it
+        if not any(holds_unfinished_commit(folder) for folder in self._folders_written()):
+            self._check_ownership()
 
     def check_paths(self) -> None:
         """The checks that read no file: the outputs can be created, use no name lumos3d keeps for
@@ -294,6 +299,11 @@ class OutputSet:
                     created += make_folders(folder)
                     stack.enter_context(folder_lock(folder, self.command))
                 for folder in self._folders_written():
+                    # a killed commit into another folder that still needs this one's temporaries
+                    # (its video) is finished first, under that folder's lock
+                    for other in folders_of_pending_commits(folder):
+                        with folder_lock(other, self.command):
+                            remove_leftovers(other)
                     remove_leftovers(folder)
                 self._check_ownership()
                 yield
@@ -359,7 +369,7 @@ class OutputSet:
         trash = root / ".replaced"
         moves: list[tuple[Path, Path, str]] = []
         leftovers: list[Path] = []  # old files moved beside themselves (outside the staging folder)
-        manifests_elsewhere: list[Path] = []  # the manifests of folders outside the staging folder's
+        staged_elsewhere: list[Path] = []  # manifests and markers outside the staging folder's: gone if no commit
 
         def move_away(path: Path) -> None:
             if _is_within(path.parent, self.folder.absolute()):
@@ -403,9 +413,14 @@ class OutputSet:
                     staged_manifest = root / f".manifest.{len(moves)}"
                 else:  # another folder (a video's, maybe on another file system): staged beside its manifest
                     staged_manifest = folder / f"{temporary_prefix(MANIFEST_NAME)}manifest_{len(moves)}.tmp"
-                    manifests_elsewhere.append(staged_manifest)
+                    staged_elsewhere.append(staged_manifest)
                 staged_manifest.write_text(manifest.document())
                 moves.append((staged_manifest, folder / MANIFEST_NAME, "source-gone"))
+            # the other folders learn of the journal first: a run into them keeps what it still needs
+            markers = [mark_pending_commit(folder, root) for folder in
+                       dict.fromkeys(path.parent for move in moves for path in move[:2] if not _is_within(path, self.folder.absolute()))]
+            leftovers += markers
+            staged_elsewhere += markers
             write_commit_journal(root, self.folder.absolute(), moves)
             done: list[tuple[Path, Path]] = []
             with _stop_signals_held():
@@ -434,7 +449,7 @@ class OutputSet:
                 # the staging folder (which `staged` removes), as after a commit, and what was staged
                 # elsewhere with it (a run killed outright leaves both to the next run's clean-up)
                 (root / COMMIT_JOURNAL).unlink(missing_ok=True)
-                for path in manifests_elsewhere:
+                for path in staged_elsewhere:
                     path.unlink(missing_ok=True)
             raise
 
