@@ -396,3 +396,17 @@ def test_photos_with_nothing_in_them_add_nothing_to_the_scene(tmp_path, buu, run
     assert restored["mixed"]["z0"].max() == 0 and restored["mixed"]["z1"].min() == 1
     for name, view in restored["clean"].items():
         assert peak_signal_noise_ratio(view, restored["mixed"][name], data_range=1) > 22, name
+
+
+def test_an_interrupted_evaluation_leaves_no_work_folder_of_structure_from_motion(tmp_path, buu, random_checkpoint):
+    """Ctrl-C while structure-from-motion ran beside the network left its work folder (the
+    photos as BMPs and COLMAP's database, 8-14 MB) in the temporary folder for good: the script
+    ends the process before the thread's own cleanup."""
+    temporary = tmp_path / "tmp"
+    temporary.mkdir()
+    stopped = interrupt_when(("eval", buu.parent, "--scenes", "buu", "--out", tmp_path / "report", "--checkpoint",
+                              random_checkpoint, "--preset", "fast", "--max-views", 6, "--refine-steps", 0),
+                             lambda _: any(temporary.glob("lumos3d-sfm-*/images")), signal.SIGINT,
+                             env={"TMPDIR": str(temporary)})
+    assert stopped.code == 130, stopped.err[-3000:]
+    assert sorted(p.name for p in temporary.iterdir() if p.name.startswith("lumos3d-sfm-")) == []

@@ -16,6 +16,7 @@ import lumos3d_cli
 from lumos3d_cli.cli.console import configure_logging, state, stderr_console
 from lumos3d_cli.cli.interrupts import interruption_behind, signals_raise_interrupted
 from lumos3d_cli.errors import InputError, Interrupted, RunError
+from lumos3d_cli.io.work_folders import remove_work_folders
 
 EXAMPLES = """
 [bold]Examples[/bold]
@@ -200,7 +201,10 @@ def run() -> None:
     33.7 s wall for 32.6 s to the last atexit handler). So the streams and log handlers are flushed
     and the process exits at once. An exception out of `main` (only with --debug) takes the usual
     way, with its traceback."""
-    code = main()
+    try:
+        code = main()
+    finally:
+        remove_work_folders()  # what threads still working had in use: os._exit runs none of their cleanup
     logging.shutdown()
     try:
         sys.stdout.flush()

@@ -49,7 +49,6 @@ RANSAC draws depend on which thread takes which pair) makes a run deterministic.
 from __future__ import annotations
 
 import os
-import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -58,6 +57,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pycolmap
+
+from lumos3d_cli.io.work_folders import work_folder
 
 SFM_LONG_SIDE = 512
 EXHAUSTIVE_MATCHING_LIMIT = 25
@@ -183,8 +184,8 @@ def run_colmap(
     previous_level = pycolmap.logging.minloglevel
     pycolmap.logging.minloglevel = 3  # COLMAP's progress and failures: the caller logs what they mean
     try:
-        with tempfile.TemporaryDirectory(prefix="lumos3d-sfm-") as work:
-            folder, database = Path(work) / "images", Path(work) / "database.db"
+        with work_folder("lumos3d-sfm-") as work:
+            folder, database = work / "images", work / "database.db"
             folder.mkdir()
             for index, file in enumerate(files):
                 check_stop()
@@ -211,8 +212,8 @@ def run_colmap(
                                           cancellation_token=token)
             stage_seconds["matching"] = time.perf_counter() - started - stage_seconds["features"]
             check_stop()
-            (Path(work) / "models").mkdir()
-            models = pycolmap.incremental_mapping(database, folder, Path(work) / "models", mapping,
+            (work / "models").mkdir()
+            models = pycolmap.incremental_mapping(database, folder, work / "models", mapping,
                                                   cancellation_token=token)
             stage_seconds["mapping"] = time.perf_counter() - started - stage_seconds["features"] - stage_seconds["matching"]
     except InterruptedError as error:  # pycolmap's answer to a cancelled token
