@@ -179,6 +179,11 @@ def test_degrade_bad_values(run_cli, buu, tmp_path):
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--bit-depth", "12"), "--bit-depth 12")
     expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o.jpg", "--bit-depth", "16"), "JPEG holds 8 bits only")
     expect_input_error(run_cli("degrade", buu / "high", "-o", tmp_path / "one.png"), "names one file but there are 25 inputs")
+    copy = tmp_path / "photos" / "1.JPG"  # a copy: were the refusal to fail, nothing lands in the shared data
+    copy.parent.mkdir()
+    copy.write_bytes(image.read_bytes())
+    expect_input_error(run_cli("degrade", copy, "-o", copy.with_suffix(".png")), "-o ", "would sit beside 1.JPG")
+    assert sorted(p.name for p in copy.parent.iterdir()) == ["1.JPG"]
     for gain in ("0.5", "inf", "nan", "1e+100"):  # 1e100 overflowed into NaN, blamed on a staging file
         expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--colour-cast", gain), f"--colour-cast {gain}",
                            "must be from 1 (no cast) to 100")

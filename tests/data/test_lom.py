@@ -88,7 +88,7 @@ def test_a_frame_listed_twice_is_scored_once_and_unpaired_photos_are_named(mixed
 
 
 def test_a_scene_name_as_a_shell_completes_it(mixed_case_scene):
-    assert [scene.name for scene in find_lom_scenes(mixed_case_scene.parent, "low-light", ["mixed/", "mixed"])] == ["mixed"]
+    assert [scene.name for scene in find_lom_scenes(mixed_case_scene.parent, "low-light", ["mixed/", "./mixed", "mixed"])] == ["mixed"]
 
 
 def test_shrub_reads_in_both_modes(shared_data):

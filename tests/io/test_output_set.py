@@ -552,3 +552,36 @@ def test_temporaries_beside_a_file_elsewhere_are_recognised_as_leftovers(tmp_pat
     temporaries = [name for name in names if name.startswith(".") and name != MANIFEST_NAME]
     assert any("manifest" in name for name in temporaries) and any("replaced" in name for name in temporaries)
     assert all(atomic._OWNER.search(name) for name in temporaries), temporaries
+
+
+def test_a_run_never_replaces_another_commands_output(tmp_path):
+    """`render -o F` replaced the `degrade -o F/00000.png` there without a word, and a restore's
+    --video the render's video of the same name: the docs promise other runs' outputs stay."""
+    folder = tmp_path / "F"
+    with OutputSet(folder, "degrade", "degrade 00000.png").add_file("00000.png").staged() as staging:
+        (staging.root / "00000.png").write_text("degraded")
+    with pytest.raises(InputError, match=r"F/00000.png: an output of another lumos3d command \(degrade, degrade 00000.png\)"):
+        OutputSet(folder, "render", "render").add_file("00000.png").check()
+    video = tmp_path / "videos" / "orbit.gif"
+    video.parent.mkdir()
+    render = OutputSet(tmp_path / "frames", "render", "render").add_file("00000.png")
+    render.add_elsewhere(video, "video orbit.gif")
+    with render.staged() as staging:
+        (staging.root / "00000.png").write_text("frame")
+        staging.files[video].write_text("rendered")
+    with pytest.raises(InputError, match=r"orbit.gif: an output of another lumos3d command \(render, video orbit.gif\)"):
+        _restore_like(tmp_path / "out", ["1.png"], video=video)
+    assert video.read_text() == "rendered" and (folder / "00000.png").read_text() == "degraded"
+    _restore_like(tmp_path / "out", ["1.png"], video=tmp_path / "videos" / "restored.gif")  # beside it: fine
+
+
+def test_a_read_only_folder_the_run_replaces_is_refused_before_the_work(tmp_path, monkeypatch):
+    """A read-only views/ failed only at the commit, after the whole job (os.access stands in
+    for the permissions: the tests may run as root, who may write anywhere)."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], text="first")
+    real = os.access
+    monkeypatch.setattr(os, "access", lambda path, mode: False if Path(path) == out / "views" else real(path, mode))
+    outputs = OutputSet(out, "restore", "restore scene.ply").add_file("scene.ply").add_file("summary.json").add_folder("views")
+    with pytest.raises(InputError, match=r"out/views: is read-only, and this run replaces it"):
+        outputs.check()

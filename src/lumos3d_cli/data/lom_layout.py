@@ -28,6 +28,6 @@ def lom_scene_folders(root: Path) -> list[Path]:
 
 
 def scene_name(name: str) -> str:
-    """A scene's name as typed on a command line: without the separator a shell's completion of
-    the folder adds (`buu/`)."""
-    return name.strip().rstrip("/\\")
+    """A scene's folder name as typed on a command line, whatever path leads to it (`buu/` as a
+    shell completes it, `./buu`)."""
+    return Path(name.strip()).name

@@ -32,7 +32,7 @@ import shutil
 import signal
 import tempfile
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -216,6 +216,11 @@ class OutputSet:
                 if own.is_symlink() or (own.exists() and not own.is_file()):
                     raise InputError(f"{own}: is not lumos3d's {'lock' if name == LOCK_NAME else 'manifest'} file but "
                                      "takes its name; move it away or choose another output")
+        for name in self._folders:  # moved whole at the commit: a read-only one failed only then, after the work
+            path = self.folder / name
+            if path.is_dir() and not path.is_symlink() and not os.access(path, os.W_OK | os.X_OK):
+                raise InputError(f"{path}: is read-only, and this run replaces it; fix its permissions or choose "
+                                 "another output")
         for path in self.paths():
             if path.name in RESERVED_NAMES:
                 raise InputError(f"{path}: this name is lumos3d's own bookkeeping file; choose another name")
@@ -267,6 +272,20 @@ class OutputSet:
                                      "which this run replaces whole; move it away or choose another output")
                 _refuse_unless_ours(manifest(self.folder), inner)
         self._check_no_set_left_incomplete(manifest(self.folder))
+        self._check_no_other_commands_output(manifest)
+
+    def _check_no_other_commands_output(self, manifest: Callable[[Path], Manifest]) -> None:
+        """InputError when a file this run writes is the output of another command: `render -o F`
+        over the `degrade -o F/00000.png` there, `restore --video v.gif` over a render's v.gif.
+        (A run of the same command may take over an earlier run's files: `restore -o out/b.ply`
+        where a.ply was removed.)"""
+        for path in [*(self.folder / name for name in (*self._files, *self._folders)), *self._elsewhere]:
+            listing = manifest(path.parent)
+            entry = listing.files.get(listing.relative(path))
+            if entry is not None and entry.command != self.command and path.exists():
+                raise InputError(f"{path}: an output of another lumos3d command ({entry.command}, {entry.output_set}) that "
+                                 "this run would replace; lumos3d keeps other runs' outputs: move it away or choose "
+                                 "another output")
 
     def _check_no_set_left_incomplete(self, manifest: Manifest) -> None:
         """InputError when this run would replace files of another output set of its folder while
