@@ -32,7 +32,7 @@ def degrade_outputs(inputs: list[Path], output: Path, bit_depth: int, given: Seq
             raise InputError(f"{output}: JPEG holds 8 bits only; use .png for 16-bit output", parameter="output")
         check_output_path(output, "output")
         twin = next((path for path in inputs if path.parent.resolve() == output.parent.resolve()
-                     and path.stem.casefold() == output.stem.casefold()), None)
+                     and path.stem.casefold() == output.stem.casefold() and path.resolve() != output.resolve()), None)
         if twin is not None:  # 1.jpg and 1.png: a folder no command reads again ("two photos named '1'")
             raise InputError(f"{output}: would sit beside {twin.name} under the same name, and the folder would hold two "
                              "photos of one view; name the output otherwise or write it to another folder",

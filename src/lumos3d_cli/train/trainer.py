@@ -451,7 +451,9 @@ class Trainer:
         pictures = [path for path in self._written_by_a_run() if path.parent.name == "validation"
                     and int(path.stem.removeprefix("step_")) > start]
         final = self.output / FINAL_FILE
-        later_final = final.is_file() and int(read_provenance(final).get("steps", start + 1)) > start
+        # only the run's own, as it wrote it (a file of the user's there is the replacement check's to refuse)
+        later_final = (final.is_file() and self._files.manifest.owns(final)
+                       and int(read_provenance(final).get("steps", start + 1)) > start)
         return [*([final] if later_final else []), *pictures]
 
     def _request_stop(self, signum, frame) -> None:
