@@ -55,6 +55,20 @@ def test_zero_and_huge_scales(scale):
         assert output.alphas.min() > 0.9
 
 
+@pytest.mark.parametrize("scale", [1e8, 1e12])
+def test_the_kernel_and_its_twin_agree_on_gaussians_far_larger_than_the_scene(scale):
+    """In float32 the twin's 2D determinant overflowed: it drew nothing (alpha 0) where the
+    kernel covered the image (0.9997), and its gradients were not finite from std 1e12."""
+    gaussians = random_scene(4, 0, dtype=torch.float32)
+    gaussians.scales[0], gaussians.opacities[0] = scale, 0.95
+    camera = camera_at_origin(32, 24)
+    kernel, _ = _render_with_grad(gaussians, camera, backend="cpu")
+    twin, _ = _render_with_grad(gaussians, camera, backend="reference")
+    assert kernel.alphas.min() > 0.9
+    torch.testing.assert_close(twin.alphas, kernel.alphas, atol=1e-5, rtol=0)
+    torch.testing.assert_close(twin.images, kernel.images, atol=1e-5, rtol=0)
+
+
 def test_zero_and_unnormalised_quaternions():
     gaussians = random_scene(6, 4, dtype=torch.float32)
     reference = render(gaussians, camera_at_origin(32, 24))

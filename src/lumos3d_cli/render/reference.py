@@ -104,7 +104,13 @@ def colours_reference(means: torch.Tensor, sh: torch.Tensor, campos: torch.Tenso
 def project_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
     """Per-Gaussian projection, the stages above in sequence. Returns means2d [N,2], conics [N,3],
     depths [N], opacities [N] (with compensation), colours [N,3] and radii [N,2] (int32, 0 =
-    culled); the other outputs of culled Gaussians are finite but meaningless."""
+    culled); the other outputs of culled Gaussians are finite but meaningless.
+
+    The stages run in float64 whatever the inputs' dtype, as the kernel's per-Gaussian arithmetic
+    does (its scalars are float64): in float32 the gradients of a Gaussian of std 1e12 were not
+    finite where the kernel's were. The outputs take the inputs' dtype."""
+    dtype = means.dtype
+    means, quats, scales, opacities, sh = (tensor.to(torch.float64) for tensor in (means, quats, scales, opacities, sh))
     width, height = float(settings.width), float(settings.height)
     camera, cov_camera = world_to_camera_reference(means, covariance_reference(quats, scales), viewmat)
     x, y, z_true = camera.unbind(-1)
@@ -124,11 +130,13 @@ def project_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, 
             in_depth_range & (det > 0) & (opacity >= ALPHA_THRESHOLD) & ~((rx <= 0) & (ry <= 0))
             & (u + rx > 0) & (u - rx < width) & (v + ry > 0) & (v - ry < height)
         )
-        radii = torch.where(valid[:, None], torch.stack([rx, ry], -1), torch.zeros_like(means2d)).to(torch.int32)
+        # at most 2^30 pixels, as the kernel stores them (a Gaussian of std 1e8 overflowed int32 and was culled)
+        radii = torch.where(valid[:, None], torch.stack([rx, ry], -1).clamp_max(2.0**30),
+                            torch.zeros_like(means2d)).to(torch.int32)
 
     rotation, translation = viewmat[:, :3].to(means.dtype), viewmat[:, 3].to(means.dtype)
     colours = colours_reference(means, sh, -rotation.T @ translation, settings.sh_degree)
-    return means2d, conics, z, opacity, colours, radii
+    return (*(tensor.to(dtype) for tensor in (means2d, conics, z, opacity, colours)), radii)
 
 
 def _composite_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, settings: RasterSettings):
