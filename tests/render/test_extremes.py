@@ -69,6 +69,24 @@ def test_the_kernel_and_its_twin_agree_on_gaussians_far_larger_than_the_scene(sc
     torch.testing.assert_close(twin.images, kernel.images, atol=1e-5, rtol=0)
 
 
+def test_values_outside_the_activated_ranges_are_refused():
+    """An opacity of 2 rendered (the kernel and its twin differing) and was saved as 1; a negative
+    scale rendered as its size and was saved as 1e-30; a background of 2 was composited."""
+    from lumos3d_cli.io.ply import write_ply
+
+    camera = camera_at_origin(16, 12)
+    for name, value, message in (("opacities", 2.0, r"gaussians.opacities: 1 value\(s\) outside the activated range \(2"),
+                                 ("scales", -0.1, r"gaussians.scales: 1 value\(s\) outside the activated range \(-0.1")):
+        gaussians = random_scene(5, 0, dtype=torch.float32)
+        getattr(gaussians, name).view(-1)[0] = value
+        with pytest.raises(ValueError, match=message):
+            render(gaussians, camera)
+        with pytest.raises(ValueError, match=message.replace("gaussians", "scene to save")):
+            write_ply("unused.ply", gaussians)
+    with pytest.raises(ValueError, match=r"background \[2.0, 0.0, 0.0\]: an RGB colour in \[0, 1\]"):
+        render(random_scene(5, 0, dtype=torch.float32), camera, background=(2.0, 0.0, 0.0))
+
+
 def test_zero_and_unnormalised_quaternions():
     gaussians = random_scene(6, 4, dtype=torch.float32)
     reference = render(gaussians, camera_at_origin(32, 24))

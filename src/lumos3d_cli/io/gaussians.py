@@ -101,6 +101,18 @@ class Gaussians:
         for name, tensor in self.tensors().items():
             require_finite(f"{where}.{name}", tensor)
 
+    def require_activated(self, where: str = "Gaussians") -> None:
+        """ValueError unless the opacities lie in [0, 1] and the scales are not negative: the
+        activated values these tensors hold (an opacity of 2 rendered, then saved as 1; a negative
+        scale rendered as its size, then saved as 1e-30)."""
+        for name, tensor, outside in (("opacities", self.opacities, (self.opacities < 0) | (self.opacities > 1)),
+                                      ("scales", self.scales, self.scales < 0)):
+            if bool(outside.any()):
+                first = float(tensor.detach()[outside][0])
+                raise ValueError(f"{where}.{name}: {int(outside.sum())} value(s) outside the activated range ({first:g}; "
+                                 f"{'opacities lie in [0, 1]' if name == 'opacities' else 'scales are not negative'}): "
+                                 "give activated values (sigmoid of the opacity logit, exp of the log-scale)")
+
     @staticmethod
     def concatenate(parts: list[Gaussians]) -> Gaussians:
         first = parts[0]

@@ -47,6 +47,7 @@ def ply_property_names(sh_degree: int) -> list[str]:
 def gaussians_to_ply_fields(gaussians: Gaussians) -> np.ndarray:
     """Gaussians -> [N, P] float32 in the order of `ply_property_names`."""
     gaussians.require_finite("scene to save")
+    gaussians.require_activated("scene to save")
     g = gaussians.detach().to(device="cpu", dtype=torch.float64)
     n, k = len(g), g.sh.shape[1]
     opacity = g.opacities.clamp(_OPACITY_EPS, 1 - _OPACITY_EPS)

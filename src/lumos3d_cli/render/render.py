@@ -44,6 +44,7 @@ class RenderOutput:
 
 def _check_inputs(gaussians: Gaussians, cameras: Cameras, sh_degree: int) -> tuple[int, int]:
     gaussians.require_finite("gaussians")
+    gaussians.require_activated("gaussians")
     require_finite("cameras.extrinsics", cameras.extrinsics)
     require_finite("cameras.intrinsics", cameras.intrinsics)
     if not 0 <= sh_degree <= min(gaussians.sh_degree, MAX_SH_DEGREE):
@@ -122,6 +123,8 @@ def render(
         raise ValueError(f"background must be one RGB colour [3], got shape {tuple(background.shape)}")
     background = background.to(device=device, dtype=dtype)
     require_finite("background", background)
+    if bool(((background < 0) | (background > 1)).any()):
+        raise ValueError(f"background {background.tolist()}: an RGB colour in [0, 1]")
     if backend == "auto":
         if device.type == "cuda":
             if gsplat_available():
