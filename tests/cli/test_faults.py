@@ -410,3 +410,12 @@ def test_an_interrupted_evaluation_leaves_no_work_folder_of_structure_from_motio
                              env={"TMPDIR": str(temporary)})
     assert stopped.code == 130, stopped.err[-3000:]
     assert sorted(p.name for p in temporary.iterdir() if p.name.startswith("lumos3d-sfm-")) == []
+
+
+def test_views_no_gaussian_covers_are_warned_of(tmp_path, photos, random_checkpoint, run_cli):
+    """--max-gaussians 1: every restored view one flat colour, exit 0 and not a word."""
+    result = run_cli(*_restore(photos, tmp_path / "out" / "scene.ply", random_checkpoint, "--max-gaussians", 1))
+    assert result.code == 0, result.err
+    assert "6 view(s) are mostly filled in: no Gaussian covers them" in " ".join(result.err.split())
+    plain = run_cli(*_restore(photos, tmp_path / "plain" / "scene.ply", random_checkpoint))
+    assert plain.code == 0 and "mostly" not in plain.err

@@ -213,3 +213,16 @@ def test_concatenate_keeps_order_sizes_and_names():
     assert joined.extrinsics.dtype == torch.float64 and joined.intrinsics[0, 0, 0] == 2 and joined.intrinsics[1, 0, 0] == 1
     with pytest.raises(ValueError):
         Cameras.concatenate([])
+
+
+def test_a_camera_holding_nan_is_named_by_its_view():
+    """A transforms.json pose with NaN was "extrinsics: 6 of 48 values are NaN or Inf": which view?"""
+    intrinsics = make_intrinsics(50.0, 50.0, 32.0, 24.0).expand(4, 3, 3).clone()
+    extrinsics = torch.eye(4)[:3].expand(4, 3, 4).clone()
+    extrinsics[2, 0, 3] = float("nan")
+    cameras = Cameras(extrinsics, intrinsics, [(64, 48)] * 4, ["a.jpg", "b.jpg", "c.jpg", "d.jpg"])
+    with pytest.raises(InputError, match=r"poses.json: the pose of view 2 \(c.jpg\) holds NaN or Inf; correct the file"):
+        cameras.require_valid("poses.json")
+    intrinsics[0, 0, 0] = float("inf")
+    with pytest.raises(InputError, match=r"the intrinsics of view 0 \(a.jpg\) holds NaN"):
+        Cameras(torch.eye(4)[:3].expand(4, 3, 4).clone(), intrinsics, [(64, 48)] * 4, ["a.jpg", "b.jpg", "c.jpg", "d.jpg"]).require_valid("poses.json")

@@ -205,12 +205,17 @@ def test_photos_of_one_size_are_not_mixed(tmp_path):
     assert not load_images(tmp_path).mixed_sizes
 
 
-def test_linear_sources_are_encoded_once_and_clipped(tmp_path):
+def test_linear_sources_are_encoded_once_and_clipped(tmp_path, caplog):
     _write_oiio(tmp_path / "a.exr", np.full((4, 4, 3), 0.18, np.float32), "float")
     _write_oiio(tmp_path / "b.exr", np.full((4, 4, 3), 3.0, np.float32), "float")
+    _write_oiio(tmp_path / "c.exr", np.full((4, 4, 3), -0.5, np.float32), "float")
     batch = load_images(tmp_path)
     np.testing.assert_allclose(batch.images[0].numpy(), linear_to_srgb(np.float32(0.18)), atol=1e-6)
     np.testing.assert_allclose(batch.images[1].numpy(), 1.0)
+    np.testing.assert_allclose(batch.images[2].numpy(), 0.0)
+    assert "b.exr: 100.0% of linear samples exceed 1.0 and were clipped" in caplog.text
+    assert "c.exr: 100.0% of linear samples are negative and were clipped" in caplog.text  # clipped silently before
+    assert "a.exr" not in caplog.text
 
 
 def test_transparent_pixels_are_warned_of_since_alpha_is_ignored(tmp_path, caplog):

@@ -54,3 +54,17 @@ def test_library_errors_name_parameters_not_flags(buu, random_checkpoint):
     assert "--" not in str(caught.value)
     with pytest.raises(InputError, match="^geometry 'colmap': use one of auto, network, sfm$"):
         lumos3d_cli.restore(buu / "low", checkpoint=random_checkpoint, geometry="colmap")
+
+
+def test_a_photo_batch_made_in_python_with_nan_names_the_photo(buu, random_checkpoint):
+    import torch
+
+    from lumos3d_cli.io.images import load_images
+    from lumos3d_cli.model.loading import load_model
+    from lumos3d_cli.pipeline.presets import get_restore_preset
+    from lumos3d_cli.pipeline.restore import restore_scene
+
+    batch = load_images([buu / "low" / name for name in ("1.JPG", "2.JPG", "3.JPG")])
+    batch.images[1, 0, 5, 5] = torch.nan
+    with pytest.raises(InputError, match=r"low/2.JPG: the photo's pixels hold NaN or Inf"):
+        restore_scene(batch, load_model(random_checkpoint), get_restore_preset("fast"), geometry="network")

@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 import torch
 
-from lumos3d_cli.checks import require_finite
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import InputError, NonFiniteError, listed
+
 
 # Flipping y and z turns OpenGL/nerfstudio camera axes (x right, y up, z back) into OpenCV's
 # (x right, y down, z forward) and back: the map is its own inverse.
@@ -159,8 +159,11 @@ class Cameras:
     def require_valid(self, where: str = "cameras", remedy: str = "correct the file") -> None:
         """Finite values, proper rotations, positive focal lengths and image sizes; otherwise
         NonFiniteError, or InputError naming `where` and the view and ending in `remedy`."""
-        require_finite(f"{where}.extrinsics", self.extrinsics)
-        require_finite(f"{where}.intrinsics", self.intrinsics)
+        for what, values in (("pose", self.extrinsics), ("intrinsics", self.intrinsics)):
+            broken = ~torch.isfinite(values.detach()).flatten(1).all(dim=1)
+            if bool(broken.any()):
+                views = [self._view_name(int(index)) for index in broken.nonzero().flatten()]
+                raise NonFiniteError(f"{where}: the {what} of {listed(views, 3)} holds NaN or Inf; {remedy}")
         rotation = self.extrinsics[:, :, :3].double()
         identity = torch.eye(3, dtype=torch.float64).expand_as(rotation)
         not_rotations = ((rotation @ rotation.transpose(1, 2) - identity).abs().amax(dim=(1, 2)) > 1e-4) | (

@@ -44,9 +44,9 @@ def to_srgb(image: DecodedImage) -> np.ndarray:
     """[H, W, 3] float32 sRGB in [0, 1]; linear sources are clipped to [0, 1] and encoded once."""
     if image.encoding == "srgb":
         return np.clip(image.pixels, 0.0, 1.0)
-    above = float((image.pixels > 1.0).mean())
-    if above > 0.01:
-        logger.warning("%s: %.1f%% of linear samples exceed 1.0 and were clipped", image.path, 100 * above)
+    for share, what in ((float((image.pixels > 1.0).mean()), "exceed 1.0"), (float((image.pixels < 0.0).mean()), "are negative")):
+        if share > 0.01:  # a few out-of-gamut samples are usual; more is a file in another range
+            logger.warning("%s: %.1f%% of linear samples %s and were clipped", image.path, 100 * share, what)
     return linear_to_srgb(np.clip(image.pixels, 0.0, 1.0))
 
 

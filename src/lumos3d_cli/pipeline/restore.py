@@ -17,7 +17,7 @@ from pathlib import Path
 import torch
 
 from lumos3d_cli.data.degradations import MODES
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import InputError, NonFiniteError, listed
 from lumos3d_cli.geometry.given_poses import read_given_poses
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.file_digest import file_sha256
@@ -145,6 +145,10 @@ def restore_scene(
     rendered at it, at its photo's own size."""
     progress = progress or SilentProgress()
     names = [path.name for path in batch.paths]
+    finite = torch.isfinite(batch.images).flatten(1).all(dim=1)
+    if not bool(finite.all()):  # a batch made in Python: the files' own readers refuse NaN by name
+        broken = [str(batch.paths[index]) for index in (~finite).nonzero().flatten().tolist()]
+        raise NonFiniteError(f"{listed(broken, 3)}: the photo's pixels hold NaN or Inf; give finite values in [0, 1]")
     if batch.mixed_sizes:
         odd = [name for name, size in zip(names, batch.original_sizes) if size != batch.size]
         logger.warning("%d of %d photos differ in size from %dx%d (%s): the network sees them stretched to it, their "
@@ -171,6 +175,11 @@ def restore_scene(
     else:
         rendered = render_views(built.gaussians, cameras, preset.sh_degree, progress, fill=preset.fill_unobserved)
         views, uncovered, view_source = rendered.images, rendered.summary(), "render"
+        bare = [f"{name} ({fraction:.0%})" for name, fraction in zip(cameras.names, rendered.unobserved)
+                if fraction > MOSTLY_UNCOVERED and (fuse_views is None or fuse_views[names.index(name)])]
+        if bare:  # a flat colour where the view should be: a cap far too low, or cameras that miss the scene
+            logger.warning("%d view(s) are mostly %s: no Gaussian covers them (%s); raise max_gaussians or check the "
+                           "cameras", len(bare), "filled in" if preset.fill_unobserved else "black", listed(bare, 3))
         if fuse_views is not None:
             views = [view if fuse_views[names.index(name)] else batch.photo(names.index(name))
                      for view, name in zip(views, cameras.names)]
@@ -183,6 +192,10 @@ def restore_scene(
         view_source=view_source, denoising=built.denoising,
     )
 
+
+# The share of a restored view's pixels no Gaussian covers beyond which it is warned of: buu's and
+# shrub's views have at most 8 % (a held-out view's edge); over half is a view the scene misses.
+MOSTLY_UNCOVERED = 0.5
 
 # The photos' mean sRGB level beyond which a mode does not fit them: the development sources' dark
 # inputs average 0.03-0.12 and reach 0.27 (a lit night street), their over-exposed ones 0.63-0.92,
