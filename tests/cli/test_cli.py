@@ -243,6 +243,8 @@ def test_info_on_cameras_images_and_scene_folders(run_cli, shared_data, buu):
     assert lom["summaries"][-1]["kind"] == "cameras" and lom["summaries"][-1]["format"] == "transforms splits"
     colmap = json.loads(run_cli("info", buu / "colmap_sparse" / "0" / "images.bin", "--json").out)  # not a checkpoint
     assert colmap["kind"] == "cameras" and colmap["format"] == "colmap" and colmap["count"] == 25
+    points = json.loads(run_cli("info", buu / "colmap_sparse" / "0" / "points3D.bin", "--json").out)  # read as a checkpoint once
+    assert points["kind"] == "cameras" and points["count"] == 25
 
 
 def test_info_on_a_restore_output_folder_shows_its_scene(run_cli, tmp_path):
@@ -250,6 +252,11 @@ def test_info_on_a_restore_output_folder_shows_its_scene(run_cli, tmp_path):
     cv2.imwrite(str(tmp_path / "contact_sheet.png"), np.zeros((8, 8, 3), np.uint8))
     summary = json.loads(run_cli("info", tmp_path, "--json").out)
     assert summary["kind"] == "gaussians" and summary["count"] == 50  # the contact sheet is no image folder
+    # a mesh beside the scene is named and left out; it refused the whole folder
+    (tmp_path / "mesh.ply").write_text("ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1\n")
+    result = run_cli("info", tmp_path, "--json")
+    assert result.code == 0 and json.loads(result.out)["count"] == 50, result.err
+    assert "mesh.ply: not a 3D Gaussian scene" in result.err and "left out of the summary" in " ".join(result.err.split())
 
 
 def test_info_bad_inputs(run_cli, tmp_path):

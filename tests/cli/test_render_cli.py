@@ -165,3 +165,17 @@ def test_an_orbit_around_one_gaussian_sees_it(run_cli, tmp_path):
     result = run_cli("render", tmp_path / "one.ply", "--orbit", 2, "-o", tmp_path / "frames", "--width", 64)
     assert result.code == 0, result.err
     assert cv2.imread(str(tmp_path / "frames" / "00000.png")).max() > 0
+
+
+def test_options_are_checked_before_the_scene_is_read_and_fast_gifs_warned_of(run_cli, tmp_path):
+    (tmp_path / "broken.ply").write_text("not a ply")
+    # the option's error, not the scene's: it is named before the (maybe large) scene is read
+    expect_input_error(run_cli("render", tmp_path / "broken.ply", "--orbit", 2, "-o", tmp_path / "a", "--width", 0), "--width 0")
+    (tmp_path / "cameras.json").write_text("{}")
+    expect_input_error(run_cli("render", tmp_path / "broken.ply", "--poses", tmp_path / "cameras.json", "-o", tmp_path / "a"),
+                       "cameras.json")
+    path, _ = _scene(tmp_path)
+    result = run_cli("render", path, "--orbit", 2, "-o", tmp_path / "frames", "--video", tmp_path / "fast.gif", "--fps", 60,
+                     "--width", 16)
+    assert result.code == 0, result.err
+    assert "--fps 60: a GIF holds frame times in hundredths of a second" in " ".join(result.err.split())

@@ -226,3 +226,22 @@ def test_a_camera_holding_nan_is_named_by_its_view():
     intrinsics[0, 0, 0] = float("inf")
     with pytest.raises(InputError, match=r"the intrinsics of view 0 \(a.jpg\) holds NaN"):
         Cameras(torch.eye(4)[:3].expand(4, 3, 4).clone(), intrinsics, [(64, 48)] * 4, ["a.jpg", "b.jpg", "c.jpg", "d.jpg"]).require_valid("poses.json")
+
+
+def test_distorted_colmap_cameras_are_warned_of_in_one_line(tmp_path, caplog):
+    from synthetic_scene import plane_cameras
+
+    cameras = plane_cameras(3)
+    write_colmap_model(tmp_path, cameras)
+    lines = (tmp_path / "cameras.txt").read_text().splitlines()
+    distorted = []
+    for line in lines:
+        words = line.split()
+        if words and not line.startswith("#"):  # CAMERA_ID PINHOLE W H fx fy cx cy -> OPENCV with 4 zero coefficients
+            words[1] = "OPENCV"
+            line = " ".join(words + ["0.01", "0", "0", "0"])
+        distorted.append(line)
+    (tmp_path / "cameras.txt").write_text("\n".join(distorted) + "\n")
+    read_colmap_model(tmp_path)
+    warnings = [record.getMessage() for record in caplog.records if "distortion" in record.getMessage()]
+    assert len(warnings) == 1 and "camera(s) 1 (OPENCV), 2 (OPENCV), 3 (OPENCV) are ignored" in warnings[0]

@@ -585,3 +585,14 @@ def test_a_read_only_folder_the_run_replaces_is_refused_before_the_work(tmp_path
     outputs = OutputSet(out, "restore", "restore scene.ply").add_file("scene.ply").add_file("summary.json").add_folder("views")
     with pytest.raises(InputError, match=r"out/views: is read-only, and this run replaces it"):
         outputs.check()
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux's /proc")
+def test_folders_that_take_no_files_are_refused_by_name():
+    """`-o /proc/foo` ended in an internal FileNotFoundError; a lock in /sys was called "not
+    lumos3d's lock file"."""
+    with pytest.raises(InputError, match=r"^/proc/lumos3d-test/out: cannot be created \("):
+        atomic.make_folders(Path("/proc/lumos3d-test/out"))
+    with pytest.raises(InputError, match=r"^/proc: no file can be written there \("):
+        with folder_lock(Path("/proc"), "render"):
+            pass

@@ -96,7 +96,10 @@ def convert_command(
         provenance = {key: value for key, value in model.provenance.items() if key not in ("path", "format")}
         provenance["converted_from"] = {"file": Path(source).name, "format": model.provenance.get("format"), "dtype": dtype}
         with outputs.staged() as staging:
-            save_checkpoint(model, staging.root / output.name, provenance, dtype=dtype)
+            try:
+                save_checkpoint(model, staging.root / output.name, provenance, dtype=dtype)
+            except InputError as error:  # a tensor beyond --dtype's range: the file it came from
+                raise InputError(f"{source}: {error}", parameter=None) from None
     summary = summarize_checkpoint(output)
     if as_json:
         print_json(summary)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import typer
@@ -76,12 +77,16 @@ def _refuse_unreadable(summaries: list[dict]) -> None:
             raise InputError(f"{len(refused)} of {summary['count']} images will not load or restore: {shown}{more}")
 
 
+_COLMAP_FILES = ("cameras", "images", "points3D", "frames", "rigs")  # a COLMAP model's files, text or binary
+
+
 def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
     """Every summary that applies to `path`; `deep` decodes images (see `_image_summary`)."""
     # The readers import torch, pycolmap, OpenCV and the image libraries (seconds): imported here
     # and in `_image_summary`, when the command runs, so that `--help` stays fast.
     with library_imports():
         from lumos3d_cli.io.camera_files import find_camera_source
+        from lumos3d_cli.io.colmap import is_colmap_model
         from lumos3d_cli.io.summaries import summarize_camera_file, summarize_gaussian_file
         from lumos3d_cli.io.weight_files import FOLDER_FILES
         from lumos3d_cli.model.bundled_models import BUNDLED_MODELS, resolve_checkpoint
@@ -97,7 +102,9 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
         suffix = path.suffix.lower()
         if suffix == ".ply":
             return [summarize_gaussian_file(path)]
-        if suffix in (".safetensors", ".pt", ".pth", ".bin") and find_camera_source(path) is None:  # not a COLMAP images.bin
+        if path.stem in _COLMAP_FILES and suffix in (".bin", ".txt") and is_colmap_model(path.parent):
+            return [summarize_camera_file(path.parent)]  # points3D.bin is no checkpoint: the model it belongs to
+        if suffix in (".safetensors", ".pt", ".pth", ".bin") and find_camera_source(path) is None:
             return [summarize_checkpoint(path)]
         if suffix in IMAGE_SUFFIXES:
             return [_image_summary([path], deep)]
@@ -106,7 +113,14 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
         raise InputError(f"{path}: cannot summarise '{path.suffix}' files; pass a .ply, checkpoint, camera file, image or folder")
     # a restore's output folder: its scene (its PNGs are the contact sheet; restored/ holds the views)
     scenes = sorted(p for p in path.glob("*.ply") if p.is_file() and not p.name.startswith("."))
-    summaries = [summarize_gaussian_file(scene) for scene in scenes]
+    summaries = []
+    for scene in scenes:  # one .ply that is no Gaussian scene (a mesh beside it) does not hide the others
+        try:
+            summaries.append(summarize_gaussian_file(scene))
+        except InputError as error:
+            if len(scenes) == 1:
+                raise
+            logging.getLogger(__name__).warning("%s; left out of the summary", error)
     image_folders = [path] if _has_images(path) and not scenes else []
     if not image_folders and (path / "images").is_dir() and _has_images(path / "images"):
         image_folders = [path / "images"]

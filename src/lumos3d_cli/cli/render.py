@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from pathlib import Path
 
@@ -12,6 +13,8 @@ from lumos3d_cli.cli.console import ProgressBars, print_json, progress_bar, say
 from lumos3d_cli.cli.interrupts import library_imports
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.output_paths import check_output_path
+
+MAX_GIF_FPS = 50  # a GIF frame lasts a whole number of hundredths of a second; browsers show no less than 2
 
 EXAMPLES = """
   lumos3d render out/scene.ply --orbit 60 -o frames/ --video orbit.mp4
@@ -53,20 +56,26 @@ def render_command(
     with library_imports():
         from lumos3d_cli.io.ply import read_ply
         from lumos3d_cli.io.video import video_kind
-        from lumos3d_cli.pipeline.render_job import render_cameras, render_frames, render_outputs
+        from lumos3d_cli.io.camera_files import read_cameras
+        from lumos3d_cli.pipeline.render_job import output_size, render_cameras, render_frames, render_outputs
     if (poses is None) == (orbit is None):
         raise InputError("give exactly one of --poses CAMERAS or --orbit N")
     if orbit is not None and not 1 <= orbit <= 100000:
         raise InputError(f"--orbit {orbit}: use between 1 and 100000 frames")
-    if video is not None:
-        video_kind(video)
     if not 1 <= fps <= 240:
         raise InputError(f"--fps {fps}: use between 1 and 240")
+    if video is not None and video_kind(video) == "gif" and fps > MAX_GIF_FPS:
+        logging.getLogger(__name__).warning(
+            "--fps %d: a GIF holds frame times in hundredths of a second and browsers slow frames under 20 ms down to "
+            "100 ms: it plays at most %d frames a second; use .mp4 for more", fps, MAX_GIF_FPS)
+    output_size((1, 1), width, height)  # the sizes are checked before the scene is read (seconds for a large one)
     colour = parse_background(background)
     if fill and colour != (0.0, 0.0, 0.0):
         raise InputError(f"--background {background}: a filled frame shows no background; leave one of them out")
     check_output_path(output, "output", folder=True)
     check_output_path(video, "video")
+    if poses is not None:
+        read_cameras(poses)  # a camera file that cannot be read is refused before the scene is read
     started = time.perf_counter()
     gaussians = read_ply(scene)
     if len(gaussians) == 0:

@@ -233,7 +233,10 @@ def make_folders(folder: Path) -> list[Path]:
     blocker = blocking_file(folder / "output")
     if blocker is not None:  # commands check their outputs first (check_output_path); this is the last guard
         raise InputError(f"{folder}: cannot be created because {blocker} is a file, not a folder; choose another path")
-    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:  # /proc, /sys, a read-only mount: no folder can be made there
+        raise InputError(f"{folder}: cannot be created ({error.strerror}); choose another output") from None
     return missing[::-1]
 
 

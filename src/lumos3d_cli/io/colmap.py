@@ -20,7 +20,7 @@ import pycolmap
 import torch
 
 from lumos3d_cli.checks import require_finite
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import InputError, listed
 from lumos3d_cli.io.atomic import write_bytes_atomic
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.image_files import natural_sort_key
@@ -90,8 +90,6 @@ def _pinhole_camera(path: Path, camera_id: int, model: str, width: int, height: 
         fx, fy, cx, cy = params[:4]
     else:
         raise InputError(f"{path}: camera model {model} is not supported; undistort the images with COLMAP first")
-    if model not in _PINHOLE:
-        logger.warning("%s: camera %d (%s): distortion parameters are ignored", path, camera_id, model)
     return ColmapCamera(width, height, fx, fy, cx, cy, model)
 
 
@@ -170,6 +168,10 @@ def read_colmap_model(folder: Path | str) -> Cameras:
         views = read_colmap_images(folder / "images.txt")
     else:
         cameras, views = _read_binary_views(folder)
+    distorted = [f"{camera_id} ({camera.model})" for camera_id, camera in sorted(cameras.items()) if camera.model not in _PINHOLE]
+    if distorted:  # one line for the model, not one per camera
+        logger.warning("%s: the distortion parameters of camera(s) %s are ignored (pinhole model)", folder,
+                       listed(distorted, 4))
     views = sorted(views, key=lambda view: natural_sort_key(view.name))
     if not views:
         raise InputError(f"{folder}: the model has no registered images")

@@ -56,6 +56,9 @@ def _acquire(folder: Path, command: str) -> int:
         try:  # never through a link, never onto a folder or device
             descriptor = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
         except OSError as error:
+            if not os.path.lexists(path):  # nothing there: the folder takes no file (/sys, a read-only mount)
+                raise InputError(f"{folder}: no file can be written there ({error.strerror}); choose another "
+                                 "output") from None
             raise _not_ours(path) from error
         if not stat.S_ISREG(os.fstat(descriptor).st_mode):
             os.close(descriptor)

@@ -100,8 +100,10 @@ def write_weights(tensors: dict[str, torch.Tensor], path: Path, metadata: dict[s
             require_finite(name, tensor, "the weights are damaged (a diverged training run?); nothing was written")
         if tensor.is_floating_point() and storage != torch.float32:
             limit = torch.finfo(storage).max
-            if tensor.abs().max() > limit:
-                raise InputError(f"{name}: values beyond the {dtype} range (±{limit:.4g}); store this checkpoint as float32")
+            largest = float(tensor.abs().max())
+            if largest > limit:
+                raise InputError(f"tensor {name} holds values up to {largest:.4g}, beyond the {dtype} range (±{limit:.4g}); "
+                                 "store this checkpoint as float32")
             tensor = tensor.to(storage)
         stored[name] = tensor.contiguous()
     with atomic_path(path) as temporary:
