@@ -90,8 +90,9 @@ def train_command(
             result = trainer.run(resume=resume, max_steps=max_steps, config_file=config)
     finally:
         shutdown_distributed()
-    if not context.is_main:
-        _stop_if_interrupted(result)
+    if not context.is_main:  # rank 0 says where the checkpoint is; the others end with the same code, silently
+        if result.stop_signal is not None:
+            raise typer.Exit(128 + result.stop_signal)
         return
     last = result.history[-1] if result.history else None
     summary = {
