@@ -60,6 +60,10 @@ def test_eval_bad_inputs(run_cli, lom_copy, tmp_path, random_checkpoint):
     expect_input_error(run_cli("eval", tmp_path / "nowhere", "--checkpoint", random_checkpoint, "--out", out), "no such folder")
     expect_input_error(run_cli("eval", lom_copy.parent, "--protocol", "novel", "--checkpoint", random_checkpoint, "--out", out),
                   "--protocol 'novel'")
+    (tmp_path / "garbage.pth").write_text("garbage")
+    for weights in (tmp_path / "missing.pth", tmp_path / "garbage.pth"):  # named as the LPIPS weights, not as a checkpoint
+        expect_input_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out,
+                                   "--lpips-weights", weights), f"--lpips-weights {weights}: ", "give a torchvision vgg16 weight file")
     assert not out.exists()
 
 

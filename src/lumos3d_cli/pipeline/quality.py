@@ -30,13 +30,16 @@ class QualityMeter:
 
     @staticmethod
     def create(lpips_weights: Path | str | None, network: str = "vgg") -> QualityMeter:
+        trunk = "vgg16" if network == "vgg" else network
         if lpips_weights is None:
-            trunk = "vgg16" if network == "vgg" else network
             return QualityMeter(None, f"LPIPS n/a: no LPIPS trunk weights given (a torchvision {trunk} weight file)")
         try:
             return QualityMeter(LPIPS(network, lpips_weights), f"LPIPS ({network})")
-        except InputError:
-            raise
+        except InputError as error:
+            if error.parameter is not None:
+                raise
+            # named as the LPIPS weights: a damaged file reads as a damaged checkpoint would
+            raise InputError(f"{error.detail}; give a torchvision {trunk} weight file", parameter="lpips_weights") from None
         except Exception as error:  # noqa: BLE001 - surfaced to the user as a clear message
             raise InputError(f"{lpips_weights}: {error}", parameter="lpips_weights") from error
 
