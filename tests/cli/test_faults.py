@@ -254,7 +254,7 @@ def test_render_of_a_scene_holding_nan_names_the_file(tmp_path, scene_file, run_
     data[start + 4 : start + 8] = struct.pack("<f", float("nan"))  # y of the first Gaussian
     scene.write_bytes(bytes(data))
     result = run_cli("render", scene, "--orbit", 2, "-o", tmp_path / "frames")
-    expect_input_error(result, f"{scene}: 1 value(s) are NaN or Inf (y: 1); correct or drop those Gaussians")
+    expect_input_error(result, f"{scene}: 1 value(s) no scene can use, NaN, Inf or log-scales above 88.7 (y: 1); correct or drop")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["nan.ply"]
 
 

@@ -311,52 +311,102 @@ def test_a_copied_folder_never_replays_the_journal_it_carries(tmp_path, monkeypa
     assert snapshot(out) == before and any(p.name.startswith(".staging.") for p in copy.iterdir())
 
 
-def test_a_commit_with_a_video_elsewhere_killed_at_any_move_loses_nothing(tmp_path, monkeypatch):
-    """A restore whose video lies in another folder, killed (SIGKILL) after any number of its
-    moves; then a run into the video's folder, then one into the output folder. The video's
-    folder once lost the video: the other run took the killed commit's temporaries there (the old
-    video moved aside, the new one staged) for leftovers, and the commit's recovery then moved
-    the new video aside. Now the run into the video's folder finishes the killed commit first:
-    every folder holds the complete new set, whatever the moment of the kill."""
-    for after in range(9):
-        out, videos = tmp_path / f"out{after}", tmp_path / f"videos{after}"
-        videos.mkdir()
-        _restore_like(out, ["1.png"], text="first", video=videos / "orbit.mp4")
-        original_replace, original_journal, calls = os.replace, output_set_module.write_commit_journal, []
-        armed = []
+def _killed_restore_with_video(out, video, after, monkeypatch) -> bool:
+    """A restore-like commit of text "second" into `out` with `video`, 'killed' (SIGKILL: nothing
+    cleaned up) after `after` of the moves that follow its journal; False when it has fewer moves
+    and completed."""
+    original_replace, original_journal, calls, armed = os.replace, output_set_module.write_commit_journal, [], []
 
-        def journal(*args, **kwargs):
-            original_journal(*args, **kwargs)
-            armed.append(True)
+    def journal(*args, **kwargs):
+        original_journal(*args, **kwargs)
+        armed.append(True)
 
-        def killed(source, destination):
-            if armed:
-                if len(calls) == after:
-                    raise SystemExit("killed")
-                calls.append(destination)
-            original_replace(source, destination)
+    def killed(source, destination):
+        if armed:
+            if len(calls) == after:
+                raise SystemExit("killed")
+            calls.append(destination)
+        original_replace(source, destination)
 
-        with monkeypatch.context() as patch:
-            patch.setattr(output_set_module, "write_commit_journal", journal)
-            patch.setattr(os, "replace", killed)
-            patch.setattr(sys.modules["shutil"], "rmtree", lambda *args, **kwargs: None)
-            patch.setattr(output_set_module, "remove_path", lambda *args, **kwargs: None)
-            patch.setattr(Path, "unlink", lambda *args, **kwargs: None)  # a killed run cleans nothing up
-            with pytest.raises(SystemExit):
-                _restore_like(out, ["1.png"], text="second", video=videos / "orbit.mp4")
+    with monkeypatch.context() as patch:
+        patch.setattr(output_set_module, "write_commit_journal", journal)
+        patch.setattr(os, "replace", killed)
+        patch.setattr(sys.modules["shutil"], "rmtree", lambda *args, **kwargs: None)
+        patch.setattr(output_set_module, "remove_path", lambda *args, **kwargs: None)
+        patch.setattr(Path, "unlink", lambda *args, **kwargs: None)
+        try:
+            _restore_like(out, ["1.png"], text="second", video=video)
+        except SystemExit:
+            return True
+    return False
+
+
+@pytest.mark.parametrize("where", ["elsewhere", "beside", "below", "dotdot", "link"])
+def test_a_commit_with_a_video_killed_at_any_move_loses_nothing(tmp_path, monkeypatch, where):
+    """A restore with --video, killed (SIGKILL) after any number of its moves; then a run into the
+    video's folder, then one into the output folder. The video was lost: a run into its folder took
+    the killed commit's temporaries there for leftovers (`videos/`, `out/sub/`), a run into the
+    output folder deleted the video staged beside the staging folder when it came first in the
+    listing (`out/`), and a path through `..` made the journal untrusted for good. Now every
+    folder ends with the complete newest set, whatever the moment of the kill."""
+    after = 0
+    while True:
+        root = tmp_path / str(after)
+        out = root / "out"
+        videos = {"elsewhere": root / "videos", "beside": out, "below": out / "sub", "dotdot": root / "videos",
+                  "link": root / "link"}[where]
+        video = videos / "orbit.mp4"
+        if where == "dotdot":
+            video = root / "videos" / ".." / "videos" / "orbit.mp4"
+        (root / "videos").mkdir(parents=True)
+        out.mkdir()
+        if where == "link":
+            videos.symlink_to(out, target_is_directory=True)
+        _restore_like(out, ["1.png"], text="first", video=video)
+        if not _killed_restore_with_video(out, video, after, monkeypatch):
+            break
         with monkeypatch.context() as patch:
             patch.setattr(atomic, "_process_exists", lambda pid: pid == os.getpid())  # the killed run has ended
             patch.setattr(os, "getpid", lambda: 1)  # the next runs are other processes
             patch.setattr(atomic, "_cleaned", set())
+            listing = atomic._entries  # the worst order: the staged video listed before the staging folder
+            patch.setattr(atomic, "_entries", lambda folder: sorted(listing(folder), key=lambda p: ".staging." in p.name))
             poster = OutputSet(videos, "degrade", "degrade poster.png").add_file("poster.png")
             poster.check()  # not refused over the half-moved set
             with poster.staged() as staging:
                 (staging.root / "poster.png").write_text("poster")
-            assert (videos / "orbit.mp4").read_text() == "second", after
-            _restore_like(out, ["1.png"], text="third", video=videos / "orbit.mp4")
-        assert (videos / "orbit.mp4").read_text() == "third" and (videos / "poster.png").read_text() == "poster"
-        assert hidden_entries(videos) == [] and hidden_entries(out) == [], after
-        assert {(out / name).read_text() for name in ("scene.ply", "summary.json", "views/1.png")} == {"third"}
+            _restore_like(out, ["1.png"], text="third", video=video)
+        assert (videos / "orbit.mp4").read_text() == "third" and (videos / "poster.png").read_text() == "poster", after
+        assert hidden_entries(root) == [], after
+        assert {(out / name).read_text() for name in ("scene.ply", "summary.json", "views/1.png")} == {"third"}, after
+        after += 1
+    assert after >= 8  # every move of the commit was a moment of the kill
+
+
+def test_a_recovery_cut_short_never_replays_a_finished_commit(tmp_path, monkeypatch):
+    """The recovery removed the staging folder with the journal still in it: cut short after its
+    `.replaced` went, the next recovery 'finished' the moves again and deleted the new set."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], text="first")
+    _kill_mid_commit(out, monkeypatch)
+    monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)
+    monkeypatch.setattr(atomic, "_cleaned", set())
+    removed_first = []
+
+    def cut_short(path):
+        shutil.rmtree(path / ".replaced")  # what an rmtree reached first
+        removed_first.append(path)
+        raise SystemExit("killed")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(atomic, "remove_path", cut_short)
+        with pytest.raises(SystemExit):
+            atomic.remove_leftovers(out)
+    assert removed_first and (out / "scene.ply").read_text() == "killed"
+    monkeypatch.setattr(atomic, "_cleaned", set())
+    atomic.remove_leftovers(out)
+    assert {(out / name).read_text() for name in ("scene.ply", "summary.json", "views/1.png")} == {"killed"}
+    assert hidden_entries(out) == []
 
 
 def test_a_move_that_fails_during_the_commit_puts_the_old_set_back(tmp_path, monkeypatch):

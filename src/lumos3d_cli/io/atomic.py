@@ -81,10 +81,19 @@ def remove_path(path: Path) -> None:
 COMMIT_JOURNAL = ".commit.json"
 
 
+def _real(path: Path) -> Path:
+    """`path` with its folders resolved (no `..`, no link on the way; the last part kept as it is:
+    a link among the outputs is moved, not followed)."""
+    return Path(path).absolute().parent.resolve() / Path(path).name
+
+
 def write_commit_journal(staging: Path, folder: Path, moves: list[tuple[Path, Path, str]]) -> None:
     """Write the journal of a commit into `staging` (inside the output `folder`) before its first
-    move: absolute paths, the folder they belong to, and the other folders they may touch (a video
+    move: the paths with their folders resolved (`-o ../out` would hold `..`, which a journal is
+    not trusted with), the folder they belong to, and the other folders they may touch (a video
     elsewhere). Written to a temporary name and renamed, so a journal is whole or absent."""
+    folder = Path(folder).resolve()
+    moves = [(_real(source), _real(destination), done_when) for source, destination, done_when in moves]
     others = sorted({str(path.parent) for move in moves for path in move[:2] if not _is_inside(path, folder)})
     document = {"folder": str(folder), "other_folders": others,
                 "moves": [[str(source), str(destination), done_when] for source, destination, done_when in moves]}
@@ -127,7 +136,7 @@ def mark_pending_commit(folder: Path, staging: Path) -> Path:
     staged, the staged manifest): the killed commit still needs them (`remove_leftovers`)."""
     handle, name = tempfile.mkstemp(prefix=temporary_prefix("commit"), suffix=".tmp", dir=folder)
     with os.fdopen(handle, "w") as marker:
-        json.dump({"journal": str(staging.absolute() / COMMIT_JOURNAL)}, marker)
+        json.dump({"journal": str(Path(staging).resolve() / COMMIT_JOURNAL)}, marker)
         marker.flush()
         os.fsync(marker.fileno())
     return Path(name)
@@ -142,11 +151,19 @@ def _pending_journals(entries: list[Path]) -> dict[str, Path]:
         if entry.name.startswith(".commit.") and _is_leftover(entry.name):
             try:
                 journal = Path(json.loads(entry.read_text())["journal"])
-            except (OSError, ValueError, KeyError, TypeError):
+                if journal.name == COMMIT_JOURNAL and journal.is_file():
+                    journals[_OWNER.search(entry.name)["pid"]] = journal
+            except (OSError, ValueError, KeyError, TypeError):  # unreadable: nothing it protects
                 continue
-            if journal.name == COMMIT_JOURNAL and journal.is_file():
-                journals[_OWNER.search(entry.name)["pid"]] = journal
     return journals
+
+
+def _entries(folder: Path) -> list[Path]:
+    """What `folder` holds; nothing when it is gone, no folder, or cannot be listed."""
+    try:
+        return list(Path(folder).iterdir())
+    except OSError:
+        return []
 
 
 def _pending_owners(entries: list[Path]) -> set[str]:
@@ -157,22 +174,17 @@ def folders_of_pending_commits(folder: Path | str) -> list[Path]:
     """The output folders whose killed commit still needs temporaries in `folder` (a video's):
     a run writing into `folder` finishes those commits first (`remove_leftovers` of each, under
     its lock)."""
-    try:
-        entries = list(Path(folder).iterdir())
-    except (FileNotFoundError, NotADirectoryError):
-        return []
-    return list(dict.fromkeys(journal.parent.parent for journal in _pending_journals(entries).values()))
+    return list(dict.fromkeys(journal.parent.parent for journal in _pending_journals(_entries(folder)).values()))
 
 
 def holds_unfinished_commit(folder: Path | str) -> bool:
-    """Whether a killed run left `folder` mid-commit: a staging folder of its with a journal, or a
-    marker of a journal in another folder that still exists. Its files are then neither the old
-    set nor the new one until `remove_leftovers` finishes the commit, under the folder's lock."""
-    try:
-        entries = [entry for entry in Path(folder).iterdir() if _is_leftover(entry.name)]
-    except (FileNotFoundError, NotADirectoryError):
-        return False
-    return any((entry / COMMIT_JOURNAL).is_file() for entry in entries) or bool(_pending_owners(entries))
+    """Whether a killed run left `folder` mid-commit: a staging folder of its with a journal that
+    can be finished here, or a marker of a journal in another folder that still exists. Its files
+    are then neither the old set nor the new one until `remove_leftovers` finishes the commit,
+    under the folder's lock."""
+    entries = [entry for entry in _entries(folder) if _is_leftover(entry.name)]
+    return (any((entry / COMMIT_JOURNAL).is_file() and _journal_moves(entry) is not None for entry in entries)
+            or bool(_pending_owners(entries)))
 
 
 def finish_commit(staging: Path) -> bool:
@@ -199,28 +211,44 @@ def finish_commit(staging: Path) -> bool:
 
 def remove_leftovers(folder: Path | str) -> list[Path]:
     """Remove the temporaries in `folder` left by killed runs on this host (once per folder and
-    process), after finishing a commit one of them had begun; returns what was removed. A
-    staging folder whose journal cannot be trusted is left where it is, with a warning."""
+    process), after finishing the commits they had begun; returns what was removed.
+
+    The commits are finished first, each journal removed before its staging folder (a recovery
+    cut short must not replay moves whose trace is gone), and only then the other temporaries
+    go: a commit's video staged beside the staging folder is one of them until it is moved into
+    place. Kept: the temporaries of a killed run whose commit is unfinished (a journal here that
+    cannot be trusted or finished, or one in another folder that a marker here names)."""
     folder = Path(folder).absolute()
     if folder in _cleaned:
         return []
-    try:
-        entries = list(folder.iterdir())
-    except (FileNotFoundError, NotADirectoryError):
-        return []
+    entries = [entry for entry in _entries(folder) if _is_leftover(entry.name)]
     _cleaned.add(folder)
-    removed = []
     pending = _pending_owners(entries)
-    for entry in (entry for entry in entries if _is_leftover(entry.name)):
-        if _OWNER.search(entry.name)["pid"] in pending:
-            logger.info("%s: kept for the unfinished commit of a killed run into another folder", entry)
+    removed = []
+    for entry in [entry for entry in entries if (entry / COMMIT_JOURNAL).is_file()]:
+        owner = _OWNER.search(entry.name)["pid"]
+        if owner in pending:
             continue
-        if (entry / COMMIT_JOURNAL).is_file():
-            if not finish_commit(entry):
-                logger.warning("%s: a commit journal of a killed run that does not belong here (a copied folder?) or "
-                               "cannot be read; left as it is", entry)
-                continue
-            logger.warning("finished moving the outputs of an earlier run into %s: it was killed while it did", folder)
+        try:
+            finished = finish_commit(entry)
+        except OSError as error:  # a folder where a file goes, a file gone read-only: finished by hand
+            logger.warning("%s: the commit of a killed run cannot be finished (%s); left as it is", entry, error)
+            finished = False
+        if not finished:
+            logger.warning("%s: a commit journal of a killed run that does not belong here (a copied folder?), cannot "
+                           "be read or cannot be finished; left as it is", entry)
+            pending.add(owner)  # its temporaries beside it may still be the commit's
+            continue
+        logger.warning("finished moving the outputs of an earlier run into %s: it was killed while it did", folder)
+        (entry / COMMIT_JOURNAL).unlink()
+        remove_path(entry)
+        removed.append(entry)
+    for entry in entries:
+        if entry in removed or not (entry.exists() or entry.is_symlink()):
+            continue
+        if _OWNER.search(entry.name)["pid"] in pending:
+            logger.info("%s: kept for the unfinished commit of a killed run", entry)
+            continue
         remove_path(entry)
         removed.append(entry)
         logger.info("removed %s, left behind by an earlier run that was killed", entry)

@@ -163,7 +163,8 @@ class Cameras:
             broken = ~torch.isfinite(values.detach()).flatten(1).all(dim=1)
             if bool(broken.any()):
                 views = [self._view_name(int(index)) for index in broken.nonzero().flatten()]
-                raise NonFiniteError(f"{where}: the {what} of {listed(views, 3)} holds NaN or Inf; {remedy}")
+                whose = f"the {what} of {views[0]} holds" if len(views) == 1 else f"the {what} of {listed(views, 3)} hold"
+                raise NonFiniteError(f"{where}: {whose} NaN or Inf; {remedy}")
         rotation = self.extrinsics[:, :, :3].double()
         identity = torch.eye(3, dtype=torch.float64).expand_as(rotation)
         not_rotations = ((rotation @ rotation.transpose(1, 2) - identity).abs().amax(dim=(1, 2)) > 1e-4) | (

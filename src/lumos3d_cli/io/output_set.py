@@ -197,8 +197,10 @@ class OutputSet:
 
     def check(self) -> None:
         """InputError naming the path when the outputs cannot be written, would write over a file
-        lumos3d did not write, or touch an input. (`reserved` checks the same under the folders'
-        locks: a command enters it before any work.)"""
+        lumos3d did not write, or touch an input, or another run holds a folder: the check a
+        command makes before its libraries load. Files a killed run left half committed are
+        judged by `reserved`, which finishes the commit first under the folders' locks and checks
+        the same again, as `staged` does once more before its commit."""
         self.check_paths()
         for folder in self._folders_written():
             refuse_if_locked(folder)
@@ -279,7 +281,7 @@ class OutputSet:
         over the `degrade -o F/00000.png` there, `restore --video v.gif` over a render's v.gif.
         (A run of the same command may take over an earlier run's files: `restore -o out/b.ply`
         where a.ply was removed.)"""
-        for path in [*(self.folder / name for name in (*self._files, *self._folders)), *self._elsewhere]:
+        for path in [*(self.folder / name for name in self._files), *self._elsewhere]:  # (folders: `_check_ownership`)
             listing = manifest(path.parent)
             entry = listing.files.get(listing.relative(path))
             if entry is not None and entry.command != self.command and path.exists():
@@ -321,8 +323,12 @@ class OutputSet:
                     # a killed commit into another folder that still needs this one's temporaries
                     # (its video) is finished first, under that folder's lock
                     for other in folders_of_pending_commits(folder):
-                        with folder_lock(other, self.command):
-                            remove_leftovers(other)
+                        try:
+                            with folder_lock(other, self.command):
+                                remove_leftovers(other)
+                        except InputError as refusal:  # held by a live run, or no lock file can go there:
+                            # its temporaries here stay (remove_leftovers keeps them) for a run into it
+                            logger.info("%s; the killed commit into it stays unfinished for now", refusal)
                     remove_leftovers(folder)
                 self._check_ownership()
                 yield
@@ -350,7 +356,8 @@ class OutputSet:
                     os.close(handle)
                     staging.files[path] = Path(name)
                 yield staging
-                self.check()
+                self.check_paths()  # again, under the lock, after the work: what changed meanwhile
+                self._check_ownership()
                 self._commit(staging)
             except OSError as error:
                 reason = _DISK_ERRORS.get(error.errno)
@@ -374,9 +381,11 @@ class OutputSet:
         undeclared = staged - declared
         if undeclared:
             raise ValueError(f"written but not declared as outputs: {sorted(undeclared)}")
-        items = [_Item(self.folder.absolute() / name, staging.root.absolute() / name, self.output_set, name in self._folders)
+        # folders resolved: a video through a link to the output folder is in that folder, whose
+        # manifest lists it with the rest (two manifests of one folder dropped each other's files)
+        items = [_Item(self.folder.resolve() / name, staging.root.absolute() / name, self.output_set, name in self._folders)
                  for name in sorted(staged)]
-        return items + [_Item(final.absolute(), temporary.absolute(), output_set, False)
+        return items + [_Item(final.absolute().parent.resolve() / final.name, temporary.absolute(), output_set, False)
                         for (final, output_set), temporary in zip(self._elsewhere.items(), staging.files.values())]
 
     def _commit(self, staging: Staging) -> None:
@@ -391,7 +400,7 @@ class OutputSet:
         staged_elsewhere: list[Path] = []  # manifests and markers outside the staging folder's: gone if no commit
 
         def move_away(path: Path) -> None:
-            if _is_within(path.parent, self.folder.absolute()):
+            if _is_within(path.parent, self.folder.resolve()):
                 destination = trash / str(len(moves))
             else:  # another folder (maybe another file system): beside itself, as a temporary of ours
                 destination = path.parent / f"{temporary_prefix(path.name)}replaced_{len(moves)}.tmp"
@@ -428,7 +437,7 @@ class OutputSet:
                     for file in files:
                         name = item.final.name + ("/" + file.relative_to(item.staged).as_posix() if item.is_folder else "")
                         manifest.files[name] = describe_file(file, self.command, item.output_set)
-                if _is_within(folder, self.folder.absolute()):
+                if _is_within(folder, self.folder.resolve()):
                     staged_manifest = root / f".manifest.{len(moves)}"
                 else:  # another folder (a video's, maybe on another file system): staged beside its manifest
                     staged_manifest = folder / f"{temporary_prefix(MANIFEST_NAME)}manifest_{len(moves)}.tmp"
@@ -436,8 +445,12 @@ class OutputSet:
                 staged_manifest.write_text(manifest.document())
                 moves.append((staged_manifest, folder / MANIFEST_NAME, "source-gone"))
             # the other folders learn of the journal first: a run into them keeps what it still needs
-            markers = [mark_pending_commit(folder, root) for folder in
-                       dict.fromkeys(path.parent for move in moves for path in move[:2] if not _is_within(path, self.folder.absolute()))]
+            # (every folder but the output folder itself, compared resolved: a video in out/sub/ or
+            # through a link to out/ is in out/sub/ and in out/)
+            own = self.folder.resolve()
+            markers = [mark_pending_commit(folder, root) for folder in dict.fromkeys(
+                path.parent.resolve() for move in moves for path in move[:2] if not _is_within(path, root))
+                if folder != own]
             leftovers += markers
             staged_elsewhere += markers
             write_commit_journal(root, self.folder.absolute(), moves)

@@ -233,9 +233,9 @@ def read_ply(path: Path | str) -> Gaussians:
                          f"(exp overflows above {_MAX_LOG_SCALE:.1f}); correct or drop those Gaussians")
     unusable = unusable_values(table, degree)
     if unusable:
-        raise NonFiniteError(f"{path}: {sum(unusable.values())} value(s) are NaN or Inf "
-                             f"({listed([f'{name}: {count}' for name, count in unusable.items()], 4)}); correct or "
-                             "drop those Gaussians")
+        raise NonFiniteError(f"{path}: {sum(unusable.values())} value(s) no scene can use, NaN, Inf or log-scales above "
+                             f"{_MAX_LOG_SCALE:.1f} ({listed([f'{name}: {count}' for name, count in unusable.items()], 4)}); "
+                             "correct or drop those Gaussians")
     gaussians = ply_fields_to_gaussians(table, degree)
     gaussians.require_finite(f"{path}: gaussians")
     return gaussians
