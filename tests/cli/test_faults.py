@@ -416,6 +416,20 @@ def test_views_no_gaussian_covers_are_warned_of(tmp_path, photos, random_checkpo
     """--max-gaussians 1: every restored view one flat colour, exit 0 and not a word."""
     result = run_cli(*_restore(photos, tmp_path / "out" / "scene.ply", random_checkpoint, "--max-gaussians", 1))
     assert result.code == 0, result.err
-    assert "6 view(s) are mostly filled in: no Gaussian covers them" in " ".join(result.err.split())
+    assert "6 view(s) are mostly uncovered: no Gaussian covers 1.JPG (" in " ".join(result.err.split())
     plain = run_cli(*_restore(photos, tmp_path / "plain" / "scene.ply", random_checkpoint))
     assert plain.code == 0 and "mostly" not in plain.err
+
+
+def test_a_subset_of_views_always_holds_a_photo_with_content(tmp_path, buu, random_checkpoint, run_cli):
+    """Two black photos around one real one, two views through the network: the even subset
+    took both black ones, and the restore ended in "fuse_views selects none of the network's views"."""
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    cv2.imwrite(str(photos / "a.png"), np.zeros((375, 500, 3), np.uint8))
+    shutil.copy(buu / "low" / "1.JPG", photos / "b.JPG")
+    cv2.imwrite(str(photos / "c.png"), np.zeros((375, 500, 3), np.uint8))
+    result = run_cli("restore", photos, "-o", tmp_path / "out" / "scene.ply", "--checkpoint", random_checkpoint,
+                     "--geometry", "network", "--max-views", 2, "--refine-steps", 0, "--json")
+    assert result.code == 0, result.err
+    assert "b.JPG" in json.loads(result.out)["network_views"]

@@ -136,7 +136,11 @@ def test_camera_files_with_sizes_of_their_own(run_cli, tmp_path):
     huge = cameras.rescaled_to([(48, 32), (100000, 100000)])
     write_transforms_json(tmp_path / "huge.json", huge)
     expect_input_error(run_cli("render", path, "--poses", tmp_path / "huge.json", "-o", tmp_path / "a"),
-                       "--poses", "huge.json: cameras larger than 16384 pixels a side: 1 (100000x100000)", "give width or height")
+                       "--poses", "huge.json: frames larger than 16384 pixels a side: 1 (100000x100000)",
+                       "give a smaller width or height")
+    write_transforms_json(tmp_path / "strip.json", cameras.rescaled_to([(48, 32), (16, 4000)]))
+    expect_input_error(run_cli("render", path, "--poses", tmp_path / "strip.json", "-o", tmp_path / "a", "--width", 96),
+                       "--width 96: makes 96x24000 frames of a 16x4000 camera, beyond 16384 pixels a side")
     small = run_cli("render", path, "--poses", tmp_path / "huge.json", "-o", tmp_path / "b", "--width", 50)
     assert small.code == 0, small.err
     write_transforms_json(tmp_path / "mixed.json", cameras.rescaled_to([(48, 32), (16, 32)]))

@@ -159,6 +159,18 @@ def test_restore_writes_an_orbit_video(run_cli, buu, tmp_path, random_checkpoint
     video = json.loads((out.parent / "summary.json").read_text())["video"]  # what the file holds, as render --json says
     assert (video["codec"], video["width"], video["height"], video["frames"]) == ("h264", stream.width, stream.height, 120)
     assert video["path"] == str(tmp_path / "orbit.mp4") and video["filled"] is True
+    # one photo: its view is the 2D restoration, but its orbit renders the scene, filled as well
+    # (it was drawn over black, 38 % darker than the view)
+    (tmp_path / "one").mkdir()
+    one = _copy(buu, tmp_path / "one", ["1.JPG"])
+    result = run_cli("restore", one, "-o", tmp_path / "one-out" / "scene.ply", "--video", tmp_path / "one.mp4",
+                     "--refine-steps", 0, "--quiet")
+    assert result.code == 0, result.err
+    summary = json.loads((tmp_path / "one-out" / "summary.json").read_text())
+    assert summary["restored_views"] == "photo restoration" and summary["video"]["filled"] is True
+    result = run_cli("restore", one, "-o", tmp_path / "black-out" / "scene.ply", "--video", tmp_path / "black.mp4",
+                     "--refine-steps", 0, "--black-unobserved", "--quiet")
+    assert json.loads((tmp_path / "black-out" / "summary.json").read_text())["video"]["filled"] is False
 
 
 def test_gaussian_grid_densifies_the_pixel_gaussians(run_cli, buu, tmp_path, random_checkpoint):

@@ -41,7 +41,7 @@ def test_overrides_and_errors(tmp_path):
                               ("loss.lumos=-1", "loss.lumos: -1.0 must be a weight of at least 0"),
                               ("loss.reconstruction=.nan", "loss.reconstruction: nan must be"),
                               ("degrade.white_balance=[1.2,0.8]", r"white_balance=\(1.2, 0.8\) must satisfy"),
-                              ("loss.background=[.nan,0,0]", r"low-light.yaml: loss.background.0: not a finite number"),
+                              ("loss.background=[.nan,0,0]", r"config loss.background.0: not a finite number"),
                               ("degrade.colour_cast=[.inf,.inf]", "degrade.colour_cast.0, degrade.colour_cast.1: not a finite"),
                               ("brackets.weight=nan", "brackets.weight: not a finite number")):
         with pytest.raises(InputError, match=message):  # once an internal error or silently accepted
@@ -49,6 +49,9 @@ def test_overrides_and_errors(tmp_path):
     (tmp_path / "twice.yaml").write_text("stage: teacher\noutput: x\noptim: {steps: 6}\noptim: {lr: 1.0}\n")
     with pytest.raises(InputError, match=r"twice.yaml: invalid YAML at line 4, column 1 \(key 'optim' given twice"):
         load_config(tmp_path / "twice.yaml")  # the second block replaced the first: 6 steps became 30,000
+    (tmp_path / "listkey.yaml").write_text("stage: teacher\noutput: x\n? [a, b]\n: 1\n")
+    with pytest.raises(InputError, match=r"listkey.yaml: invalid YAML at line 3, column 3 \(a key \['a', 'b'\] that is not a name"):
+        load_config(tmp_path / "listkey.yaml")  # an internal TypeError (unhashable) before
     (tmp_path / "bad.yaml").write_text("stage: [unclosed")
     with pytest.raises(InputError, match=r"bad.yaml: invalid YAML at line 1, column 17 \(.*\); correct the file") as error:
         load_config(tmp_path / "bad.yaml")

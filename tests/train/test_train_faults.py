@@ -135,7 +135,20 @@ def test_a_resume_refuses_a_config_that_changes_what_the_run_learns(tiny_config)
         expect_input_error(result, f"{checkpoints / 'step_00000004'}: this config differs from the run's in {named}",
                            "resume with its config.yaml, or start a new run with --new-run")
         assert (checkpoints / "step_00000004" / "config.yaml").read_text() == saved
-    result = run_lumos3d("train", config, "optim.steps=6", "log_every=2", "checkpoint_every=3", "--resume", "--json")
+    # validations scored on other samples would be compared with the earlier ones
+    expect_input_error(run_lumos3d("train", config, "validation_samples=3", "optim.steps=6", "--resume"),
+                       "validation_samples 8 -> 3")
+    # a checkpoint of an earlier release lacks keys added since: their defaults are no change
+    import yaml
+
+    older = yaml.safe_load(saved)
+    del older["brackets"]["well_exposed"]
+    (checkpoints / "step_00000004" / "config.yaml").write_text(yaml.safe_dump(older))
+    # the data moved (another path, same files) and the reporting changed: the run goes on
+    moved = _output(config).parent / "scenes-moved"
+    moved.symlink_to(Path(load_config(config, []).data.root).resolve(), target_is_directory=True)
+    result = run_lumos3d("train", config, "optim.steps=6", "log_every=2", "checkpoint_every=3", f"data.root={moved}",
+                         "--resume", "--json")
     assert result.code == 0, result.err[-3000:]
     assert json.loads(result.out)["steps_done"] == 6
 
@@ -156,3 +169,13 @@ def test_a_resume_from_an_older_checkpoint_drops_what_later_steps_wrote(tiny_con
     assert [json.loads(line)["step"] for line in (output / "validation.jsonl").read_text().splitlines()] == [3]
     manifest = json.loads((output / ".lumos3d-manifest.json").read_text())["files"]
     assert "final.safetensors" not in manifest and "validation/step_00000006.png" not in manifest
+
+
+def test_files_may_move_on_resume_but_not_appear_or_go():
+    from lumos3d_cli.train.resume_config import _may_differ
+
+    assert _may_differ("data.root", "/data/scenes", "/mnt/scenes") and _may_differ("log_every", 10, 1)
+    assert _may_differ("model", "runs/a/final.safetensors", "/moved/final.safetensors")
+    assert not _may_differ("model", "tiny", "small")  # an architecture, not a file
+    assert not _may_differ("brackets.root", None, "/data/brackets")  # the bracket loss switched on mid-run
+    assert not _may_differ("teacher", "/t.safetensors", None) and not _may_differ("optim.lr", 2e-4, 0.05)

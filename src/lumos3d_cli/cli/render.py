@@ -75,7 +75,7 @@ def render_command(
     check_output_path(output, "output", folder=True)
     check_output_path(video, "video")
     if poses is not None:
-        read_cameras(poses)  # a camera file that cannot be read is refused before the scene is read
+        read_cameras(poses, warn_on_distortion=False)  # refused before the scene is read; read (and warned of) again
     started = time.perf_counter()
     gaussians = read_ply(scene)
     if len(gaussians) == 0:

@@ -29,11 +29,17 @@ def longer_side_fov(intrinsics: torch.Tensor, size: tuple[int, int]) -> torch.Te
     return torch.rad2deg(2 * torch.atan(side / 2 / focal.clamp_min(1e-12)))
 
 
+# Fields of view that cameras from structure-from-motion or a camera file may have: down to a
+# 2000 mm lens on a 35 mm frame (an 800 mm super-telephoto sees 2.6 degrees, under the network's
+# fallback bound). SfM on few features has settled on 0.25 degrees for a phone photo.
+MEASURED_FOV_DEGREES = (1.0, PLAUSIBLE_FOV_DEGREES[1])
+
+
 def implausible_views(intrinsics: torch.Tensor, sizes: list[tuple[int, int]]) -> dict[int, float]:
     """intrinsics [V, 3, 3] of images of `sizes` (width, height, one per view) -> {view: field of
-    view of its longer side in degrees} for the views outside PLAUSIBLE_FOV_DEGREES (or not finite):
+    view of its longer side in degrees} for the views outside MEASURED_FOV_DEGREES (or not finite):
     cameras that structure-from-motion or a camera file gave, which no lens has."""
-    low, high = PLAUSIBLE_FOV_DEGREES
+    low, high = MEASURED_FOV_DEGREES
     found = {}
     for view, size in enumerate(sizes):
         degrees = float(longer_side_fov(intrinsics[view: view + 1].double(), size)[0])

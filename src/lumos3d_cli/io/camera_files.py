@@ -78,6 +78,6 @@ def read_cameras(path: Path | str, warn_on_distortion: bool = True) -> Cameras:
         raise InputError(f"{path}: no cameras found; {_HINT}")
     if source.is_dir():
         if is_colmap_model(source):
-            return read_colmap_model(source)
+            return read_colmap_model(source, warn_on_distortion)
         return read_transforms_splits(source, warn_on_distortion)
     return read_transforms_json(source, warn_on_distortion)

@@ -157,9 +157,10 @@ def _read_binary_views(folder: Path) -> tuple[dict[int, ColmapCamera], list[Colm
     return cameras, views
 
 
-def read_colmap_model(folder: Path | str) -> Cameras:
+def read_colmap_model(folder: Path | str, warn_on_distortion: bool = True) -> Cameras:
     """Read the cameras of a sparse model folder (cameras.txt + images.txt, or cameras.bin +
-    images.bin); views sorted by image name."""
+    images.bin); views sorted by image name. Distortion parameters are ignored (pinhole), with
+    a warning unless `warn_on_distortion` is False (a caller that read the model once already)."""
     folder = Path(folder)
     if not is_colmap_model(folder):
         raise InputError(f"{folder}: no cameras.txt + images.txt (or cameras.bin + images.bin); expected a COLMAP model folder")
@@ -169,7 +170,7 @@ def read_colmap_model(folder: Path | str) -> Cameras:
     else:
         cameras, views = _read_binary_views(folder)
     distorted = [f"{camera_id} ({camera.model})" for camera_id, camera in sorted(cameras.items()) if camera.model not in _PINHOLE]
-    if distorted:  # one line for the model, not one per camera
+    if distorted and warn_on_distortion:  # one line for the model, not one per camera
         logger.warning("%s: the distortion parameters of camera(s) %s are ignored (pinhole model)", folder,
                        listed(distorted, 4))
     views = sorted(views, key=lambda view: natural_sort_key(view.name))

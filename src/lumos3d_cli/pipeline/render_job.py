@@ -36,10 +36,15 @@ def output_size(native: tuple[int, int], width: int | None, height: int | None) 
     if width and height:
         return width, height
     if width:
-        return width, max(1, round(width * native[1] / native[0]))
-    if height:
-        return max(1, round(height * native[0] / native[1])), height
-    return native
+        size, given, name = (width, max(1, round(width * native[1] / native[0]))), width, "width"
+    elif height:
+        size, given, name = (max(1, round(height * native[0] / native[1])), height), height, "height"
+    else:
+        return native
+    if max(size) > MAX_SIDE:  # the other side, from the aspect ratio: a 16x4000 camera at width 96 is 24000 tall
+        raise InputError(f"{given}: makes {size[0]}x{size[1]} frames of a {native[0]}x{native[1]} camera, beyond {MAX_SIDE} "
+                         "pixels a side; give a smaller size, or both width and height", parameter=name)
+    return size
 
 
 def render_cameras(
@@ -53,15 +58,14 @@ def render_cameras(
         raise InputError("give exactly one of poses (a camera file) or orbit (a frame count)", parameter="poses")
     if poses is not None:
         cameras, source = read_cameras(poses), str(find_camera_source(poses))
-        if width is None and height is None:  # every camera at its own size (photos may differ)
-            too_large = [f"{name or index} ({w}x{h})" for index, (name, (w, h)) in enumerate(zip(cameras.names, cameras.sizes))
-                         if max(w, h) > MAX_SIDE]
-            if too_large:
-                raise InputError(f"{source}: cameras larger than {MAX_SIDE} pixels a side: {listed(too_large, 3)}; give "
-                                 "width or height to render them smaller", parameter="poses")
-            return cameras, source
-        # each camera keeps its own aspect ratio when one side is given (photos may differ)
-        return cameras.rescaled_to([output_size(size, width, height) for size in cameras.sizes]), source
+        if width is not None or height is not None:  # each camera keeps its own aspect ratio (photos may differ)
+            cameras = cameras.rescaled_to([output_size(size, width, height) for size in cameras.sizes])
+        too_large = [f"{name or index} ({w}x{h})" for index, (name, (w, h)) in enumerate(zip(cameras.names, cameras.sizes))
+                     if max(w, h) > MAX_SIDE]  # its own size, or the side computed from the one given
+        if too_large:
+            raise InputError(f"{source}: frames larger than {MAX_SIDE} pixels a side: {listed(too_large, 3)}; give a "
+                             "smaller width or height", parameter="poses")
+        return cameras, source
     nearby = find_camera_source(scene.parent)
     if nearby is not None:
         try:

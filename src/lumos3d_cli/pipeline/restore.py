@@ -75,6 +75,7 @@ class RestoredScene:
     exposure: dict | None = None  # the exposure prior's strength and gain (SceneJob.exposure)
     uncovered: dict | None = None  # the views' pixels no Gaussian covered and whether they were filled (None: not rendered)
     view_source: str = "render"  # "render": the scene at each camera; "photo restoration": one photo restored in 2D
+    fill_unobserved: bool = True  # how the scene's renders are shown (its views, its video): filled, or over black
     denoising: dict | None = None  # a one-photo restore's measured noise and whether it was removed (None: not one photo)
     # what the job read, as given (the photos' folder or files, poses, references, checkpoint):
     # write_restored_scene keeps the outputs clear of them, as `lumos3d restore` does
@@ -159,8 +160,11 @@ def restore_scene(
     # over the other views. Its view is the photo as it is.
     empty = set().union(*frames_without_content(batch.images))
     fuse_views = [index not in empty for index in range(len(names))] if empty and len(empty) < len(names) else None
+    # one photo with content always among the network's views: a subset of empty ones builds nothing
+    required = [fuse_views.index(True)] if fuse_views is not None else []
     built = build_scene(batch.images, names, model, preset, geometry, poses, max_views, mode, progress,
-                        fuse_views=fuse_views, sizes=batch.original_sizes, early_registration=early_registration)
+                        required_views=required, fuse_views=fuse_views, sizes=batch.original_sizes,
+                        early_registration=early_registration)
     cameras = built.geometry.cameras
     missing = [name for name in names if name not in cameras.names]
     if missing:
@@ -178,8 +182,8 @@ def restore_scene(
         bare = [f"{name} ({fraction:.0%})" for name, fraction in zip(cameras.names, rendered.unobserved)
                 if fraction > MOSTLY_UNCOVERED and (fuse_views is None or fuse_views[names.index(name)])]
         if bare:  # a flat colour where the view should be: a cap far too low, or cameras that miss the scene
-            logger.warning("%d view(s) are mostly %s: no Gaussian covers them (%s); raise max_gaussians or check the "
-                           "cameras", len(bare), "filled in" if preset.fill_unobserved else "black", listed(bare, 3))
+            logger.warning("%d view(s) are mostly uncovered: no Gaussian covers %s of their pixels; raise max_gaussians "
+                           "or check the cameras", len(bare), listed(bare, 3))
         if fuse_views is not None:
             views = [view if fuse_views[names.index(name)] else batch.photo(names.index(name))
                      for view, name in zip(views, cameras.names)]
@@ -189,7 +193,7 @@ def restore_scene(
         built.gaussians.to(device="cpu"), cameras, views, inputs, list(cameras.names), list(batch.paths),
         built.selected, built.counts, built.network_size, built.geometry, preset.name, mode, timings=timings,
         refinement=built.refinement, budget=built.budget, exposure=built.exposure, uncovered=uncovered,
-        view_source=view_source, denoising=built.denoising,
+        view_source=view_source, denoising=built.denoising, fill_unobserved=preset.fill_unobserved,
     )
 
 
@@ -302,7 +306,7 @@ neighbouring photos (`geometry.photo_consistency`). `early_registration`: the ph
     else:
         batch = load_images(paths, progress=lambda _: progress.advance("load images"))
     if poses is not None:  # a camera file that does not fit the photos stops the run before the work
-        read_given_poses(poses, [path.name for path in paths], batch.original_sizes)
+        read_given_poses(poses, [path.name for path in paths], batch.original_sizes, warn_on_distortion=False)
     # References are matched and read before the work, so that a missing one stops the run at once.
     references = None if reference is None else dict(zip(
         (path.name for path in paths), load_references(reference, [path.name for path in paths], batch.original_sizes)))

@@ -86,7 +86,7 @@ def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_fo
         written_video = None
         if video is not None:
             # as bright as the restored views: completed as they were (filled renders of the scene)
-            filled = scene.uncovered is not None and scene.uncovered["filled"]
+            filled = scene.fill_unobserved  # a one-photo scene's view is no render, but its orbit is one
             orbit = write_orbit_video(scene.gaussians, scene.cameras, staging.files[Path(video)],
                                       on_frame=on_video_frame, fill=filled)
             stream = probe_video(staging.files[Path(video)])  # as ffmpeg reads it back (H.264 pads odd sides)

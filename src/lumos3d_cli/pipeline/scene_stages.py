@@ -217,8 +217,8 @@ def _require_finite_scene(job: SceneJob) -> None:
         job.gaussians.require_finite("the fused scene's Gaussians")
     except NonFiniteError as error:
         if job.poses is not None:
-            raise InputError(f"{job.poses}: {error}; check the camera file's positions and units",
-                             parameter="poses") from None
+            raise InputError(f"{job.poses}: {error}; check the camera file's positions and units (if they are right, "
+                             "the checkpoint's weights)", parameter="poses") from None
         source = job.model.provenance.get("path", "the model's weights")
         raise InputError(f"{source}: {error}, on these photos: damaged or diverged weights; use another "
                          "checkpoint") from None
@@ -235,8 +235,10 @@ def budget(job: SceneJob) -> SceneJob:
         where, parameter = (None, None) if job.poses is None else (str(job.poses), "poses")
         require_drawable(job.gaussians.means, job.geometry.cameras, where, parameter=parameter)  # extreme units
         # in range, yet outside every view: cameras that look elsewhere, or focal lengths in another unit
-        raise InputError(f"{where + ': ' if where else ''}no Gaussian of the scene falls inside any camera's view; check "
-                         "the cameras' focal lengths (pixels of the photos) and directions", parameter=parameter)
+        advice = ("check the cameras' focal lengths (pixels of the photos) and directions" if where else
+                  "the cameras placed for these photos miss the scene: try the other geometry source")
+        raise InputError(f"{where + ': ' if where else ''}no Gaussian of the scene falls inside any camera's view; {advice}",
+                         parameter=parameter)
     job.gaussians = gaussians if preset.sh_degree is None else gaussians.with_sh_degree(preset.sh_degree)
     job.budget = report.as_dict() | {
         "max_gaussians": preset.max_gaussians, "min_weight_px": DEFAULT_MIN_WEIGHT, "grid": list(job.grid_size),

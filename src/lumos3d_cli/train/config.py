@@ -210,7 +210,12 @@ class _UniqueKeyLoader(yaml.SafeLoader):
     def construct_mapping(self, node, deep=False):
         seen = set()
         for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=deep)
+            key = self.construct_object(key_node, deep=True)
+            try:
+                hash(key)
+            except TypeError:  # `? [a, b]`: no config key is a list
+                raise yaml.constructor.ConstructorError(None, None, f"a key {key!r} that is not a name",
+                                                        key_node.start_mark) from None
             if key in seen:
                 raise yaml.constructor.ConstructorError(None, None, f"key {key!r} given twice in one mapping",
                                                         key_node.start_mark)
@@ -245,8 +250,8 @@ def load_config(path: Path | str, overrides: list[str] = ()) -> TrainConfig:
     config = from_dict(TrainConfig, values)
     non_finite = _non_finite(to_dict(config))  # after conversion: `nan` written as a string is a float here
     if non_finite:
-        raise InputError(f"{path}: {', '.join(non_finite)}: not a finite number; give one (NaN and infinity train "
-                         "nothing)")
+        raise InputError(f"config {', '.join(non_finite)}: not a finite number; give one (NaN and infinity train "
+                         "nothing)")  # from the file or an override: named as the key, as the other config errors are
     return config
 
 

@@ -361,7 +361,7 @@ class Trainer:
         problems = []
         run_id = self.run_identity.run_id if self.run_identity is not None else None
         for folder in resume_candidates(self.output, run_id):
-            require_same_training(folder / CONFIG_FILE, config_to_yaml(self.config))
+            require_same_training(folder / CONFIG_FILE, TrainConfig, self.config)
             try:
                 state = load_training_checkpoint(folder, self.model)
             except InputError as error:
