@@ -144,8 +144,9 @@ def test_camera_files_with_sizes_of_their_own(run_cli, tmp_path):
     small = run_cli("render", path, "--poses", tmp_path / "huge.json", "-o", tmp_path / "b", "--width", 50)
     assert small.code == 0, small.err
     write_transforms_json(tmp_path / "mixed.json", cameras.rescaled_to([(48, 32), (16, 32)]))
-    result = run_cli("render", path, "--poses", tmp_path / "mixed.json", "-o", tmp_path / "c", "--width", 96)
+    result = run_cli("render", path, "--poses", tmp_path / "mixed.json", "-o", tmp_path / "c", "--width", 96, "--json")
     assert result.code == 0, result.err
+    assert json.loads(result.out)["sizes"] == [[96, 64], [96, 192]]  # every size, not the first alone
     sizes = [cv2.imread(str(tmp_path / "c" / name)).shape[1::-1] for name in ("00000.png", "00001.png")]
     assert sizes == [(96, 64), (96, 192)]
 

@@ -59,6 +59,9 @@ def _assert_observations_reproject(registration: Registration, pixels_tolerance:
     error = (projected[rows, registration.points.point] - registration.points.pixel).norm(dim=1)
     assert float(error.mean()) < pixels_tolerance
     assert registration.reprojection_error < pixels_tolerance
+    # the reported figure is the mean over the observations, as this reprojection measures it
+    # (pycolmap's own mean is over the points: 0.551 against 0.536 on buu's over-exposed photos)
+    assert registration.reprojection_error == pytest.approx(float(error.mean()), rel=1e-9)
 
 
 def test_a_few_small_photos_register(buu_low):

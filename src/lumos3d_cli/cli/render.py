@@ -88,10 +88,12 @@ def render_command(
     summary = {
         "scene": str(scene), "gaussians": len(gaussians), "sh_degree": gaussians.sh_degree,
         "cameras": source, "frames": frames.frames, "width": frames.size[0], "height": frames.size[1],
+        "sizes": [list(size) for size in frames.sizes],  # every frame's size (width and height: the first's)
         "output": str(output), "video": frames.video, "filled": fill, "render_ms_per_frame": frames.render_ms_per_frame,
         "total_seconds": round(time.perf_counter() - started, 3),
     }
     if json_output:
         print_json(summary)
     else:
-        say(f"wrote {frames.frames} frame(s) of {frames.size[0]}x{frames.size[1]} to {output}" + (f" and {video}" if video else ""))
+        shapes = ", ".join(f"{w}x{h}" for w, h in frames.sizes)
+        say(f"wrote {frames.frames} frame(s) of {shapes} to {output}" + (f" and {video}" if video else ""))

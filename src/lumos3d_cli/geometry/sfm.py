@@ -10,6 +10,7 @@ common tensor is un-stretched there).
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -134,10 +135,12 @@ def _read_model(
     at_sfm_size = sparse_points_of(model, view_of_image)
     factor = scale.mean(dim=1)[at_sfm_size.view]  # [O]
     point_factor = _group_means(factor, at_sfm_size.point, len(at_sfm_size))
-    mean_factor = float(_group_means(factor, torch.zeros_like(at_sfm_size.view), 1)[0])
     points = replace(at_sfm_size, error=at_sfm_size.error * point_factor,
                      pixel=at_sfm_size.pixel * scale[at_sfm_size.view])
-    return cameras, registered, points, model.compute_mean_reprojection_error() * mean_factor
+    # the mean over the observations (a point's error is the mean of its track's: weighted by its
+    # length), as the docstring and docs say; pycolmap's mean is over the points
+    observed = float(points.error[points.point].mean()) if len(points.point) else math.nan
+    return cameras, registered, points, observed
 
 
 def _registered_names(model: pycolmap.Reconstruction) -> set[str]:

@@ -95,9 +95,10 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mod
     intrinsics, replaced = plausible_intrinsics(prediction.intrinsics[0], prepared.network_size)
     if bool(replaced.any()):
         degrees = longer_side_fov(prediction.intrinsics[0][replaced], prepared.network_size)
+        # one photo has no structure-from-motion, and its restored view does not depend on its camera
+        advice = "" if len(replaced) == 1 else " (give --poses or use structure-from-motion for exact cameras)"
         logger.warning("the network predicted a field of view no lens has (%s degrees) for %d of %d view(s); using %g "
-                       "degrees there (give --poses or use structure-from-motion for exact cameras)",
-                       ", ".join(f"{value:.3g}" for value in degrees.tolist()[:5]), int(replaced.sum()), len(replaced),
-                       FALLBACK_FOV_DEGREES)
+                       "degrees there%s", ", ".join(f"{value:.3g}" for value in degrees.tolist()[:5]), int(replaced.sum()),
+                       len(replaced), FALLBACK_FOV_DEGREES, advice)
         prediction = replace(prediction, intrinsics=intrinsics[None])
     return NetworkPass(prediction, prepared, exposure_stops)

@@ -7,7 +7,7 @@ import contextlib
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from lumos3d_cli.errors import InputError, listed
@@ -83,13 +83,15 @@ def render_cameras(
 
 @dataclass
 class RenderedFrames:
-    """frames written, their size (width, height; the first frame's when sizes differ),
-    milliseconds per rendered frame, and the video as ffmpeg reads it back (None without one)."""
+    """frames written, their size (width, height; the first frame's when sizes differ) and every
+    size they have (in the order first met), milliseconds per rendered frame, and the video as
+    ffmpeg reads it back (None without one)."""
 
     frames: int
     size: tuple[int, int]
     render_ms_per_frame: float
     video: dict | None
+    sizes: list[tuple[int, int]] = field(default_factory=list)
 
 
 def render_outputs(frames: int, output: Path, video: Path | None = None, inputs: Sequence[Path | None] = ()) -> OutputSet:
@@ -146,4 +148,5 @@ def render_frames(
         stream = probe_video(video)
         written = {"path": str(video), "codec": stream.codec, "pixel_format": stream.pixel_format,
                    "width": stream.width, "height": stream.height, "frames": len(cameras), "fps": fps}
-    return RenderedFrames(len(cameras), (frame_width, frame_height), round(1000 * render_seconds / len(cameras), 2), written)
+    return RenderedFrames(len(cameras), (frame_width, frame_height), round(1000 * render_seconds / len(cameras), 2), written,
+                          list(dict.fromkeys(cameras.sizes)))
