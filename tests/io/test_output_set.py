@@ -267,54 +267,10 @@ def test_leftover_staging_of_a_killed_commit_is_rolled_forward_when_the_next_run
     _restore_like(out, ["1.png"], text="third")  # and the manifest owns the result
 
 
-def _kill_mid_commit(out, monkeypatch, after=2):
-    """A restore-like commit into `out` whose process 'dies' after `after` of its moves (os.replace
-    raising SystemExit stands for SIGKILL; a killed run cleans nothing up)."""
-    original, calls = os.replace, []
-
-    def killed(source, destination):
-        if (".staging." in str(source)) != (".staging." in str(destination)):
-            if len(calls) == after:
-                raise SystemExit("killed")
-            calls.append(destination)
-        original(source, destination)
-
-    with monkeypatch.context() as patch:
-        patch.setattr(os, "replace", killed)
-        patch.setattr(sys.modules["shutil"], "rmtree", lambda *args, **kwargs: None)
-        with pytest.raises(SystemExit):
-            _restore_like(out, ["1.png"], text="killed")
-
-
-def test_the_next_run_of_the_same_command_finishes_a_killed_commit_then_runs(tmp_path, monkeypatch):
-    out = tmp_path / "out"
-    _restore_like(out, ["1.png", "2.png"], text="first")
-    _kill_mid_commit(out, monkeypatch)
-    monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)
-    monkeypatch.setattr(atomic, "_cleaned", set())
-    # the check a command makes before loading its libraries leaves the half-moved set to the
-    # recovery under the lock (it called the killed run's new files "changed since lumos3d wrote them")
-    OutputSet(out, "restore", "restore scene.ply").add_file("scene.ply").add_file("summary.json").add_folder("views").check()
-    _restore_like(out, ["1.png"], text="third")  # no "was changed since lumos3d wrote it"
-    assert _tree(out) == [MANIFEST_NAME, "scene.ply", "summary.json", "views", "views/1.png"]
-
-
-def test_a_copied_folder_never_replays_the_journal_it_carries(tmp_path, monkeypatch):
-    out = tmp_path / "out"
-    _restore_like(out, ["1.png"], text="first")
-    _kill_mid_commit(out, monkeypatch)
-    copy = shutil.copytree(out, tmp_path / "copy", symlinks=True)
-    before = snapshot(out)
-    monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)
-    monkeypatch.setattr(atomic, "_cleaned", set())
-    atomic.remove_leftovers(copy)
-    assert snapshot(out) == before and any(p.name.startswith(".staging.") for p in copy.iterdir())
-
-
-def _killed_restore_with_video(out, video, after, monkeypatch) -> bool:
-    """A restore-like commit of text "second" into `out` with `video`, 'killed' (SIGKILL: nothing
-    cleaned up) after `after` of the moves that follow its journal; False when it has fewer moves
-    and completed."""
+def _kill_mid_commit(out, monkeypatch, after=2, video=None, text="killed") -> bool:
+    """A restore-like commit of `text` into `out` (with `video`) whose process 'dies' after `after`
+    of the moves that follow its journal (os.replace raising SystemExit stands for SIGKILL; a
+    killed run cleans nothing up); False when the commit has fewer moves and completed."""
     original_replace, original_journal, calls, armed = os.replace, output_set_module.write_commit_journal, [], []
 
     def journal(*args, **kwargs):
@@ -335,10 +291,35 @@ def _killed_restore_with_video(out, video, after, monkeypatch) -> bool:
         patch.setattr(output_set_module, "remove_path", lambda *args, **kwargs: None)
         patch.setattr(Path, "unlink", lambda *args, **kwargs: None)
         try:
-            _restore_like(out, ["1.png"], text="second", video=video)
+            _restore_like(out, ["1.png"], text=text, video=video)
         except SystemExit:
             return True
     return False
+
+
+def test_the_next_run_of_the_same_command_finishes_a_killed_commit_then_runs(tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png", "2.png"], text="first")
+    assert _kill_mid_commit(out, monkeypatch)
+    monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)
+    monkeypatch.setattr(atomic, "_cleaned", set())
+    # the check a command makes before loading its libraries leaves the half-moved set to the
+    # recovery under the lock (it called the killed run's new files "changed since lumos3d wrote them")
+    OutputSet(out, "restore", "restore scene.ply").add_file("scene.ply").add_file("summary.json").add_folder("views").check()
+    _restore_like(out, ["1.png"], text="third")  # no "was changed since lumos3d wrote it"
+    assert _tree(out) == [MANIFEST_NAME, "scene.ply", "summary.json", "views", "views/1.png"]
+
+
+def test_a_copied_folder_never_replays_the_journal_it_carries(tmp_path, monkeypatch):
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], text="first")
+    assert _kill_mid_commit(out, monkeypatch)
+    copy = shutil.copytree(out, tmp_path / "copy", symlinks=True)
+    before = snapshot(out)
+    monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)
+    monkeypatch.setattr(atomic, "_cleaned", set())
+    atomic.remove_leftovers(copy)
+    assert snapshot(out) == before and any(p.name.startswith(".staging.") for p in copy.iterdir())
 
 
 @pytest.mark.parametrize("where", ["elsewhere", "beside", "below", "dotdot", "link"])
@@ -363,7 +344,7 @@ def test_a_commit_with_a_video_killed_at_any_move_loses_nothing(tmp_path, monkey
         if where == "link":
             videos.symlink_to(out, target_is_directory=True)
         _restore_like(out, ["1.png"], text="first", video=video)
-        if not _killed_restore_with_video(out, video, after, monkeypatch):
+        if not _kill_mid_commit(out, monkeypatch, after, video=video, text="second"):
             break
         with monkeypatch.context() as patch:
             patch.setattr(atomic, "_process_exists", lambda pid: pid == os.getpid())  # the killed run has ended
@@ -388,7 +369,7 @@ def test_a_recovery_cut_short_never_replays_a_finished_commit(tmp_path, monkeypa
     `.replaced` went, the next recovery 'finished' the moves again and deleted the new set."""
     out = tmp_path / "out"
     _restore_like(out, ["1.png"], text="first")
-    _kill_mid_commit(out, monkeypatch)
+    assert _kill_mid_commit(out, monkeypatch)
     monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)
     monkeypatch.setattr(atomic, "_cleaned", set())
     removed_first = []

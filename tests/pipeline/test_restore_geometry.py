@@ -155,22 +155,39 @@ def test_the_depth_sweep_never_compares_with_held_out_views(buu, monkeypatch):
     assert not seen and plain.geometry.report["depth_sweep"] is None
 
 
-@pytest.mark.parametrize("scale", [1e-6, 1e12])
-def test_poses_in_units_that_put_the_scene_out_of_the_renderers_range_are_refused(run_cli, buu, tmp_path,
-                                                                                   random_checkpoint, scale):
+def _dataset_cameras(buu):
+    """The dataset's own cameras of FRAMES (buu's transforms_train.json)."""
+    everything = read_transforms_json(buu / "transforms_train.json")
+    stems = [name.rsplit("/", 1)[-1].split(".")[0] for name in everything.names]
+    return everything[[stems.index(n[:-4]) for n in FRAMES]]
+
+
+def _scaled(extrinsics, scale):
+    extrinsics[:, :, 3] *= scale
+
+
+def _one_far_away(extrinsics, _):
+    extrinsics[0, :, 3] = 1e30
+
+
+@pytest.mark.parametrize("move, amount, refusal", [
+    (_scaled, 1e-6, ("no camera sees the scene", "outside the renderer's range")),
+    (_scaled, 1e12, ("no camera sees the scene", "outside the renderer's range")),
+    # every footprint overflows: the refusal named only `gaussians.scales`, not the file
+    (_one_far_away, None, ("poses.json: the fused scene's Gaussians", "NaN or Inf; check the camera file's positions")),
+])
+def test_camera_files_that_build_no_drawable_scene_are_refused_by_name(run_cli, buu, tmp_path, random_checkpoint,
+                                                                        move, amount, refusal):
     """The rasterizer's clipping planes are absolute (0.01 to 1e10 units, as gsplat's): poses in
     extreme units once gave an empty .ply and black views with exit 0."""
     photos = _photos(buu, tmp_path)
-    everything = read_transforms_json(buu / "transforms_train.json")
-    stems = [name.rsplit("/", 1)[-1].split(".")[0] for name in everything.names]
-    given = everything[[stems.index(n[:-4]) for n in FRAMES]]
+    given = _dataset_cameras(buu)
     extrinsics = given.extrinsics.clone()
-    extrinsics[:, :, 3] *= scale
+    move(extrinsics, amount)
     write_transforms_json(tmp_path / "poses.json", Cameras(extrinsics, given.intrinsics, given.sizes, given.names))
     out = tmp_path / "out" / "scene.ply"
     expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--poses",
-                               tmp_path / "poses.json", "--refine-steps", 0),
-                       "--poses", "no camera sees the scene", "outside the renderer's range")
+                               tmp_path / "poses.json", "--refine-steps", 0), "--poses", *refusal)
     assert not out.parent.exists()
 
 
@@ -197,9 +214,7 @@ def test_cameras_with_a_field_of_view_no_lens_has(run_cli, buu, tmp_path, random
     assert json.loads(result.out)["geometry"]["source"] == "network"
     assert "using the network's cameras instead" in " ".join(result.err.split())
     monkeypatch.setattr(scene_geometry, "register_photos", real)
-    given = read_transforms_json(buu / "transforms_train.json")
-    stems = [name.rsplit("/", 1)[-1].split(".")[0] for name in given.names]
-    given = given[[stems.index(n[:-4]) for n in FRAMES]]
+    given = _dataset_cameras(buu)
     for focal, refused in ((1e5, False), (1e30, True)):
         intrinsics = given.intrinsics.clone()
         intrinsics[:, 0, 0] = intrinsics[:, 1, 1] = focal
@@ -212,20 +227,3 @@ def test_cameras_with_a_field_of_view_no_lens_has(run_cli, buu, tmp_path, random
             expect_input_error(result, "--poses", "no Gaussian of the scene falls inside any camera's view")
         else:
             assert result.code == 0, result.err
-
-
-def test_a_camera_file_that_overflows_the_scene_is_named(run_cli, buu, tmp_path, random_checkpoint):
-    """One camera placed 1e30 units away: every footprint overflows. The refusal named only
-    `gaussians.scales`; it names the camera file now."""
-    photos = _photos(buu, tmp_path)
-    given = read_transforms_json(buu / "transforms_train.json")
-    stems = [name.rsplit("/", 1)[-1].split(".")[0] for name in given.names]
-    given = given[[stems.index(n[:-4]) for n in FRAMES]]
-    extrinsics = given.extrinsics.clone()
-    extrinsics[0, :, 3] = 1e30
-    write_transforms_json(tmp_path / "poses.json", Cameras(extrinsics, given.intrinsics, given.sizes, given.names))
-    out = tmp_path / "out" / "scene.ply"
-    expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--poses",
-                               tmp_path / "poses.json", "--refine-steps", 0),
-                       "--poses", "poses.json: the fused scene's Gaussians", "NaN or Inf; check the camera file's positions")
-    assert not out.parent.exists()
