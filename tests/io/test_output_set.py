@@ -627,3 +627,23 @@ def test_folders_that_take_no_files_are_refused_by_name():
     with pytest.raises(InputError, match=r"^/proc: no file can be written there \("):
         with folder_lock(Path("/proc"), "render"):
             pass
+
+
+def test_a_long_lived_process_finishes_a_commit_killed_since_it_last_wrote(tmp_path, monkeypatch):
+    """A process (the Python API) that wrote into out once took the folder as cleaned for its
+    life: another run's commit killed since was left unfinished under its next commit, and a
+    later process replayed that stale journal over the newer set."""
+    out, videos = tmp_path / "out", tmp_path / "videos"
+    videos.mkdir()
+    _restore_like(out, ["1.png"], text="first", video=videos / "orbit.mp4")  # `out` now counts as cleaned here
+    with monkeypatch.context() as patch:
+        patch.setattr(os, "getpid", lambda: 999999)  # another process, that has ended (no such pid here)
+        assert _kill_mid_commit(out, monkeypatch, after=1, video=videos / "orbit.mp4", text="second")
+    _restore_like(out, ["1.png"], text="third")  # this process again: the killed commit is finished first
+    assert {(out / name).read_text() for name in ("scene.ply", "summary.json", "views/1.png")} == {"third"}
+    assert (videos / "orbit.mp4").read_text() == "second"
+    # and the killed run's temporaries in the video's folder (its marker, the old video) went with it
+    assert hidden_entries(out) == [] and hidden_entries(videos) == []
+    monkeypatch.setattr(atomic, "_cleaned", set())
+    _restore_like(out, ["1.png"], text="fourth")  # a fresh process finds nothing to replay
+    assert (out / "scene.ply").read_text() == "fourth"

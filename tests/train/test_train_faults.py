@@ -179,3 +179,13 @@ def test_files_may_move_on_resume_but_not_appear_or_go():
     assert not _may_differ("model", "tiny", "small")  # an architecture, not a file
     assert not _may_differ("brackets.root", None, "/data/brackets")  # the bracket loss switched on mid-run
     assert not _may_differ("teacher", "/t.safetensors", None) and not _may_differ("optim.lr", 2e-4, 0.05)
+    assert _may_differ("data.root", "scenes", "/data/scenes")  # a bare relative folder that moved
+
+
+def test_a_damaged_config_in_the_newest_checkpoint_falls_back_like_damaged_weights(tiny_config):
+    config = tiny_config(name="badconfig", optim__steps=4, checkpoint_every=2)
+    checkpoints = _trained(config)
+    (checkpoints / "step_00000004" / "config.yaml").write_text("optim: [unclosed")
+    result = run_lumos3d("train", config, "--resume", "--json")
+    assert result.code == 0, result.err[-3000:]
+    assert "skipping checkpoint step_00000004" in result.err and "resuming from step 2" in result.err

@@ -1,7 +1,8 @@
 """Write outputs so that they appear whole or not at all: write under a temporary name, then rename.
 
 Temporary names are hidden and carry the writing process's id and a tag of its host,
-`.NAME.<pid>-<host>.XXXXXXXX.tmp[.suffix]`. A run that is killed outright (SIGKILL, power loss)
+`.NAME.<pid>-<host>.XXXXXXXX.tmp[.suffix]`. A run that is killed outright (SIGKILL; a power loss
+too, as far as the file system kept the renames: nothing here syncs folders)
 cannot clean up after itself; the next run writing into the same folder recognises such
 leftovers — their process no longer exists on this host — and removes them, while the
 temporaries of a run still going on (same host, live process) or of another host are left alone.
@@ -209,7 +210,18 @@ def finish_commit(staging: Path) -> bool:
     return True
 
 
-def remove_leftovers(folder: Path | str) -> list[Path]:
+def _remove_dead_owners_temporaries(folder: Path, owner: str) -> None:
+    """Remove the temporaries of the killed process `owner` in `folder` (another folder its
+    finished commit touched: the marker, the old video moved aside), without its lock: only the
+    dead process's own files, which no live run reads."""
+    for entry in _entries(folder):
+        match = _OWNER.search(entry.name)
+        if match is not None and match["pid"] == owner and _is_leftover(entry.name):
+            remove_path(entry)
+            logger.info("removed %s, left behind by an earlier run that was killed", entry)
+
+
+def remove_leftovers(folder: Path | str, again: bool = False) -> list[Path]:
     """Remove the temporaries in `folder` left by killed runs on this host (once per folder and
     process), after finishing the commits they had begun; returns what was removed.
 
@@ -219,7 +231,7 @@ def remove_leftovers(folder: Path | str) -> list[Path]:
     place. Kept: the temporaries of a killed run whose commit is unfinished (a journal here that
     cannot be trusted or finished, or one in another folder that a marker here names)."""
     folder = Path(folder).absolute()
-    if folder in _cleaned:
+    if folder in _cleaned and not again:  # `again`: a command's start, where another run may have died since
         return []
     entries = [entry for entry in _entries(folder) if _is_leftover(entry.name)]
     _cleaned.add(folder)
@@ -240,9 +252,13 @@ def remove_leftovers(folder: Path | str) -> list[Path]:
             pending.add(owner)  # its temporaries beside it may still be the commit's
             continue
         logger.warning("finished moving the outputs of an earlier run into %s: it was killed while it did", folder)
+        others = {path.parent for move in (_journal_moves(entry) or []) for path in move[:2]
+                  if not _is_inside(path, folder.resolve())}
         (entry / COMMIT_JOURNAL).unlink()
         remove_path(entry)
         removed.append(entry)
+        for other in others:  # its marker and the old video moved aside there: garbage now
+            _remove_dead_owners_temporaries(other, owner)
     for entry in entries:
         if entry in removed or not (entry.exists() or entry.is_symlink()):
             continue

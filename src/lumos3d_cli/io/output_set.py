@@ -17,7 +17,7 @@ hidden staging folder inside the output folder (files elsewhere: beside themselv
 committed: a journal of the moves is written, and with the stop signals held back the old
 outputs of this output set move into the staging folder and the new ones into place, the
 manifest last, one rename each (a whole folder is one rename). A signal during the commit takes
-effect once it is complete; a run killed outright during it (SIGKILL, power loss) is finished by
+effect once it is complete; a run killed outright during it (SIGKILL) is finished by
 the next lumos3d run writing into that folder (io/atomic.py). Either way the folder holds the
 complete old set or the complete new one.
 """
@@ -325,11 +325,12 @@ class OutputSet:
                     for other in folders_of_pending_commits(folder):
                         try:
                             with folder_lock(other, self.command):
-                                remove_leftovers(other)
+                                remove_leftovers(other, again=True)
                         except InputError as refusal:  # held by a live run, or no lock file can go there:
                             # its temporaries here stay (remove_leftovers keeps them) for a run into it
                             logger.info("%s; the killed commit into it stays unfinished for now", refusal)
-                    remove_leftovers(folder)
+                    # again, whatever this process cleaned before: another run may have died there since
+                    remove_leftovers(folder, again=True)
                 self._check_ownership()
                 yield
             except BaseException:
@@ -414,6 +415,7 @@ class OutputSet:
                 os.chmod(item.staged, 0o666 & ~current_umask())  # mkstemp made it private
             moves.append((item.staged, item.final, "source-gone"))
         committed = False
+        done: list[tuple[Path, Path]] = []  # the moves made (and not undone)
         try:
             written_sets = {(item.final.parent, item.output_set) for item in items}
             for folder in dict.fromkeys(item.final.parent for item in items):
@@ -453,16 +455,16 @@ class OutputSet:
                 if folder != own]
             leftovers += markers
             staged_elsewhere += markers
+            trash.mkdir()  # before the journal: a full disk here fails with no journal to replay
             write_commit_journal(root, self.folder.absolute(), moves)
-            done: list[tuple[Path, Path]] = []
             with _stop_signals_held():
-                trash.mkdir()
                 try:
                     for source, destination, _ in moves:
                         os.replace(source, destination)
                         done.append((source, destination))
                 except OSError as error:
                     _undo(done)
+                    done.clear()
                     reason = _DISK_ERRORS.get(error.errno) or error.strerror or type(error).__name__
                     raise InputError(f"{error.filename}: cannot be replaced ({reason}); nothing was changed: fix its "
                                      "permissions or choose another output") from error
@@ -473,10 +475,10 @@ class OutputSet:
                 shutil.rmtree(root, ignore_errors=True)
                 for path in leftovers:
                     remove_path(path)
-        except (Interrupted, InputError) as stop:
+        except BaseException as stop:  # a signal, a refusal, or anything else (KeyboardInterrupt in the API)
             if isinstance(stop, Interrupted) and committed:  # a signal held over the moves lands after them
                 stop.detail = stop.detail or f"after the outputs were written; {self.folder} holds the complete new outputs"
-            elif not committed:
+            elif not committed and not done:
                 # the old outputs are in place (never moved, or moved back): the journal goes before
                 # the staging folder (which `staged` removes), as after a commit, and what was staged
                 # elsewhere with it (a run killed outright leaves both to the next run's clean-up)

@@ -45,24 +45,36 @@ def _is_path(value: Any) -> bool:
 def _may_differ(key: str, saved: Any, current: Any) -> bool:
     if key in MAY_CHANGE:
         return True
-    return key in MAY_MOVE and _is_path(saved) and _is_path(current)
+    if key == "model":  # a checkpoint that moved, not another architecture
+        return _is_path(saved) and _is_path(current)
+    return key in MAY_MOVE and saved is not None and current is not None
 
 
-def require_same_training(saved_config: Path, config_type: type, config: Any) -> None:
-    """InputError naming the keys in which `config` (of the dataclass `config_type`) differs from
-    `saved_config` (the config.yaml of the checkpoint it resumes), beyond what may change (module
-    docstring); nothing when the checkpoint has no config.yaml. The saved config is read as a
-    config is (the defaults of keys added since it was written filled in)."""
+def read_run_config(saved_config: Path, config_type: type) -> dict[str, Any] | None:
+    """The config a checkpoint was saved with (its config.yaml), flattened to dotted keys and read
+    as a config is: the defaults of keys added since it was written filled in (of a config this
+    release no longer reads, the keys it holds). None when the checkpoint has none; InputError
+    when it cannot be read (the checkpoint is damaged)."""
     try:
         values = yaml.safe_load(saved_config.read_text()) or {}
-        saved = _flat(to_dict(from_dict(config_type, values)))
     except FileNotFoundError:
-        return
-    except (OSError, yaml.YAMLError, InputError, ValueError, TypeError) as error:
-        raise InputError(f"{saved_config}: cannot be read as the run's config ({error}); resume from another "
-                         "checkpoint") from None
+        return None
+    except (OSError, yaml.YAMLError) as error:
+        raise InputError(f"{saved_config}: cannot be read ({error})") from None
+    if not isinstance(values, dict):
+        raise InputError(f"{saved_config}: holds no config")
+    try:
+        return _flat(to_dict(from_dict(config_type, values)))
+    except (InputError, ValueError, TypeError):  # keys since removed, rules since added: compare what it holds
+        return _flat(values)
+
+
+def require_same_training(saved_config: Path, saved: dict[str, Any], config: Any) -> None:
+    """InputError naming the keys in which `config` differs from `saved` (`read_run_config` of the
+    checkpoint's `saved_config`), beyond what may change (module docstring). Where and what files
+    lie at a path that may move is not checked against their content."""
     current = _flat(to_dict(config))
-    changed = [f"{key} {saved.get(key)!r} -> {current.get(key)!r}" for key in sorted(set(saved) | set(current))
+    changed = [f"{key} {saved.get(key)!r} -> {current.get(key)!r}" for key in sorted(saved)
                if saved.get(key) != current.get(key) and not _may_differ(key, saved.get(key), current.get(key))]
     if changed:
         raise InputError(f"{saved_config.parent}: this config differs from the run's in {listed(changed, 4)}; a resume "

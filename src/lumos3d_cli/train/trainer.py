@@ -52,7 +52,7 @@ from lumos3d_cli.train.run_folder import (
     remove_unfinished_run,
     start_run,
 )
-from lumos3d_cli.train.resume_config import require_same_training
+from lumos3d_cli.train.resume_config import read_run_config, require_same_training
 from lumos3d_cli.train.run_logs import RunLogs
 from lumos3d_cli.train.schedule import learning_rate_factor
 from lumos3d_cli.train.selection import SELECTED_FILE, best_earlier_score, drop_stale_selection, is_improvement
@@ -361,7 +361,14 @@ class Trainer:
         problems = []
         run_id = self.run_identity.run_id if self.run_identity is not None else None
         for folder in resume_candidates(self.output, run_id):
-            require_same_training(folder / CONFIG_FILE, TrainConfig, self.config)
+            try:
+                saved = read_run_config(folder / CONFIG_FILE, TrainConfig)
+            except InputError as error:  # a damaged checkpoint, as one whose weights cannot be read
+                logger.warning("skipping checkpoint %s: %s", folder.name, error)
+                problems.append(str(error))
+                continue
+            if saved is not None:  # a config that changes what the run learns is refused, not skipped
+                require_same_training(folder / CONFIG_FILE, saved, self.config)
             try:
                 state = load_training_checkpoint(folder, self.model)
             except InputError as error:
