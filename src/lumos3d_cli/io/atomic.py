@@ -223,7 +223,8 @@ def _remove_dead_owners_temporaries(folder: Path, owner: str) -> None:
 
 def remove_leftovers(folder: Path | str, again: bool = False) -> list[Path]:
     """Remove the temporaries in `folder` left by killed runs on this host (once per folder and
-    process), after finishing the commits they had begun; returns what was removed.
+    process, unless `again`: a command's start), after finishing the commits they had begun;
+    returns what was removed.
 
     The commits are finished first, each journal removed before its staging folder (a recovery
     cut short must not replay moves whose trace is gone), and only then the other temporaries
