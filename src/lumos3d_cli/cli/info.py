@@ -104,7 +104,7 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
             return [summarize_gaussian_file(path)]
         if path.stem in _COLMAP_FILES and suffix in (".bin", ".txt") and is_colmap_model(path.parent):
             return [summarize_camera_file(path.parent)]  # points3D.bin is no checkpoint: the model it belongs to
-        if suffix in (".safetensors", ".pt", ".pth", ".bin") and find_camera_source(path) is None:
+        if suffix in (".safetensors", ".pt", ".pth", ".bin"):
             return [summarize_checkpoint(path)]
         if suffix in IMAGE_SUFFIXES:
             return [_image_summary([path], deep)]

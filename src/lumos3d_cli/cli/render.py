@@ -56,8 +56,9 @@ def render_command(
     with library_imports():
         from lumos3d_cli.io.ply import read_ply
         from lumos3d_cli.io.video import video_kind
-        from lumos3d_cli.io.camera_files import read_cameras
-        from lumos3d_cli.pipeline.render_job import output_size, render_cameras, render_frames, render_outputs
+        from lumos3d_cli.pipeline.render_job import (
+            camera_file_cameras, output_size, render_cameras, render_frames, render_outputs,
+        )
     if (poses is None) == (orbit is None):
         raise InputError("give exactly one of --poses CAMERAS or --orbit N")
     if orbit is not None and not 1 <= orbit <= 100000:
@@ -74,13 +75,13 @@ def render_command(
         raise InputError(f"--background {background}: a filled frame shows no background; leave one of them out")
     check_output_path(output, "output", folder=True)
     check_output_path(video, "video")
-    if poses is not None:
-        read_cameras(poses, warn_on_distortion=False)  # refused before the scene is read; read (and warned of) again
+    # a camera file is read (and refused) before the scene, which takes seconds when large
+    from_file = camera_file_cameras(poses, width, height) if poses is not None else None
     started = time.perf_counter()
     gaussians = read_ply(scene)
     if len(gaussians) == 0:
         raise InputError(f"{scene}: holds no Gaussians; there is nothing to render")
-    cameras, source = render_cameras(scene, gaussians, poses, orbit, width, height)
+    cameras, source = from_file if from_file is not None else render_cameras(scene, gaussians, None, orbit, width, height)
     outputs = render_outputs(len(cameras), output, video, [scene, poses])
     with outputs.reserved(), progress_bar() as bars:
         frames = render_frames(gaussians, cameras, output, video, fps, colour, antialiased, ProgressBars(bars), [scene, poses],

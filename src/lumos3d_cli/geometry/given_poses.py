@@ -29,7 +29,6 @@ logger = logging.getLogger(__name__)
 _ASPECT_TOLERANCE = 0.01
 
 
-
 def _read_pose_source(path: Path, warn_on_distortion: bool) -> Cameras:
     """The cameras in PATH, whatever supported form it takes; in a scene folder a COLMAP model
     first (the folder itself, sparse/0, colmap/), then LOM's splits, then what `read_cameras`
@@ -63,7 +62,7 @@ def read_given_poses(
         raise InputError(f"{len(names)} photo names for {len(sizes)} photo sizes")
     if not path.exists():
         raise InputError(f"{path}: no such file or folder", parameter="poses")
-    given = _read_pose_source(Path(path), warn_on_distortion)
+    given = _read_pose_source(path, warn_on_distortion)
     stems = [Path(name).stem for name in given.names]
     row_of_stem: dict[str, int] = {}
     conflicting = []

@@ -167,10 +167,6 @@ def _entries(folder: Path) -> list[Path]:
         return []
 
 
-def _pending_owners(entries: list[Path]) -> set[str]:
-    return set(_pending_journals(entries))
-
-
 def folders_of_pending_commits(folder: Path | str) -> list[Path]:
     """The output folders whose killed commit still needs temporaries in `folder` (a video's):
     a run writing into `folder` finishes those commits first (`remove_leftovers` of each, under
@@ -185,7 +181,7 @@ def holds_unfinished_commit(folder: Path | str) -> bool:
     under the folder's lock."""
     entries = [entry for entry in _entries(folder) if _is_leftover(entry.name)]
     return (any((entry / COMMIT_JOURNAL).is_file() and _journal_moves(entry) is not None for entry in entries)
-            or bool(_pending_owners(entries)))
+            or bool(set(_pending_journals(entries))))
 
 
 def finish_commit(staging: Path) -> bool:
@@ -236,7 +232,7 @@ def remove_leftovers(folder: Path | str, again: bool = False) -> list[Path]:
         return []
     entries = [entry for entry in _entries(folder) if _is_leftover(entry.name)]
     _cleaned.add(folder)
-    pending = _pending_owners(entries)
+    pending = set(_pending_journals(entries))
     removed = []
     for entry in [entry for entry in entries if (entry / COMMIT_JOURNAL).is_file()]:
         owner = _OWNER.search(entry.name)["pid"]

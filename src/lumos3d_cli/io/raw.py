@@ -11,6 +11,7 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.image_types import DecodedImage, ImageHeader
 from lumos3d_cli.io.photo import read_file_bytes
 
+
 def _convert_hint(path: Path) -> str:
     if path.suffix.lower() == ".dng":
         return "export it as a 16-bit TIFF from a RAW editor"

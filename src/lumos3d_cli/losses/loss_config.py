@@ -28,6 +28,7 @@ class LossConfig:
     voxel_size: float = 0.002  # relative to the scene scale, at full resolution
     supervised_pose: float = 5.0  # teacher stage; VGGT's camera-loss weight
     supervised_depth: float = 1.0  # teacher stage, sparse COLMAP depth
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         # a negative weight would reward its term's error (a negative total, the term "optimised" away)
@@ -40,4 +41,3 @@ class LossConfig:
             raise ValueError(f"loss.voxel_scale_weights: {list(self.voxel_scale_weights)} must be weights of at least 0")
         if not (math.isfinite(self.voxel_size) and self.voxel_size > 0):
             raise ValueError(f"loss.voxel_size: {self.voxel_size} must be positive")
-    background: tuple[float, float, float] = (0.0, 0.0, 0.0)

@@ -7,7 +7,7 @@ import contextlib
 import logging
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from lumos3d_cli.errors import InputError, listed
@@ -47,25 +47,32 @@ def output_size(native: tuple[int, int], width: int | None, height: int | None) 
     return size
 
 
+def camera_file_cameras(poses: Path, width: int | None = None, height: int | None = None) -> tuple[Cameras, str]:
+    """The cameras of the camera file `poses` at the frame size asked for (each at its own size, or
+    with one side given each keeping its aspect ratio), and where they came from. It needs no
+    scene: `render` reads it before the scene."""
+    cameras, source = read_cameras(poses), str(find_camera_source(poses))
+    if width is not None or height is not None:  # each camera keeps its own aspect ratio (photos may differ)
+        cameras = cameras.rescaled_to([output_size(size, width, height) for size in cameras.sizes])
+    too_large = [f"{name or index} ({w}x{h})" for index, (name, (w, h)) in enumerate(zip(cameras.names, cameras.sizes))
+                 if max(w, h) > MAX_SIDE]  # its own size, or the side computed from the one given
+    if too_large:
+        raise InputError(f"{source}: frames larger than {MAX_SIDE} pixels a side: {listed(too_large, 3)}; give a "
+                         "smaller width or height", parameter="poses")
+    return cameras, source
+
+
 def render_cameras(
     scene: Path, gaussians: Gaussians, poses: Path | None = None, orbit: int | None = None,
     width: int | None = None, height: int | None = None,
 ) -> tuple[Cameras, str]:
     """The cameras to render `gaussians` (read from `scene`) from, and where they came from: the
-    camera file `poses`, or `orbit` frames around the cameras beside the scene (a restore output)
-    or, without any, around the scene's bounds."""
+    camera file `poses` (`camera_file_cameras`), or `orbit` frames around the cameras beside the
+    scene (a restore output) or, without any, around the scene's bounds."""
     if (poses is None) == (orbit is None):
         raise InputError("give exactly one of poses (a camera file) or orbit (a frame count)", parameter="poses")
     if poses is not None:
-        cameras, source = read_cameras(poses), str(find_camera_source(poses))
-        if width is not None or height is not None:  # each camera keeps its own aspect ratio (photos may differ)
-            cameras = cameras.rescaled_to([output_size(size, width, height) for size in cameras.sizes])
-        too_large = [f"{name or index} ({w}x{h})" for index, (name, (w, h)) in enumerate(zip(cameras.names, cameras.sizes))
-                     if max(w, h) > MAX_SIDE]  # its own size, or the side computed from the one given
-        if too_large:
-            raise InputError(f"{source}: frames larger than {MAX_SIDE} pixels a side: {listed(too_large, 3)}; give a "
-                             "smaller width or height", parameter="poses")
-        return cameras, source
+        return camera_file_cameras(poses, width, height)
     nearby = find_camera_source(scene.parent)
     if nearby is not None:
         try:
@@ -88,10 +95,13 @@ class RenderedFrames:
     ffmpeg reads it back (None without one)."""
 
     frames: int
-    size: tuple[int, int]
+    sizes: list[tuple[int, int]]
     render_ms_per_frame: float
     video: dict | None
-    sizes: list[tuple[int, int]] = field(default_factory=list)
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.sizes[0]
 
 
 def render_outputs(frames: int, output: Path, video: Path | None = None, inputs: Sequence[Path | None] = ()) -> OutputSet:
@@ -148,5 +158,5 @@ def render_frames(
         stream = probe_video(video)
         written = {"path": str(video), "codec": stream.codec, "pixel_format": stream.pixel_format,
                    "width": stream.width, "height": stream.height, "frames": len(cameras), "fps": fps}
-    return RenderedFrames(len(cameras), (frame_width, frame_height), round(1000 * render_seconds / len(cameras), 2), written,
-                          list(dict.fromkeys(cameras.sizes)))
+    return RenderedFrames(len(cameras), list(dict.fromkeys(cameras.sizes)), round(1000 * render_seconds / len(cameras), 2),
+                          written)
