@@ -87,6 +87,9 @@ def _convert(value: Any, annotation, key: str) -> Any:
 
 def from_dict(cls: type[T], values: dict, prefix: str = "") -> T:
     """cls(**values) with every value converted to its field type; errors name the full key."""
+    if not isinstance(values, dict):
+        where = f"config key '{prefix}'" if prefix else "config"
+        raise InputError(f"{where}: expected a mapping, got {values!r}")
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls)}
     unknown = [name for name in values if name not in fields]

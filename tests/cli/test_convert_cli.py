@@ -23,7 +23,7 @@ def test_float16_halves_the_file_and_keeps_the_output(tmp_path, run_cli):
     result = run_cli("convert", str(source), "-o", str(target), "--dtype", "float16", "--json")
     assert result.code == 0, result.err
     summary = json.loads(result.out)
-    assert summary["dtypes"] == {"F16": summary["tensors"]}
+    assert summary["dtypes"] == {"float16": summary["tensors"]}
     assert summary["provenance"]["converted_from"] == {"file": "full.safetensors", "format": "lumos3d", "dtype": "float16"}
     assert 0.45 < target.stat().st_size / source.stat().st_size < 0.55
     with safe_open(str(target), framework="pt") as f:
@@ -106,3 +106,19 @@ def test_an_empty_scene_is_not_converted(tmp_path, run_cli):
     expect_input_error(run_cli("convert", tmp_path / "empty.ply", "-o", tmp_path / "empty.splat"),
                        "empty.ply: holds no Gaussians; there is nothing to convert")
     assert listing(tmp_path) == ["empty.ply"]
+
+
+def test_a_bundled_model_named_by_its_name_is_protected_as_an_input(tmp_path, run_cli, monkeypatch):
+    """`convert low-light -o <the bundled file itself>` is refused as `convert <its path> -o <it>` is,
+    even where lumos3d wrote that file (its manifest would otherwise let it be replaced)."""
+    from lumos3d_cli.model import bundled_models
+
+    weights = tmp_path / "weights"
+    weights.mkdir()
+    monkeypatch.setattr(bundled_models, "bundled_weights_path", lambda name: weights / f"{name}.safetensors")
+    bundled = weights / f"{bundled_models.BUNDLED_MODELS['low-light']}.safetensors"
+    assert run_cli("convert", str(_random_checkpoint(tmp_path / "full.safetensors")), "-o", str(bundled)).code == 0
+    before = bundled.read_bytes()
+    result = run_cli("convert", "low-light", "-o", str(bundled), "--dtype", "float16")
+    expect_input_error(result, f"{bundled}: is an input")
+    assert bundled.read_bytes() == before

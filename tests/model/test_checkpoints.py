@@ -2,6 +2,8 @@ import dataclasses
 import json
 import logging
 import pathlib
+import pickle
+import warnings
 
 import pytest
 import torch
@@ -9,12 +11,12 @@ from safetensors import safe_open
 from safetensors.torch import save_file
 
 from lumos3d_cli.errors import InputError, NonFiniteError
-from lumos3d_cli.model.architectures import ARCHITECTURES, Architecture, PatchEmbedConfig
+from lumos3d_cli.model.architectures import ARCHITECTURES, Architecture, PatchEmbedConfig, get_architecture
 from lumos3d_cli.model.bundled_models import BUNDLED_MODELS, bundled_weights_path
 from lumos3d_cli.model.checkpoints import read_checkpoint, save_checkpoint, summarize_checkpoint
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import build_model
-from lumos3d_cli.typed_config import from_dict
+from lumos3d_cli.typed_config import from_dict, to_dict
 
 # VGGT's key structure (DINOv2 patch embed with registers, QK-norm blocks, camera and DPT heads)
 # at a size that builds and runs in a fraction of a second.
@@ -110,7 +112,7 @@ def test_official_vggt_layout_loads_with_a_fresh_gaussian_head(tmp_path, caplog,
     actual = _outputs(loaded)
     assert torch.equal(actual.pose_enc, expected.pose_enc)
     assert torch.equal(actual.depth, expected.depth) and torch.equal(actual.depth_conf, expected.depth_conf)
-    summary = summarize_checkpoint(path)
+    summary = summarize_checkpoint(path, REDUCED)
     assert summary["format"] == "vggt" and summary["ignored_tensors"] == 2 and summary["fresh_modules"] == ["gaussian_head"]
 
 
@@ -123,7 +125,7 @@ def test_anysplat_layout_loads_everything_and_reads_the_sh_degree(tmp_path, sour
     assert torch.equal(actual.pose_enc, expected.pose_enc) and torch.equal(actual.depth, expected.depth)
     for name, tensor in expected.gaussians[0].tensors().items():
         assert torch.equal(getattr(actual.gaussians[0], name), tensor), name
-    assert summarize_checkpoint(path)["format"] == "anysplat"
+    assert summarize_checkpoint(path, REDUCED)["format"] == "anysplat"
 
 
 def test_half_precision_files_load_as_float32(tmp_path, source):
@@ -131,7 +133,7 @@ def test_half_precision_files_load_as_float32(tmp_path, source):
     save_file({k: v.to(torch.bfloat16) for k, v in _anysplat_state(source).items()}, str(path))
     loaded = load_model(path, architecture=REDUCED)
     assert all(p.dtype == torch.float32 for p in loaded.parameters())
-    assert summarize_checkpoint(path)["dtypes"] == {"BF16": len(source.state_dict())}
+    assert summarize_checkpoint(path, REDUCED)["dtypes"] == {"bfloat16": len(source.state_dict())}
 
 
 def test_weights_holding_nan_are_not_written(tmp_path):
@@ -169,9 +171,29 @@ def test_long_key_lists_are_truncated(tmp_path, source):
 def test_the_wrong_architecture_for_an_official_file_is_a_shape_error(tmp_path, source):
     torch.save(_vggt_state(source), tmp_path / "model.pt")
     with pytest.raises(InputError, match="does not fit the model") as error:
-        load_model(tmp_path / "model.pt")  # defaults to vggt-1b
+        load_model(tmp_path / "model.pt", architecture=get_architecture("vggt-1b"))
     assert "It was read as the 'vggt-1b' architecture; pass the one it was trained at (tiny, small" in str(error.value)
     assert len(str(error.value)) < 1000  # one readable line, not a dump of key names
+    with pytest.raises(InputError, match="does not fit the model") as error:
+        load_model(tmp_path / "model.pt")  # no architecture fits this reduced size
+    assert "fits none of lumos3d's architectures (tiny, small" in str(error.value) and len(str(error.value)) < 1000
+    with pytest.raises(InputError, match="fits none of lumos3d's architectures"):
+        summarize_checkpoint(tmp_path / "model.pt")  # `info` checks the file as loading does
+
+
+def test_a_foreign_file_of_a_smaller_architecture_is_read_at_the_size_it_fits(tmp_path):
+    """A VGGT-layout file at the `tiny` size loads without naming it; `info` reports that size, the
+    Gaussian head freshly made, and the same file gives the same fresh head every time."""
+    model = build_model("tiny", seed=3)
+    state = {key: tensor for key, tensor in model.state_dict().items() if not key.startswith("gaussian_head.")}
+    save_file(state, str(tmp_path / "model.safetensors"))
+    first, second = load_model(tmp_path / "model.safetensors"), load_model(tmp_path / "model.safetensors")
+    assert first.architecture.name == "tiny" and first.provenance["format"] == "vggt"
+    assert torch.equal(first.aggregator.camera_token, model.aggregator.camera_token)
+    assert all(torch.equal(a, b) for a, b in zip(first.gaussian_head.parameters(), second.gaussian_head.parameters()))
+    summary = summarize_checkpoint(tmp_path / "model.safetensors")
+    assert summary["architecture"] == "tiny" and summary["fresh_modules"] == ["gaussian_head"]
+    assert summary["parameters"] == sum(t.numel() for t in state.values())
 
 
 class _Payload:
@@ -227,6 +249,67 @@ def test_damaged_config_and_unknown_sh_layouts_are_refused(tmp_path, source):
     save_file(state, str(tmp_path / "model.safetensors"))
     with pytest.raises(InputError, match="50 output channels"):
         read_checkpoint(tmp_path / "model.safetensors")
+    state["encoder.gaussian_param_head.scratch.output_conv2.2.weight"] = torch.zeros(84)
+    save_file(state, str(tmp_path / "model.safetensors"))
+    with pytest.raises(InputError, match=r"has shape \(84,\); a convolution's weight has 4 dimensions"):
+        read_checkpoint(tmp_path / "model.safetensors")
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    ({"num_heads": 0}, "num_heads must be positive"),  # was a ZeroDivisionError
+    ({"patch_size": 0}, "patch_size must be positive"),
+    ({"camera_num_heads": -2}, "camera_num_heads must be positive"),
+    ([], "'preset': expected a mapping, got \\[\\]"),  # the whole architecture
+    ("provenance", "provenance: expected a mapping, got 'by hand'"),
+    ("version", "format version '1' is not supported"),  # a string, not the number 1
+])
+def test_damaged_fields_of_our_config_are_named(tmp_path, source, change, message):
+    config = {"format_version": 1, "preset": to_dict(source.architecture), "provenance": {}}
+    if change == "provenance":
+        config["provenance"] = "by hand"
+    elif change == "version":
+        config["format_version"] = "1"
+    elif isinstance(change, dict):
+        config["preset"].update(change)
+    else:
+        config["preset"] = change
+    path = tmp_path / "ours.safetensors"
+    save_file({k: v.contiguous() for k, v in source.state_dict().items()}, str(path), metadata={"lumos3d": json.dumps(config)})
+    for read in (read_checkpoint, summarize_checkpoint):
+        with pytest.raises(InputError, match=f"^{path}: .*{message}"):
+            read(path)
+
+
+def test_bare_state_dicts_and_anysplat_encoder_dicts(tmp_path, source, expected):
+    """Our module names without our metadata name the problem (no architecture to read them at);
+    AnySplat's encoder saved on its own (no `encoder.` prefix) loads as AnySplat's whole model does."""
+    torch.save(source.state_dict(), tmp_path / "bare.pt")
+    with pytest.raises(InputError, match="lumos3d's own module names but no lumos3d metadata"):
+        read_checkpoint(tmp_path / "bare.pt", architecture=REDUCED)
+    encoder = {key.removeprefix("encoder."): tensor for key, tensor in _anysplat_state(source).items()}
+    torch.save(encoder, tmp_path / "encoder.pt")
+    loaded = load_model(tmp_path / "encoder.pt", architecture=REDUCED)
+    assert loaded.provenance["format"] == "anysplat" and loaded.architecture.sh_degree == 2
+    assert torch.equal(_outputs(loaded).depth, expected.depth)
+
+
+def test_float64_weights_beyond_float32_and_upper_case_suffixes(tmp_path, source):
+    state = {key: tensor.double() for key, tensor in _vggt_state(source).items()}
+    save_file(state, str(tmp_path / "model.SAFETENSORS"))  # a suffix in capitals is still a checkpoint
+    assert read_checkpoint(tmp_path / "model.SAFETENSORS", REDUCED).tensors["aggregator.camera_token"].dtype == torch.float32
+    state["aggregator.camera_token"] = torch.full_like(state["aggregator.camera_token"], 1e300)
+    save_file(state, str(tmp_path / "huge.safetensors"))
+    with pytest.raises(InputError, match=r"tensor aggregator.camera_token holds values up to 1e\+300, beyond the float32 range"):
+        read_checkpoint(tmp_path / "huge.safetensors", REDUCED)
+
+
+def test_a_raw_pickle_is_refused_without_torch_warnings(tmp_path):
+    (tmp_path / "raw.pt").write_bytes(pickle.dumps({"aggregator.camera_token": [1.0]}, protocol=4))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(InputError, match="raw.pt: "):
+            read_checkpoint(tmp_path / "raw.pt")
+    assert [str(w.message) for w in caught] == []  # torch's "Detected pickle protocol 4" would print two lines
 
 
 @pytest.mark.slow

@@ -26,7 +26,7 @@ def test_the_bundled_models_fit_the_budget_in_half_precision():
         summary = summarize_checkpoint(path)
         # both predict a restoration operator (issue 15): an illumination head trained on brackets
         assert summary["format"] == "lumos3d" and summary["architecture"] == "tiny-operator"
-        assert summary["dtypes"] == {"F16": summary["tensors"]}
+        assert summary["dtypes"] == {"float16": summary["tensors"]}
         with safe_open(str(path), framework="pt") as f:
             assert all(torch.isfinite(f.get_tensor(key)).all() for key in f.keys())
         trained = summary["provenance"]

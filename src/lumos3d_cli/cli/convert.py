@@ -4,6 +4,8 @@ scene (.ply) as a .splat file for WebGL viewers. The suffixes of the input and o
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import typer
@@ -15,6 +17,7 @@ from lumos3d_cli.io.output_paths import check_output_path
 from lumos3d_cli.io.output_set import OutputSet
 from lumos3d_cli.io.weight_dtypes import STORAGE_DTYPE_NAMES
 from lumos3d_cli.model.architectures import get_architecture
+from lumos3d_cli.model.bundled_models import resolve_checkpoint
 
 EXAMPLES = """
   lumos3d convert runs/low-light/final.safetensors -o lumos3d-low-light.safetensors --dtype float16
@@ -40,6 +43,17 @@ def _converts_a_scene(source: Path, output: Path, dtype: str, architecture: str 
 def _written_once(source: Path, output: Path) -> OutputSet:
     """The one file convert writes: never over a file lumos3d did not write, never its input."""
     return OutputSet(output.parent, "convert", f"convert {output.name}", [source]).add_file(output.name)
+
+
+@contextmanager
+def _source_errors() -> Iterator[None]:
+    """The library's errors about its `checkpoint` parameter, which is convert's SOURCE argument, not an option."""
+    try:
+        yield
+    except InputError as error:
+        if error.parameter != "checkpoint":
+            raise
+        raise InputError(error.detail) from None
 
 
 def _scene_to_splat(source: Path, output: Path, as_json: bool) -> None:
@@ -68,7 +82,7 @@ def convert_command(
     source: Path = typer.Argument(..., help="Checkpoint file or folder (ours, VGGT model.pt/.safetensors, AnySplat), or a scene .ply."),
     output: Path = typer.Option(..., "--output", "-o", help="The .safetensors file to write (.splat for a scene)."),
     dtype: str = typer.Option("float32", "--dtype", help=f"Storage precision: {', '.join(STORAGE_DTYPE_NAMES)}."),
-    architecture: str | None = typer.Option(None, "--architecture", help="Model size of a foreign (VGGT/AnySplat) checkpoint: tiny, small, base or vggt-1b (default)."),
+    architecture: str | None = typer.Option(None, "--architecture", help="Model size of a foreign (VGGT/AnySplat) checkpoint: tiny, small, base or vggt-1b (default: the first its shapes fit, vggt-1b tried first)."),
     as_json: bool = typer.Option(False, "--json", help="Print the written file's summary as JSON."),
 ) -> None:
     """Rewrite a checkpoint in lumos3d's format (e.g. float16 to halve it), or a scene .ply as .splat."""
@@ -85,14 +99,12 @@ def convert_command(
         from lumos3d_cli.model.loading import load_model
     storage_dtype(dtype)  # refuse a bad --dtype before the (possibly large) checkpoint is read
     check_output_path(output, "output")
+    with _source_errors():
+        source = resolve_checkpoint(source)  # a bundled model's name: its file, protected as an input below
     outputs = _written_once(source, output)
     with outputs.reserved():
-        try:
+        with _source_errors():
             model = load_model(source, architecture=get_architecture(architecture) if architecture else None)
-        except InputError as error:
-            if error.parameter != "checkpoint":
-                raise
-            raise InputError(error.detail) from None  # the library's checkpoint is convert's SOURCE, no option
         provenance = {key: value for key, value in model.provenance.items() if key not in ("path", "format")}
         provenance["converted_from"] = {"file": Path(source).name, "format": model.provenance.get("format"), "dtype": dtype}
         with outputs.staged() as staging:

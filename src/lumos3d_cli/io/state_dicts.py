@@ -4,6 +4,7 @@ runs) and check them strictly against the tensors a network expects."""
 from __future__ import annotations
 
 import pickle
+import warnings
 from pathlib import Path
 
 import torch
@@ -18,15 +19,16 @@ def listing(names: list[str]) -> str:
     return shown + (f" ... and {len(names) - _SHOWN_KEYS} more" if len(names) > _SHOWN_KEYS else "")
 
 
-def check_tensors(expected: dict[str, tuple[int, ...]], tensors: dict[str, torch.Tensor], source: str) -> None:
-    """Strict check: the same key set and every shape equal; else InputError listing the
-    missing, unexpected and mis-shaped keys (at most _SHOWN_KEYS of each)."""
-    missing = sorted(set(expected) - set(tensors))
-    unexpected = sorted(set(tensors) - set(expected))
+def check_shapes(expected: dict[str, tuple[int, ...]], found: dict[str, tuple[int, ...]], source: str) -> None:
+    """Strict check of a file's tensor shapes (`found`, by key) against a network's (`expected`):
+    the same key set and every shape equal; else InputError listing the missing, unexpected and
+    mis-shaped keys (at most _SHOWN_KEYS of each)."""
+    missing = sorted(set(expected) - set(found))
+    unexpected = sorted(set(found) - set(expected))
     mismatched = sorted(
-        f"{key} (file {tuple(tensors[key].shape)}, model {tuple(expected[key])})"
-        for key in set(expected) & set(tensors)
-        if tuple(tensors[key].shape) != tuple(expected[key])
+        f"{key} (file {tuple(found[key])}, model {tuple(expected[key])})"
+        for key in set(expected) & set(found)
+        if tuple(found[key]) != tuple(expected[key])
     )
     problems = []
     if missing:
@@ -45,7 +47,7 @@ def read_state_dict(path: Path | str) -> dict[str, torch.Tensor]:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: weight file not found")
-    if path.suffix == ".safetensors":
+    if path.suffix.lower() == ".safetensors":
         from safetensors import SafetensorError
         from safetensors.torch import load_file
 
@@ -58,11 +60,13 @@ def read_state_dict(path: Path | str) -> dict[str, torch.Tensor]:
 
 def load_torch_state_dict(path: Path) -> dict[str, torch.Tensor]:
     try:
-        try:
-            loaded = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
-        except RuntimeError:
-            # Files saved with the legacy (non-zip) serialisation cannot be memory-mapped.
-            loaded = torch.load(path, map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():  # torch's warnings about a raw pickle's protocol: the error below says it
+            warnings.simplefilter("ignore")
+            try:
+                loaded = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
+            except RuntimeError:
+                # Files saved with the legacy (non-zip) serialisation cannot be memory-mapped.
+                loaded = torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as error:
         # torch explains weights_only over a paragraph; its own reason is the last line before the advice
         reasons = [line.strip() for line in str(error).splitlines() if line.strip() and not line.startswith(

@@ -7,7 +7,6 @@ tensors atomically in a storage precision. What the keys mean is the model's bus
 
 from __future__ import annotations
 
-from collections import Counter
 from pathlib import Path
 
 import torch
@@ -46,9 +45,13 @@ def resolve_weights_file(path: Path) -> Path:
             hint = f"; give {path / written[0]}" if written else "; give one of its checkpoints/step_* folders"
             raise InputError(f"{path}: a training run's folder, not a checkpoint{hint}")
         raise InputError(f"{path}: folder holds none of {', '.join(FOLDER_FILES)}")
-    if path.suffix != ".safetensors" and path.suffix not in TORCH_SUFFIXES:
+    if not _is_safetensors(path) and path.suffix.lower() not in TORCH_SUFFIXES:
         raise InputError(f"{path}: not a checkpoint; expected .safetensors or a torch state dict ({', '.join(TORCH_SUFFIXES)})")
     return path
+
+
+def _is_safetensors(path: Path) -> bool:
+    return path.suffix.lower() == ".safetensors"
 
 
 def _read_metadata(path: Path) -> dict[str, str]:
@@ -61,7 +64,7 @@ def _read_metadata(path: Path) -> dict[str, str]:
 
 def read_weights(path: Path) -> tuple[dict[str, str], dict[str, torch.Tensor]]:
     """(safetensors header metadata, empty for torch files; every tensor by its file key)."""
-    if path.suffix != ".safetensors":
+    if not _is_safetensors(path):
         return {}, load_torch_state_dict(path)
     metadata = _read_metadata(path)
     try:
@@ -70,19 +73,14 @@ def read_weights(path: Path) -> tuple[dict[str, str], dict[str, torch.Tensor]]:
         raise InputError(f"{path}: cannot read as safetensors ({error})") from None
 
 
-def read_header(path: Path) -> tuple[dict[str, tuple[int, ...]], Counter, dict[str, str]]:
-    """(shapes, dtype counts, metadata) without loading tensor data where the format allows."""
-    if path.suffix == ".safetensors":
+def read_header(path: Path) -> tuple[dict[str, tuple[int, ...]], dict[str, str]]:
+    """(shapes, metadata) without loading tensor data where the format allows."""
+    if _is_safetensors(path):
         metadata = _read_metadata(path)
-        shapes, dtypes = {}, Counter()
         with safe_open(str(path), framework="pt") as handle:
-            for key in handle.keys():
-                piece = handle.get_slice(key)
-                shapes[key] = tuple(piece.get_shape())
-                dtypes[piece.get_dtype()] += 1
-        return shapes, dtypes, metadata
-    state = load_torch_state_dict(path)
-    return {k: tuple(v.shape) for k, v in state.items()}, Counter(str(v.dtype).removeprefix("torch.") for v in state.values()), {}
+            shapes = {key: tuple(handle.get_slice(key).get_shape()) for key in handle.keys()}
+        return shapes, metadata
+    return {k: tuple(v.shape) for k, v in load_torch_state_dict(path).items()}, {}
 
 
 def write_weights(tensors: dict[str, torch.Tensor], path: Path, metadata: dict[str, str], dtype: str = "float32") -> Path:

@@ -10,7 +10,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from lumos3d_cli.io.state_dicts import check_tensors, read_state_dict
+from lumos3d_cli.io.state_dicts import check_shapes, read_state_dict
 
 logger = logging.getLogger(__name__)
 
@@ -97,7 +97,7 @@ def load_trunk(name: str, path: Path | str) -> FeatureTrunk:
     state = read_state_dict(path)
     features = {k: v for k, v in state.items() if k.startswith("features.")}
     expected = {k: tuple(v.shape) for k, v in trunk.state_dict().items()}
-    check_tensors(expected, features, f"{path} (torchvision {name})")
+    check_shapes(expected, {k: tuple(v.shape) for k, v in features.items()}, f"{path} (torchvision {name})")
     trunk.load_state_dict({k: v.float() for k, v in features.items()})
     ignored = len(state) - len(features)
     if ignored:

@@ -80,7 +80,12 @@ class Architecture:
     local_correction_channels: int = 1  # per-view local gain grid channels (1 or 3); 0: none
 
     def __post_init__(self) -> None:
-        head_dim = self.embed_dim // max(self.num_heads, 1)
+        sizes = {name: getattr(self, name) for name in ("image_size", "patch_size", "embed_dim", "depth", "num_heads",
+                                                         "camera_num_heads", "dpt_features")}
+        not_positive = [f"{name} must be positive (got {value!r})" for name, value in sizes.items() if value <= 0]
+        if not_positive:  # the divisibility checks below divide by them
+            raise ValueError(f"architecture '{self.name}': " + "; ".join(not_positive))
+        head_dim = self.embed_dim // self.num_heads
         checks = {
             "embed_dim must be divisible by num_heads": self.embed_dim % self.num_heads == 0,
             "RoPE needs a head dimension divisible by 4": head_dim % 4 == 0,

@@ -23,19 +23,15 @@ import logging
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
-
 import torch
 
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.state_dicts import listing
+from lumos3d_cli.io.state_dicts import check_shapes, listing
 from lumos3d_cli.io.weight_files import read_header, read_weights, resolve_weights_file, write_weights
-from lumos3d_cli.model.architectures import Architecture, get_architecture
+from lumos3d_cli.model.architectures import ARCHITECTURES, Architecture, get_architecture
+from lumos3d_cli.model.lumos3d import Lumos3D
 from lumos3d_cli.typed_config import from_dict, to_dict
-
-if TYPE_CHECKING:
-    from lumos3d_cli.model.lumos3d import Lumos3D
 
 logger = logging.getLogger(__name__)
 
@@ -78,8 +74,14 @@ def save_checkpoint(model: Lumos3D, path: Path | str, provenance: dict | None = 
 def _detect_format(path: Path, keys: list[str], metadata: dict[str, str]) -> str:
     if METADATA_KEY in metadata:
         return FORMAT_LUMOS3D
-    if any(k.startswith("encoder.aggregator.") for k in keys):
+    # AnySplat's whole model (encoder.*) or its encoder's own state dict (gaussian_param_head.* beside aggregator.*)
+    if any(k.startswith(("encoder.aggregator.", "gaussian_param_head.")) for k in keys):
         return FORMAT_ANYSPLAT
+    if any(k.startswith(("gaussian_head.", "illumination_head.")) for k in keys):
+        raise InputError(
+            f"{path}: holds lumos3d's own module names but no lumos3d metadata, so its architecture is unknown "
+            "(a bare state_dict); use the .safetensors file lumos3d wrote (save_checkpoint, lumos3d train)"
+        )
     if any(k.startswith("aggregator.") for k in keys) and any(k.startswith(("camera_head.", "depth_head.")) for k in keys):
         return FORMAT_VGGT
     raise InputError(
@@ -95,9 +97,10 @@ def _our_name(file_format: str, key: str) -> str | None:
     if file_format == FORMAT_ANYSPLAT:
         if key.startswith("encoder.distill_"):
             return None  # AnySplat's frozen teacher copy, if a training checkpoint holds it
-        if key.startswith("encoder.gaussian_param_head."):
-            return "gaussian_head." + key.removeprefix("encoder.gaussian_param_head.")
-        return key.removeprefix("encoder.")
+        key = key.removeprefix("encoder.")
+        if key.startswith("gaussian_param_head."):
+            return "gaussian_head." + key.removeprefix("gaussian_param_head.")
+        return key
     return key
 
 
@@ -108,9 +111,12 @@ def _our_config(path: Path, metadata: dict[str, str]) -> tuple[Architecture, dic
     except (json.JSONDecodeError, AttributeError) as error:
         raise InputError(f"{path}: the checkpoint's lumos3d config is damaged ({error})") from None
     if version != FORMAT_VERSION:
-        raise InputError(f"{path}: checkpoint format version {version} is not supported (expected {FORMAT_VERSION})")
+        raise InputError(f"{path}: checkpoint format version {version!r} is not supported (expected {FORMAT_VERSION})")
+    provenance = config.get("provenance", {})
     try:
-        return from_dict(Architecture, config[ARCHITECTURE_KEY], ARCHITECTURE_KEY), config.get("provenance", {})
+        if not isinstance(provenance, dict):
+            raise InputError(f"provenance: expected a mapping, got {provenance!r}")
+        return from_dict(Architecture, config[ARCHITECTURE_KEY], ARCHITECTURE_KEY), provenance
     except (KeyError, InputError) as error:
         raise InputError(f"{path}: the checkpoint's lumos3d config is damaged ({error})") from None
 
@@ -119,6 +125,9 @@ def _anysplat_architecture(path: Path, base: Architecture, shapes: dict[str, tup
     """`base` with the SH degree and head width read off the Gaussian head's output conv."""
     if _GAUSSIAN_OUTPUT not in shapes:
         raise InputError(f"{path}: AnySplat checkpoint without encoder.gaussian_param_head.scratch.output_conv2.2.weight")
+    if len(shapes[_GAUSSIAN_OUTPUT]) != 4:
+        raise InputError(f"{path}: encoder.gaussian_param_head.scratch.output_conv2.2.weight has shape "
+                         f"{shapes[_GAUSSIAN_OUTPUT]}; a convolution's weight has 4 dimensions")
     channels, hidden = shapes[_GAUSSIAN_OUTPUT][:2]
     coefficients = (channels - 9) / 3
     degree = round(coefficients**0.5) - 1 if coefficients > 0 else -1
@@ -140,21 +149,50 @@ class _Layout:
 
 
 def _interpret(path: Path, shapes: dict[str, tuple[int, ...]], metadata: dict[str, str], architecture: Architecture | None) -> _Layout:
+    """How the file's keys (`shapes`, by file key) map onto our network, checked key by key and
+    shape by shape against it (InputError otherwise). A foreign file (VGGT, AnySplat) names no size:
+    `architecture` gives it, else the first of ARCHITECTURES it fits (vggt-1b, the official size,
+    tried first)."""
     file_format = _detect_format(path, list(shapes), metadata)
     names = {key: _our_name(file_format, key) for key in shapes}
     ignored = sorted(key for key, name in names.items() if name is None)
     names = {key: name for key, name in names.items() if name is not None}
+    used = {name: shapes[key] for key, name in names.items()}
     if file_format == FORMAT_LUMOS3D:
         if architecture is not None:
             raise InputError(f"{path}: is a Lumos3D checkpoint and carries its own architecture; do not pass one")
         architecture, provenance = _our_config(path, metadata)
+        _require_fits(path, architecture, [], used)
         return _Layout(file_format, architecture, provenance, names, ignored, [])
-    architecture = architecture or get_architecture(OFFICIAL_ARCHITECTURE)
     provenance = {"source": f"{'VGGT' if file_format == FORMAT_VGGT else 'AnySplat'} checkpoint", "file": path.name}
-    if file_format == FORMAT_ANYSPLAT:
-        architecture = _anysplat_architecture(path, architecture, {names[k]: s for k, s in shapes.items() if k in names})
-        return _Layout(file_format, architecture, provenance, names, ignored, [])
-    return _Layout(file_format, architecture, provenance, names, ignored, ["gaussian_head"])
+    fresh_modules = ["gaussian_head"] if file_format == FORMAT_VGGT else []
+    official = get_architecture(OFFICIAL_ARCHITECTURE)
+    candidates = [architecture] if architecture else [official, *(a for a in ARCHITECTURES.values() if a != official)]
+    misfits = []
+    for candidate in candidates:
+        if file_format == FORMAT_ANYSPLAT:
+            candidate = _anysplat_architecture(path, candidate, used)
+        try:
+            _require_fits(path, candidate, fresh_modules, used)
+        except InputError as error:
+            misfits.append(error)
+            continue
+        return _Layout(file_format, candidate, provenance, names, ignored, fresh_modules)
+    if architecture:
+        raise InputError(f"{misfits[0]}. It was read as the '{architecture.name}' architecture; pass the one it was "
+                         f"trained at ({', '.join(ARCHITECTURES)})") from None
+    raise InputError(f"{misfits[0]}. It fits none of lumos3d's architectures ({', '.join(ARCHITECTURES)}); "
+                     f"compared above with {OFFICIAL_ARCHITECTURE}, the official size") from None
+
+
+def _require_fits(path: Path, architecture: Architecture, fresh_modules: list[str], shapes: dict[str, tuple[int, ...]]) -> None:
+    """InputError unless `shapes` (our parameter names) are exactly the network's of `architecture`,
+    less the `fresh_modules` the file does not provide. The network is built on the meta device: no
+    memory and no initialisation (a fraction of a second for VGGT-1B)."""
+    with torch.device("meta"):
+        network = Lumos3D(architecture)
+    fresh = tuple(f"{name}." for name in fresh_modules)
+    check_shapes({key: tuple(t.shape) for key, t in network.state_dict().items() if not key.startswith(fresh)}, shapes, str(path))
 
 
 def require_finite_weights(path: Path, tensors: dict[str, torch.Tensor]) -> None:
@@ -165,9 +203,10 @@ def require_finite_weights(path: Path, tensors: dict[str, torch.Tensor]) -> None
 
 
 def read_checkpoint(path: Path | str, architecture: Architecture | None = None) -> Checkpoint:
-    """Read any supported checkpoint (file, or folder holding one). `architecture` gives the network
-    size for foreign layouts (default vggt-1b); our files carry their own. NaN or Inf in any
-    tensor is an error naming the file and the tensor."""
+    """Read any supported checkpoint (file, or folder holding one), checked against its network key
+    by key and shape by shape. `architecture` gives the network size for foreign layouts (default:
+    the first of ARCHITECTURES the file fits, vggt-1b tried first); our files carry their own.
+    NaN or Inf in any tensor is an error naming the file and the tensor."""
     path = resolve_weights_file(Path(path))
     metadata, raw = read_weights(path)
     require_finite_weights(path, raw)
@@ -175,7 +214,12 @@ def read_checkpoint(path: Path | str, architecture: Architecture | None = None) 
     tensors = {}
     for key, name in layout.names.items():
         tensor = raw[key]
-        tensors[name] = tensor.float() if tensor.is_floating_point() and tensor.dtype != torch.float32 else tensor
+        if tensor.is_floating_point() and tensor.dtype != torch.float32:
+            tensor = tensor.float()
+            if not torch.isfinite(tensor).all():  # finite in float64, beyond float32's range
+                raise InputError(f"{path}: tensor {key} holds values up to {float(raw[key].abs().max()):.4g}, beyond the "
+                                 f"float32 range lumos3d computes in (±{torch.finfo(torch.float32).max:.4g})")
+        tensors[name] = tensor
     if layout.ignored:
         modules = ", ".join(sorted({k.split(".")[0] for k in layout.ignored}))
         logger.info("%s: ignored %d tensors not used by Lumos3D (%s)", path.name, len(layout.ignored), modules)
@@ -186,20 +230,22 @@ def read_provenance(path: Path | str) -> dict:
     """What a checkpoint file records of how it was made (its training steps, stage ...), from its
     header alone: no weight is read."""
     path = resolve_weights_file(Path(path))
-    shapes, _, metadata = read_header(path)
+    shapes, metadata = read_header(path)
     return _interpret(path, shapes, metadata, None).provenance
 
 
-def summarize_checkpoint(path: Path | str) -> dict:
-    """Format, architecture, parameter count, tensor names by module, dtypes and provenance (for
-    `lumos3d info`). The values are read too, to refuse NaN or Inf as loading would: one pass at
-    disk speed (seconds for VGGT-1B)."""
+def summarize_checkpoint(path: Path | str, architecture: Architecture | None = None) -> dict:
+    """Format, architecture, parameter count, tensor names by module, dtypes (of the tensors used,
+    by torch's names) and provenance (for `lumos3d info`). The file is checked as loading checks
+    it: NaN or Inf, and every key and shape against the architecture (`architecture` for a foreign
+    file, as in `read_checkpoint`); one read at disk speed: seconds for VGGT-1B."""
     path = resolve_weights_file(Path(path))
-    shapes, dtypes, metadata = read_header(path)
-    layout = _interpret(path, shapes, metadata, None)
-    require_finite_weights(path, read_weights(path)[1])
-    used = {name: shapes[key] for key, name in layout.names.items()}
+    metadata, raw = read_weights(path)
+    require_finite_weights(path, raw)
+    layout = _interpret(path, {key: tuple(tensor.shape) for key, tensor in raw.items()}, metadata, architecture)
+    used = {name: tuple(raw[key].shape) for key, name in layout.names.items()}
     modules = Counter(name.split(".")[0] for name in used)
+    dtypes = Counter(str(raw[key].dtype).removeprefix("torch.") for key in layout.names)
     parameters = sum(int(torch.Size(shape).numel()) for shape in used.values())
     return {
         "kind": "checkpoint",

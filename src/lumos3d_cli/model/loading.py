@@ -14,10 +14,9 @@ from pathlib import Path
 import torch
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.state_dicts import check_tensors
-from lumos3d_cli.model.architectures import ARCHITECTURES, Architecture
+from lumos3d_cli.model.architectures import Architecture
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
-from lumos3d_cli.model.checkpoints import FORMAT_ANYSPLAT, FORMAT_VGGT, Checkpoint, read_checkpoint
+from lumos3d_cli.model.checkpoints import FORMAT_VGGT, Checkpoint, read_checkpoint
 from lumos3d_cli.model.heads.gaussian import GaussianHead
 from lumos3d_cli.model.lumos3d import Lumos3D
 
@@ -25,25 +24,17 @@ logger = logging.getLogger(__name__)
 
 
 def model_from_checkpoint(checkpoint: Checkpoint) -> Lumos3D:
-    """Build the checkpoint's network and load its tensors (strict key and shape check).
+    """Build the checkpoint's network and load its tensors (`read_checkpoint` checked every key and shape).
 
     The network is first built on the meta device, so no memory or time goes into a random
     initialisation the checkpoint would overwrite; modules the file lacks are built for real.
     """
     with torch.device("meta"):
         model = Lumos3D(checkpoint.architecture)
-    for name in checkpoint.fresh_modules:
-        setattr(model, name, GaussianHead(checkpoint.architecture))
-    fresh = tuple(f"{name}." for name in checkpoint.fresh_modules)
-    expected = {key: tuple(t.shape) for key, t in model.state_dict().items() if not key.startswith(fresh)}
-    try:
-        check_tensors(expected, checkpoint.tensors, str(checkpoint.path))
-    except InputError as error:
-        if checkpoint.format not in (FORMAT_VGGT, FORMAT_ANYSPLAT):
-            raise
-        # a foreign file names no size: the usual cause is a model smaller than the VGGT-1B assumed
-        raise InputError(f"{error}. It was read as the '{checkpoint.architecture.name}' architecture; pass the one it "
-                         f"was trained at ({', '.join(ARCHITECTURES)})") from None
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(0)  # the same file gives the same fresh modules (a converted VGGT file is reproducible)
+        for name in checkpoint.fresh_modules:
+            setattr(model, name, GaussianHead(checkpoint.architecture))
     model.load_state_dict(checkpoint.tensors, strict=False, assign=True)
     model.provenance = {**checkpoint.provenance, "format": checkpoint.format, "path": str(checkpoint.path)}
     if checkpoint.fresh_modules:
@@ -57,8 +48,8 @@ def model_from_checkpoint(checkpoint: Checkpoint) -> Lumos3D:
 def load_model(source: str | Path, device: str | torch.device = "cpu", architecture: Architecture | None = None) -> Lumos3D:
     """A network in eval mode on `device`, from a checkpoint path (file or folder) or the name of a
     bundled model ('low-light', 'over-exposure'). `architecture` sets the size of a foreign
-    (VGGT/AnySplat) checkpoint; it defaults to vggt-1b and must not be given for our own files,
-    which carry theirs."""
+    (VGGT/AnySplat) checkpoint (default: the first architecture its shapes fit, vggt-1b tried
+    first); it must not be given for our own files, which carry theirs."""
     device = usable_device(device)
     model = model_from_checkpoint(read_checkpoint(resolve_checkpoint(source), architecture))
     logger.info("loaded architecture '%s' from %s", model.architecture.name, model.provenance.get("path"))
