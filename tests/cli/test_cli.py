@@ -100,6 +100,33 @@ def test_degrade_with_the_camera_pipeline_records_its_draws(run_cli, buu, tmp_pa
     assert cv2.imread(str(tmp_path / "dark" / "1.png")).shape == cv2.imread(str(tmp_path / "plain" / "1.png")).shape
 
 
+def test_a_jpeg_output_is_compressed_once_at_the_quality_asked(run_cli, buu, tmp_path):
+    """`-o dark.jpg --jpeg-quality 50` compressed at 50 in the degradation, then again at 95 when
+    writing; without --jpeg-quality the file's compression at 95 went unrecorded."""
+    inputs = _copy_images(buu / "high", tmp_path / "high", 1)
+    result = run_cli("degrade", inputs, "-o", tmp_path / "q50.jpg", "--jpeg-quality", "50", "--json")
+    assert result.code == 0, result.err
+    assert json.loads(result.out)["images"][0]["jpeg_quality"] == 50
+    as_png = run_cli("degrade", inputs, "-o", tmp_path / "q50.png", "--jpeg-quality", "50")
+    assert as_png.code == 0, as_png.err  # the degradation's own JPEG round trip, stored losslessly
+    assert np.array_equal(cv2.imread(str(tmp_path / "q50.jpg")), cv2.imread(str(tmp_path / "q50.png")))
+    default = run_cli("degrade", inputs, "-o", tmp_path / "plain.jpg", "--json")
+    summary = json.loads(default.out)
+    assert summary["jpeg_quality"] == 95 and summary["images"][0]["jpeg_quality"] == 95
+
+
+def test_degrade_refuses_seeds_beyond_the_generator_and_jpeg_beyond_its_sizes(run_cli, tmp_path):
+    image = tmp_path / "strip.png"
+    cv2.imwrite(str(image), np.full((2, 65501, 3), 128, np.uint8))
+    for seed in ("-1", str(2**63)):  # -1 gave 2**64 - 1's images; 2**64 an internal error
+        expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--seed", seed), f"--seed {seed}", "0 to 2**63 - 1")
+    for output, options in (("o.jpg", ()), ("o", ("--jpeg-quality", "90"))):  # internal errors naming a staging file
+        result = run_cli("degrade", image, "-o", tmp_path / output, *options)
+        expect_input_error(result, f"{image}: 65501x2 pixels; JPEG holds at most 65500 a side")
+        assert ".staging" not in result.err
+    assert listing(tmp_path) == ["strip.png"]
+
+
 def test_degrade_single_file_and_raw(run_cli, shared_data, tmp_path):
     result = run_cli("degrade", shared_data / "raw" / "Blackmagic.dng", "-o", tmp_path / "dark.png", "--quiet")
     assert result.code == 0, result.err

@@ -112,3 +112,39 @@ def test_project_sparse_depth_keeps_the_nearest():
     points = np.array([[0.0, 0.0, 2.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
     depth = project_sparse_depth(points, extrinsics, intrinsics, 10, 10)
     assert depth[5, 5] == 1.0 and (depth > 0).sum() == 1
+
+
+def test_project_sparse_depth_is_a_z_buffer_at_any_density_and_thread_count():
+    """Thousands of points on few pixels: every pixel holds its nearest point's depth, checked
+    against numpy's minimum.at, with one thread and with two (an indexed write of repeated pixels
+    kept an arbitrary point from about 4,000 points on two threads)."""
+    rng = np.random.default_rng(0)
+    points = np.concatenate([rng.uniform(-1, 1, (20000, 2)), rng.uniform(1, 5, (20000, 1))], axis=1)
+    extrinsics = torch.eye(4, dtype=torch.float64)[:3]
+    intrinsics = torch.tensor([[20.0, 0, 16], [0, 20, 12], [0, 0, 1]], dtype=torch.float64)
+    pixels = (points / points[:, 2:]) @ intrinsics.numpy().T
+    columns, rows = np.floor(pixels[:, 0]).astype(int), np.floor(pixels[:, 1]).astype(int)
+    inside = (columns >= 0) & (columns < 32) & (rows >= 0) & (rows < 24)
+    expected = np.full((24, 32), np.inf, np.float32)
+    np.minimum.at(expected, (rows[inside], columns[inside]), points[inside, 2].astype(np.float32))
+    expected[np.isinf(expected)] = 0
+    threads = torch.get_num_threads()
+    try:
+        for count in (1, 2):
+            torch.set_num_threads(count)
+            depth = project_sparse_depth(points, extrinsics, intrinsics, 32, 24)
+            assert depth.dtype == torch.float32 and np.array_equal(depth.numpy(), expected), count
+    finally:
+        torch.set_num_threads(threads)
+
+
+def test_the_image_cache_stays_within_its_budget_and_changes_no_sample(records):
+    kitchen = next(r for r in records if r.name == "kitchen")
+    unbounded = MultiViewDataset([kitchen], 3, (112, 84), require_poses=True, seed=5, samples_per_scene=6)
+    one_photo = 600 * 450 * 3 * 2  # kitchen's photos are smaller: about two fit
+    bounded = MultiViewDataset([kitchen], 3, (112, 84), require_poses=True, seed=5, samples_per_scene=6, cache_bytes=one_photo)
+    for index in range(6):
+        assert torch.equal(unbounded[index]["images"], bounded[index]["images"])
+        assert 0 < bounded._cached_bytes <= one_photo and len(bounded._cache) >= 1
+        assert bounded._cached_bytes == sum(image.nbytes for image in bounded._cache.values())
+    assert len(unbounded._cache) > len(bounded._cache)

@@ -66,6 +66,23 @@ def test_a_rerun_replaces_its_own_files_removes_its_stale_ones_and_keeps_everyth
     assert sorted(Manifest.read(out).files) == ["00000.png", "scene.ply", "summary.json", "views/2.png"]
 
 
+def test_a_stale_file_of_an_earlier_run_that_this_run_reads_is_kept(tmp_path, caplog):
+    """An input linking to an earlier run's output (degrade D2 -o D with D2/zzz.png -> D/photo.png):
+    the re-run neither writes over it nor removes it as stale."""
+    out, inputs = tmp_path / "out", tmp_path / "inputs"
+    with OutputSet(out, "degrade", "degrade").add_file("photo.png").add_file("other.png").staged() as staging:
+        for name in ("photo.png", "other.png"):
+            (staging.root / name).write_text("first")
+    inputs.mkdir()
+    (inputs / "zzz.png").symlink_to(out / "photo.png")
+    with OutputSet(out, "degrade", "degrade", [inputs, inputs / "zzz.png"]).add_file("zzz.png").staged() as staging:
+        (staging.root / "zzz.png").write_text((inputs / "zzz.png").read_text() + ", degraded")
+    assert _tree(out) == [MANIFEST_NAME, "photo.png", "zzz.png"]  # other.png: stale, removed
+    assert (inputs / "zzz.png").read_text() == "first" and (out / "zzz.png").read_text() == "first, degraded"
+    assert "photo.png: kept: an earlier run's output, and an input of this run" in caplog.text
+    assert sorted(Manifest.read(out).files) == ["photo.png", "zzz.png"]  # still the set's: a later run may remove it
+
+
 @pytest.mark.parametrize("place", ["scene.ply", "views/notes.txt", "views/1.png"])
 def test_a_file_lumos3d_did_not_write_is_refused_before_any_work_and_survives(tmp_path, place):
     out = tmp_path / "out"

@@ -5,9 +5,13 @@ or missing checkpoint falls back to the newest intact one, naming what it skippe
 import json
 import logging
 import re
+import shutil
 import signal
 from pathlib import Path
 
+import pytest
+
+from lumos3d_cli.errors import InputError
 from lumos3d_cli.train.config import load_config
 from lumos3d_cli.train.distributed import setup_distributed
 from lumos3d_cli.train.trainer import Trainer
@@ -97,10 +101,29 @@ def test_a_misspelt_exclusion_is_named(tiny_config, caplog):
     """A warning, not a refusal: a fixed hold-out list on a partial copy of a dataset names scenes
     that are not there; a misspelling trains on the scene it meant to leave out, and is said."""
     config = load_config(tiny_config(name="exclude"), ["data.exclude=[stattue]"])
-    with caplog.at_level(logging.WARNING, logger="lumos3d_cli.train.trainer"):
+    with caplog.at_level(logging.WARNING, logger="lumos3d_cli"):
         trainer = Trainer(config, setup_distributed("cpu"))
     assert "data.exclude: stattue: no such training scene" in caplog.text
     assert "statue" in {record.name for record in trainer.dataset.records}
+
+
+def test_an_excluded_scene_is_never_read_and_scenes_too_small_are_warned_of(tiny_config, shared_data, tmp_path, caplog):
+    """data.exclude leaves a damaged scene out before reading it (it was read first, and refused the
+    run); a scene with fewer photos than data.views is named in a warning (it was an info line)."""
+    root = tmp_path / "root"
+    root.mkdir()
+    for name in ("statue", "llff_fern"):
+        (root / name).symlink_to(shared_data / "scenes" / name)
+    (root / "broken" / "images").mkdir(parents=True)  # holds no images: an error when read
+    (root / "small" / "images").mkdir(parents=True)
+    shutil.copy(next((shared_data / "scenes" / "statue" / "images").iterdir()), root / "small" / "images")
+    config = tiny_config(name="broken", data__root=str(root), data__scenes=[])
+    with pytest.raises(InputError, match="broken/images: folder holds no images"):
+        Trainer(load_config(config, []), setup_distributed("cpu"))
+    with caplog.at_level(logging.WARNING, logger="lumos3d_cli"):
+        trainer = Trainer(load_config(config, ["data.exclude=[broken]"]), setup_distributed("cpu"))
+    assert {record.name for record in trainer.dataset.records} == {"statue", "llff_fern"}
+    assert "1 scene(s) have fewer than 2 posed views and are not used: small" in caplog.text
 
 
 def test_cuda_on_a_machine_without_it_is_refused_naming_the_setting(tiny_config, monkeypatch):

@@ -115,6 +115,19 @@ def test_student_stage_logs_every_term(tiny_config, tmp_path):
     assert cameras["pairs"] == 3 and 0 <= cameras["auc_30"] <= 1 and 0 <= cameras["rotation_error_median"] <= 180
 
 
+def test_validation_samples_are_no_training_steps_inputs(tiny_config):
+    """Validation scored steps 0..N-1's own inputs (the same views, crop and degradation)."""
+    trainer = _trainer(tiny_config(stage="teacher", name="validation", optim__steps=4, batch_size=1))
+    validation = [network_input for _, network_input, _ in trainer._validation_samples()]
+    assert len(validation) == min(trainer.config.validation_samples, len(trainer.dataset))
+    for step in range(8):
+        batch = trainer._load_batch(step)
+        network_input, _ = trainer.inputs_and_targets(batch, step)
+        assert all(network_input.shape != v.shape or not torch.equal(network_input, v) for v in validation), step
+    again = [network_input for _, network_input, _ in trainer._validation_samples()]
+    assert all(torch.equal(a, b) for a, b in zip(validation, again))  # fixed across the run
+
+
 @pytest.mark.parametrize("teacher_input", ["normal-light", "degraded"])
 def test_the_teacher_sees_the_configured_images(tiny_config, teacher_input):
     teacher = _trainer(tiny_config(name="teacher", optim__steps=1)).run()

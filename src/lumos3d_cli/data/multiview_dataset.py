@@ -4,6 +4,7 @@ and resized to the network size, with cameras relative to the first view and spa
 from __future__ import annotations
 
 import logging
+from collections import OrderedDict
 
 import numpy as np
 import torch
@@ -17,12 +18,17 @@ from lumos3d_cli.io.images import read_image, to_srgb
 
 logger = logging.getLogger(__name__)
 
+# Decoded views kept per dataset (each data-loading process holds its own): about 700 of LOM's
+# 500x375 photos, 250 of DL3DV's 960x540 frames; beyond it the least recently used are decoded again.
+IMAGE_CACHE_BYTES = 1 << 30
+
 
 def project_sparse_depth(points: np.ndarray, extrinsics: torch.Tensor, intrinsics: torch.Tensor, width: int, height: int) -> torch.Tensor:
-    """Nearest-pixel z-buffer of world points [P,3] in one view -> [H, W] depth (0 = no point)."""
-    depth = torch.zeros(height, width, dtype=torch.float32)
+    """Nearest-pixel z-buffer of world points [P,3] in one view -> [H, W] depth (0 = no point):
+    each pixel the nearest point's depth (a min-reduction: an indexed write of repeated pixels
+    keeps an unspecified one, which depended on the thread count)."""
     if points.size == 0:
-        return depth
+        return torch.zeros(height, width, dtype=torch.float32)
     world = torch.from_numpy(points).to(extrinsics)
     camera = world @ extrinsics[:, :3].T + extrinsics[:, 3]
     z = camera[:, 2]
@@ -32,9 +38,9 @@ def project_sparse_depth(points: np.ndarray, extrinsics: torch.Tensor, intrinsic
     rows = torch.floor(pixels[:, 1]).long()
     inside = (columns >= 0) & (columns < width) & (rows >= 0) & (rows < height)
     columns, rows, values = columns[inside], rows[inside], z[front][inside].float()
-    order = torch.argsort(values, descending=True)  # nearest written last wins
-    depth[rows[order], columns[order]] = values[order]
-    return depth
+    depth = torch.full((height * width,), torch.inf)
+    depth.scatter_reduce_(0, rows * width + columns, values, reduce="amin")
+    return torch.where(torch.isinf(depth), 0.0, depth).view(height, width)
 
 
 class MultiViewDataset(Dataset):
@@ -55,12 +61,13 @@ class MultiViewDataset(Dataset):
         require_poses: bool = False,
         seed: int = 0,
         samples_per_scene: int = 1,
+        cache_bytes: int = IMAGE_CACHE_BYTES,
     ):
         usable = [r for r in records if len(candidate_views(r, require_poses)) >= views]
         dropped = sorted(set(r.name for r in records) - set(r.name for r in usable))
         if dropped:
-            logger.info("%d scene(s) have fewer than %d %s views and are not used: %s", len(dropped), views,
-                        "posed" if require_poses else "", ", ".join(dropped))
+            logger.warning("%d scene(s) have fewer than %d %sviews and are not used: %s", len(dropped), views,
+                           "posed " if require_poses else "", ", ".join(dropped))
         if not usable:
             raise ValueError(f"no scene has {views} {'posed ' if require_poses else ''}views")
         self.records = usable
@@ -72,7 +79,9 @@ class MultiViewDataset(Dataset):
         self.seed = seed
         self.samples_per_scene = samples_per_scene
         self.epoch = 0
-        self._cache: dict[tuple[int, int], torch.Tensor] = {}
+        self.cache_bytes = cache_bytes
+        self._cache: OrderedDict[tuple[int, int], torch.Tensor] = OrderedDict()  # least recently used first
+        self._cached_bytes = 0
 
     def __len__(self) -> int:
         return len(self.records) * self.samples_per_scene
@@ -81,11 +90,19 @@ class MultiViewDataset(Dataset):
         self.epoch = epoch
 
     def _image(self, scene: int, view: int) -> torch.Tensor:
+        """View `view` of scene `scene`, [3, H, W] sRGB: decoded once and kept (float16) while the
+        cache holds at most `cache_bytes` (a paper-scale data set decodes terabytes over a run)."""
         key = (scene, view)
-        if key not in self._cache:
-            pixels = to_srgb(read_image(self.records[scene].image_paths[view]))
-            self._cache[key] = torch.from_numpy(pixels).permute(2, 0, 1).to(torch.float16)
-        return self._cache[key].float()
+        if key in self._cache:
+            self._cache.move_to_end(key)
+            return self._cache[key].float()
+        pixels = to_srgb(read_image(self.records[scene].image_paths[view]))
+        image = torch.from_numpy(pixels).permute(2, 0, 1).to(torch.float16)
+        self._cache[key] = image
+        self._cached_bytes += image.nbytes
+        while self._cached_bytes > self.cache_bytes and self._cache:
+            self._cached_bytes -= self._cache.popitem(last=False)[1].nbytes
+        return image.float()
 
     def __getitem__(self, index: int) -> dict:
         rng = np.random.default_rng([self.seed, self.epoch, index])

@@ -75,18 +75,31 @@ def _attach_colmap(record: SceneRecord, sparse: Path) -> None:
     record.observed = {view: np.asarray(indices, dtype=np.int64) for view, indices in seen.items()}
 
 
-def scan_scene_folders(root: Path | str, names: list[str] | None = None) -> list[SceneRecord]:
-    """Every `<root>/<scene>/images/` folder, with poses from `sparse/0` (COLMAP text) or
-    `transforms.json` when present."""
+def _without_excluded(root: Path, folders: list[Path], exclude: list[str]) -> list[Path]:
+    """`folders` less those named in `exclude`, left out before anything in them is read (a
+    damaged scene can be excluded); a name matching no folder is warned of."""
+    unknown = sorted(set(exclude) - {folder.name for folder in folders})
+    if unknown:  # a misspelt exclusion trains on the scene it meant to leave out; a partial copy has none
+        logger.warning("data.exclude: %s: no such training scene under %s (misspelt? nothing is left out for "
+                       "it)", ", ".join(unknown), root)
+    return [folder for folder in folders if folder.name not in set(exclude)]
+
+
+def scan_scene_folders(root: Path | str, names: list[str] | None = None, exclude: list[str] = ()) -> list[SceneRecord]:
+    """Every `<root>/<scene>/images/` folder (those in `names` when given, never those in
+    `exclude`), with poses from `sparse/0` (COLMAP text) or `transforms.json` when present."""
     root = Path(root)
     require_folder(root, "that holds the training scenes (data.root)")
     folders = sorted(p for p in root.iterdir() if (p / "images").is_dir())
+    if not folders:
+        raise InputError(f"{root}: no scene folders with an images/ subfolder")
     if names:
         wanted = set(names)
         missing = wanted - {p.name for p in folders}
         if missing:
             raise InputError(f"{root}: no scene folder(s) named {', '.join(sorted(missing))}")
         folders = [p for p in folders if p.name in wanted]
+    folders = _without_excluded(root, folders, list(exclude))
     records = []
     for folder in folders:
         record = SceneRecord(folder.name, list_images(folder / "images"))
@@ -95,20 +108,19 @@ def scan_scene_folders(root: Path | str, names: list[str] | None = None) -> list
         elif (folder / "transforms.json").is_file():
             _attach_cameras(record, read_transforms_json(folder / "transforms.json"))
         records.append(record)
-    if not records:
-        raise InputError(f"{root}: no scene folders with an images/ subfolder")
     return records
 
 
-def scan_dl3dv(root: Path | str, downsample: int = 4, names: list[str] | None = None) -> list[SceneRecord]:
+def scan_dl3dv(root: Path | str, downsample: int = 4, names: list[str] | None = None,
+               exclude: list[str] = ()) -> list[SceneRecord]:
     """DL3DV: `<root>/<hash>/transforms.json` with `images_<downsample>/` holding the frames
-    (file names as in transforms.json's file_path); intrinsics are rescaled to those images."""
+    (file names as in transforms.json's file_path); intrinsics are rescaled to those images.
+    Scenes in `names` when given, never those in `exclude`."""
     root = Path(root)
     require_folder(root, "that holds the training scenes (data.root)")
     records = []
-    for folder in sorted(p for p in root.iterdir() if (p / "transforms.json").is_file()):
-        if names and folder.name not in names:
-            continue
+    folders = [p for p in sorted(root.iterdir()) if (p / "transforms.json").is_file() and (not names or p.name in names)]
+    for folder in _without_excluded(root, folders, list(exclude)):
         image_folder = folder / f"images_{downsample}"
         if not image_folder.is_dir():
             logger.warning("%s: no images_%d/ folder; scene skipped", folder, downsample)

@@ -13,6 +13,8 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import atomic_path, write_bytes_atomic
 
 _MAX_CODE = {8: 255, 16: 65535}
+DEFAULT_JPEG_QUALITY = 95
+JPEG_MAX_SIDE = 65500  # the JPEG format's 16-bit sizes, less libjpeg's margin
 _DTYPE = {8: np.uint8, 16: np.uint16}
 
 
@@ -22,7 +24,7 @@ def quantize(srgb: np.ndarray, bit_depth: int) -> np.ndarray:
     return np.round(np.clip(srgb, 0.0, 1.0) * scale).astype(_DTYPE[bit_depth])
 
 
-def write_image(path: Path | str, srgb: np.ndarray, bit_depth: int = 8, jpeg_quality: int = 95) -> None:
+def write_image(path: Path | str, srgb: np.ndarray, bit_depth: int = 8, jpeg_quality: int = DEFAULT_JPEG_QUALITY) -> None:
     """Write [H, W, 3] sRGB float pixels to PNG (8/16 bit) or JPEG (8 bit), atomically."""
     path = Path(path)
     require_finite(f"image for {path}", srgb)
@@ -33,6 +35,9 @@ def write_image(path: Path | str, srgb: np.ndarray, bit_depth: int = 8, jpeg_qua
         raise InputError(f"{path}: JPEG holds 8 bits only; use .png for 16-bit output")
     if suffix not in (".png", ".jpg", ".jpeg"):
         raise InputError(f"{path}: cannot write '{path.suffix}' here; use .png, .jpg or .exr")
+    if suffix != ".png" and max(srgb.shape[:2]) > JPEG_MAX_SIDE:
+        raise InputError(f"{path}: {srgb.shape[1]}x{srgb.shape[0]} pixels; JPEG holds at most {JPEG_MAX_SIDE} a side: "
+                         "use .png")
     codes = np.ascontiguousarray(quantize(srgb, bit_depth)[..., ::-1])
     params = [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality] if suffix != ".png" else []
     ok, encoded = cv2.imencode(suffix, codes, params)

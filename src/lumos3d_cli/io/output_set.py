@@ -414,6 +414,7 @@ class OutputSet:
             if not item.is_folder and not _is_within(item.staged, root):
                 os.chmod(item.staged, 0o666 & ~current_umask())  # mkstemp made it private
             moves.append((item.staged, item.final, "source-gone"))
+        inputs = set(_resolved_all(self.inputs))
         committed = False
         done: list[tuple[Path, Path]] = []  # the moves made (and not undone)
         try:
@@ -428,9 +429,13 @@ class OutputSet:
                         continue  # moved away above with the output it belongs to
                     if (folder, entry.output_set) in written_sets:
                         # A file of the set this run replaces that it did not write again (a view of an
-                        # earlier run with more photos): stale; removed unless the user changed it.
-                        if previous.owns(folder / name):
+                        # earlier run with more photos): stale; removed unless the user changed it, or
+                        # this run read it (an input linking to it): inputs are never touched.
+                        if previous.owns(folder / name) and _resolved(folder / name) not in inputs:
                             move_away(folder / name)
+                        elif previous.owns(folder / name):
+                            manifest.files[name] = entry
+                            logger.warning("%s: kept: an earlier run's output, and an input of this run", folder / name)
                         continue
                     if (folder / name).exists():
                         manifest.files[name] = entry

@@ -7,6 +7,7 @@ import json
 import math
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import torch
@@ -15,7 +16,7 @@ from lumos3d_cli.data.degradations import (
     MAX_COLOUR_CAST, MODES, Degradation, apply_degradation, is_valid_range, range_rule, sample_parameters,
 )
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.image_write import write_image
+from lumos3d_cli.io.image_write import DEFAULT_JPEG_QUALITY, JPEG_MAX_SIDE, write_image
 from lumos3d_cli.io.images import read_image, to_srgb
 from lumos3d_cli.pipeline.degrade_outputs import degrade_outputs, is_single_file
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
@@ -38,6 +39,8 @@ def degrade_files(
     progress = progress or SilentProgress()
     if mode not in MODES:
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
+    if not 0 <= seed < 2**63:  # as a training config's seed: torch's generator wraps others round silently
+        raise InputError(f"{seed}: use a seed from 0 to 2**63 - 1", parameter="seed")
     outputs = degrade_outputs(paths, output, bit_depth, given)
     outputs.check()
     single_file = is_single_file(output)
@@ -60,18 +63,29 @@ def degrade_files(
     started = time.perf_counter()
     records = []
     progress.start(f"degrade ({mode})", len(paths))
+    # a .jpg output is the JPEG stage itself: compressed once, at --jpeg-quality (else write_image's default)
+    writes_jpeg = single_file and output.suffix.lower() in (".jpg", ".jpeg")
+    file_quality = jpeg_quality or DEFAULT_JPEG_QUALITY  # a PNG ignores it
     with outputs.staged() as staging:
         for source in paths:
             target = output if single_file else output / f"{source.stem}.png"
             image = torch.from_numpy(to_srgb(read_image(source))).permute(2, 0, 1)
+            if (writes_jpeg or jpeg_quality is not None) and max(image.shape[1:]) > JPEG_MAX_SIDE:
+                raise InputError(f"{source}: {image.shape[2]}x{image.shape[1]} pixels; JPEG holds at most {JPEG_MAX_SIDE} "
+                                 "a side: degrade it without JPEG (no --jpeg-quality, a .png output)")
             parameters = shared if shared is not None else sample_parameters(degradation, (), generator)
-            degraded = apply_degradation(image, mode, parameters, generator)
-            write_image(staging.root / target.name, degraded.permute(1, 2, 0).numpy(), bit_depth=bit_depth)
-            records.append({"input": str(source), "output": str(target), **parameters.as_dict()})
+            degraded = apply_degradation(image, mode, replace(parameters, jpeg_quality=None) if writes_jpeg else parameters,
+                                         generator)
+            write_image(staging.root / target.name, degraded.permute(1, 2, 0).numpy(), bit_depth=bit_depth,
+                        jpeg_quality=file_quality)
+            drawn = parameters.as_dict()
+            if writes_jpeg:
+                drawn.update(jpeg_quality=float(file_quality), bits=8)
+            records.append({"input": str(source), "output": str(target), **drawn})
             progress.advance(f"degrade ({mode})")
         summary = {
             "mode": mode, "seed": seed, "exposure_range": list(ranges.exposure), "gamma_range": list(ranges.gamma),
-            "noise": noise, "colour_cast": colour_cast, "jpeg_quality": jpeg_quality,
+            "noise": noise, "colour_cast": colour_cast, "jpeg_quality": file_quality if writes_jpeg else jpeg_quality,
             "shared_parameters": not per_image,
             "count": len(records), "seconds": round(time.perf_counter() - started, 3), "images": records,
         }

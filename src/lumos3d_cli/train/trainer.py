@@ -60,6 +60,9 @@ from lumos3d_cli.train.trainable import restrict_training
 from lumos3d_cli.train.validation import render_views, validate, validation_picture
 
 logger = logging.getLogger(__name__)
+
+# The epoch validation draws its samples from: a step reaches it only after 2^31 passes over the data.
+VALIDATION_EPOCH = 2**31
 # The schedule follows the step count, taken or skipped (`Trainer.step`): torch warns when a run's first
 # step is a skipped one, as if the two calls came in the wrong order.
 warnings.filterwarnings("ignore", message=r"Detected call of `lr_scheduler\.step\(\)` before", category=UserWarning)
@@ -160,14 +163,9 @@ class Trainer:
     def _dataset(self) -> MultiViewDataset:
         data = self.config.data
         if data.layout == "dl3dv":
-            records = scan_dl3dv(data.root, data.dl3dv_downsample, data.scenes or None)
+            records = scan_dl3dv(data.root, data.dl3dv_downsample, data.scenes or None, data.exclude)
         else:
-            records = scan_scene_folders(data.root, data.scenes or None)
-        unknown = sorted(set(data.exclude) - {record.name for record in records})
-        if unknown:  # a misspelt exclusion trains on the scene it meant to leave out; a partial copy has none
-            logger.warning("data.exclude: %s: no such training scene under %s (misspelt? nothing is left out for "
-                           "it)", ", ".join(unknown), data.root)
-        records = [r for r in records if r.name not in set(data.exclude)]
+            records = scan_scene_folders(data.root, data.scenes or None, data.exclude)
         if not records:
             raise InputError(f"{data.root}: no training scenes left after data.scenes/data.exclude")
         try:
@@ -176,7 +174,7 @@ class Trainer:
                 require_poses=self.config.stage == "teacher", seed=self.config.seed, samples_per_scene=data.samples_per_scene,
             )
         except ValueError as error:
-            raise InputError(f"{data.root}: {error}") from error
+            raise InputError(f"{data.root}: {error}; lower data.views or add scenes with more photos") from error
 
     def _student(self) -> Lumos3D:
         source = self.config.model
@@ -397,9 +395,12 @@ class Trainer:
                                    report.terms)
 
     def _validation_samples(self):
-        """The first `validation_samples` samples of epoch 0 (fixed across the run), as
-        (batch, network input, targets)."""
-        for sample_id in range(min(self.config.validation_samples, len(self.dataset))):
+        """`validation_samples` samples fixed across the run, as (batch, network input, targets):
+        the first of `VALIDATION_EPOCH`, which no run reaches, so never a training step's views,
+        crops or degradation (those of epoch 0 were steps 0..N-1's own inputs). They come from
+        the training scenes: held-out data is the brackets' (`brackets.validation_samples`)."""
+        first = VALIDATION_EPOCH * len(self.dataset)
+        for sample_id in range(first, first + min(self.config.validation_samples, len(self.dataset))):
             batch = self._load_samples([sample_id])
             yield (batch, *self.inputs_and_targets(batch, sample_id))
 
