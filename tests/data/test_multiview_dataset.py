@@ -1,8 +1,9 @@
+import cv2
 import numpy as np
 import pytest
 import torch
 
-from lumos3d_cli.data.augment import crop_and_resize, crop_box, mirror
+from lumos3d_cli.data.augment import centred_box, crop_and_resize, crop_box, mirror
 from lumos3d_cli.data.multiview_dataset import MultiViewDataset, project_sparse_depth
 from lumos3d_cli.data.scene_records import scan_scene_folders
 from lumos3d_cli.data.view_sampling import sample_views
@@ -148,3 +149,27 @@ def test_the_image_cache_stays_within_its_budget_and_changes_no_sample(records):
         assert 0 < bounded._cached_bytes <= one_photo and len(bounded._cache) >= 1
         assert bounded._cached_bytes == sum(image.nbytes for image in bounded._cache.values())
     assert len(unbounded._cache) > len(bounded._cache)
+
+
+def test_views_of_another_aspect_are_cropped_never_stretched(tmp_path):
+    """A portrait photo among landscape ones (british_museum holds one): its view is its centre at
+    the first view's aspect, never stretched to the first view's size (a disc came out 1.8x wide),
+    and posed views' intrinsics follow the crop (fx / fy stays the camera's own)."""
+    images = tmp_path / "scene" / "images"
+    images.mkdir(parents=True)
+    for name, (width, height) in {"0.png": (160, 120), "1.png": (160, 120), "2.png": (120, 160)}.items():
+        picture = np.full((height, width, 3), 255, np.uint8)
+        cv2.circle(picture, (width // 2, height // 2), 10, (0, 0, 0), -1)  # inside any crop of the sample
+        cv2.imwrite(str(images / name), picture)
+    record = scan_scene_folders(tmp_path)[0]
+    dataset = MultiViewDataset([record], 3, (112, 84), crop_scale=(1.0, 1.0), flip=False, seed=0, samples_per_scene=6)
+    for index in range(6):
+        for view in dataset[index]["images"]:
+            rows, columns = np.nonzero(view.mean(0).numpy() < 0.5)
+            assert abs((np.ptp(columns) + 1) / (np.ptp(rows) + 1) - 1) < 0.2  # stretched: 1.8 or 0.56
+    intrinsics = torch.tensor([[[100.0, 0, 80], [0, 100, 60], [0, 0, 1]], [[100.0, 0, 60], [0, 100, 80], [0, 0, 1]]])
+    box = centred_box(120, 160, 160, 120)
+    assert box == (0, 35, 120, 90)
+    _, cropped = crop_and_resize(torch.zeros(1, 3, 160, 120), intrinsics[1:], box, 160, 120)
+    torch.testing.assert_close(cropped[0, 0, 0] / cropped[0, 1, 1], torch.tensor(1.0))
+    assert cropped[0, 0, 2].item() == pytest.approx(80) and cropped[0, 1, 2].item() == pytest.approx(60)

@@ -26,6 +26,14 @@ def crop_box(width: int, height: int, out_width: int, out_height: int, scale: fl
     return x0, y0, crop_width, crop_height
 
 
+def centred_box(width: int, height: int, out_width: int, out_height: int) -> tuple[int, int, int, int]:
+    """(x0, y0, crop_width, crop_height): the largest box of the output's aspect ratio, centred."""
+    aspect = out_width / out_height
+    crop_width = max(1, min(width, int(round(height * aspect))))
+    crop_height = max(1, min(height, int(round(crop_width / aspect))))
+    return (width - crop_width) // 2, (height - crop_height) // 2, crop_width, crop_height
+
+
 def crop_and_resize(
     images: torch.Tensor, intrinsics: torch.Tensor | None, box: tuple[int, int, int, int], out_width: int, out_height: int
 ) -> tuple[torch.Tensor, torch.Tensor | None]:

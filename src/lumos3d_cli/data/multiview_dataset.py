@@ -10,7 +10,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from lumos3d_cli.data.augment import crop_and_resize, crop_box, mirror
+from lumos3d_cli.data.augment import centred_box, crop_and_resize, crop_box, mirror
 from lumos3d_cli.data.scene_records import SceneRecord
 from lumos3d_cli.data.view_sampling import candidate_views, sample_views
 from lumos3d_cli.io.cameras import invert_rigid, to_homogeneous
@@ -110,18 +110,13 @@ class MultiViewDataset(Dataset):
         record = self.records[scene]
         views = sample_views(record, self.views, rng, self.require_poses)
         images = [self._image(scene, v) for v in views]
-        sizes = {tuple(image.shape[-2:]) for image in images}
-        if len(sizes) > 1:  # mixed sizes within a scene: bring all to the first view's size
-            height, width = images[0].shape[-2:]
-            images = [torch.nn.functional.interpolate(i[None], size=(height, width), mode="bilinear", antialias=True)[0] for i in images]
-        images = torch.stack(images)
-        height, width = images.shape[-2:]
+        height, width = images[0].shape[-2:]
         rows = [record.camera_of(v) for v in views]
         has_poses = record.cameras is not None and all(r is not None for r in rows)
         intrinsics = extrinsics = None
         points = None
         if has_poses:
-            cameras = record.cameras[rows].rescaled(width, height)
+            cameras = record.cameras[rows].rescaled_to([(image.shape[-1], image.shape[-2]) for image in images])
             intrinsics = cameras.intrinsics.clone()
             # Re-express in the first view's frame.
             first_to_world = invert_rigid(cameras.extrinsics[0])
@@ -131,6 +126,16 @@ class MultiViewDataset(Dataset):
                 world_to_first = to_homogeneous(cameras.extrinsics[0]).numpy()
                 xyz = record.points_xyz[seen]
                 points = xyz @ world_to_first[:3, :3].T + world_to_first[:3, 3]
+        # views of another size than the first (a portrait photo among landscape ones): their centre at
+        # the first view's aspect, resized to its size, never stretched (the intrinsics follow)
+        for i, image in enumerate(images):
+            if image.shape[-2:] != (height, width):
+                box = centred_box(image.shape[-1], image.shape[-2], width, height)
+                resized, view = crop_and_resize(image[None], None if intrinsics is None else intrinsics[i : i + 1], box, width, height)
+                images[i] = resized[0]
+                if intrinsics is not None:
+                    intrinsics[i] = view[0]
+        images = torch.stack(images)
         scale = rng.uniform(*self.crop_scale)
         box = crop_box(width, height, self.width, self.height, scale, rng)
         images, intrinsics = crop_and_resize(images, intrinsics, box, self.width, self.height)
