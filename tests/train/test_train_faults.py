@@ -212,3 +212,25 @@ def test_a_damaged_config_in_the_newest_checkpoint_falls_back_like_damaged_weigh
     result = run_lumos3d("train", config, "--resume", "--json")
     assert result.code == 0, result.err[-3000:]
     assert "skipping checkpoint step_00000004" in result.err and "resuming from step 2" in result.err
+
+
+def test_bad_data_met_mid_run_keeps_the_steps_done(tiny_config, monkeypatch):
+    """A photo that cannot be read, met at step 3 of a run that checkpoints every 4 steps: the
+    three steps done were lost; a checkpoint after step 3 is saved and --resume goes on from it."""
+    config = tiny_config(name="damaged", optim__steps=6, checkpoint_every=4)
+    trainer = Trainer(load_config(config, []), setup_distributed("cpu"))
+    load_batch = trainer._load_batch
+
+    def damaged_at_step_3(step):
+        if step == 3:
+            raise InputError("scene/images/006.jpg: cannot be read (truncated)")
+        return load_batch(step)
+
+    monkeypatch.setattr(trainer, "_load_batch", damaged_at_step_3)
+    with pytest.raises(InputError, match=r"006.jpg: cannot be read \(truncated\); a checkpoint after step 3 was saved: "
+                                         r"fix the file or exclude its scene \(data.exclude\), then add --resume"):
+        trainer.run()
+    run = Path(str(config).replace(".yaml", ""))
+    assert (run / "checkpoints" / "latest").read_text().strip() == "step_00000003"
+    resumed = Trainer(load_config(config, []), setup_distributed("cpu")).run(resume=True)
+    assert resumed.steps_done == 6 and resumed.history[0].step == 3

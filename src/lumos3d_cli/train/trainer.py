@@ -541,7 +541,17 @@ class Trainer:
         result = TrainResult(start)
         try:
             for step in range(start, end):
-                report = self.step(step)
+                try:
+                    report = self.step(step)
+                except InputError as error:
+                    # bad data met mid-run (a damaged photo, hours in): the weights of the steps done are
+                    # kept, so the run goes on with --resume once the file is fixed or its scene excluded
+                    # (under torchrun the other ranks wait in this step's all-reduce: torchrun ends them)
+                    if self.context.enabled or step == start:
+                        raise
+                    self.save(step)
+                    raise InputError(f"{error}; a checkpoint after step {step} was saved: fix the file or exclude its "
+                                     "scene (data.exclude), then add --resume") from error
                 self._kept_work = True
                 result.history.append(report)
                 result.steps_done = step + 1
