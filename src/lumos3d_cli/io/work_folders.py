@@ -36,9 +36,17 @@ def work_folder(prefix: str) -> Iterator[Path]:
 
 
 def remove_work_folders() -> None:
-    """Remove the work folders still in use (by threads the process is about to end)."""
+    """Remove the work folders still in use (by threads the process is about to end). Each is
+    renamed first: a thread still writing into it (structure-from-motion saving its images) then
+    creates nothing more there, where a file it made between the listing and the removal of the
+    folder had kept the folder."""
     with _lock:
         folders = list(_in_use)
         _in_use.clear()
     for folder in folders:
-        shutil.rmtree(folder, ignore_errors=True)
+        doomed = folder.with_name(f"{folder.name}.removed")
+        try:
+            folder.rename(doomed)
+        except OSError:
+            doomed = folder
+        shutil.rmtree(doomed, ignore_errors=True)
