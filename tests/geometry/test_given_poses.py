@@ -56,6 +56,8 @@ def test_photos_match_poses_by_stem_in_photo_order(tmp_path):
         given = read_given_poses(source, ["a.png", "b.png", "c.png", "d.png"], [cameras.sizes[0]] * 4)
         torch.testing.assert_close(given.extrinsics, cameras.extrinsics[[1, 3, 0, 2]], atol=1e-9, rtol=0)
         assert given.names == ["a.png", "b.png", "c.png", "d.png"]
+        upper = read_given_poses(source, ["A.PNG", "b.png", "C.png", "d.PNG"], [cameras.sizes[0]] * 4)  # any case
+        torch.testing.assert_close(upper.extrinsics, given.extrinsics, atol=0, rtol=0)
 
 
 def test_mismatched_names_are_named_in_the_error(tmp_path):

@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 import torch
 
+
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.geometry.given_poses import read_given_poses
 from lumos3d_cli.io.camera_files import find_camera_source, read_cameras
 from lumos3d_cli.io.cameras import Cameras, make_intrinsics, opengl_to_opencv
 from lumos3d_cli.io.colmap import read_colmap_model, read_colmap_points, write_colmap_model
@@ -118,7 +120,14 @@ def test_a_folder_names_its_cameras_in_one_order_and_stray_transforms_files_are_
     (scene / "sparse").mkdir(parents=True)
     shutil.copytree(buu / "colmap_text", scene / "sparse" / "0")
     shutil.copy(buu / "transforms_train.json", scene / "transforms.json")
-    assert find_camera_source(scene) == scene / "transforms.json"  # render, info and view: transforms.json first
+    # one order for restore --poses, render --poses, info and view: the COLMAP model first (restore's
+    # read sparse/0 where render read transforms.json, which colmap2nerf re-centres and rescales)
+    assert find_camera_source(scene) == scene / "sparse" / "0"
+    names = read_cameras(scene / "sparse" / "0").names
+    given = read_given_poses(scene, names, [(500, 375)] * len(names), allow_extra_poses=True)
+    assert torch.equal(given.extrinsics, read_cameras(scene).extrinsics)
+    shutil.rmtree(scene / "sparse")
+    assert find_camera_source(scene) == scene / "transforms.json"
     (tmp_path / "graded").mkdir()
     (tmp_path / "graded" / "transforms_grading.json").write_text('{"note": "a colour grade, no cameras"}')
     assert find_camera_source(tmp_path / "graded") is None
@@ -242,6 +251,68 @@ def test_distorted_colmap_cameras_are_warned_of_in_one_line(tmp_path, caplog):
             line = " ".join(words + ["0.01", "0", "0", "0"])
         distorted.append(line)
     (tmp_path / "cameras.txt").write_text("\n".join(distorted) + "\n")
+    for binary in tmp_path.glob("*.bin"):  # the text form edited alone: the binary one would be read first
+        binary.unlink()
     read_colmap_model(tmp_path)
     warnings = [record.getMessage() for record in caplog.records if "distortion" in record.getMessage()]
     assert len(warnings) == 1 and "camera(s) 1 (OPENCV), 2 (OPENCV), 3 (OPENCV) are ignored" in warnings[0]
+
+
+def test_colmap_models_read_as_colmap_reads_them(tmp_path):
+    """The binary form first (a bundle adjuster writing .bin into the folder left a stale .txt read);
+    names without trailing blanks; an images.txt without its POINTS2D lines refused (it lost every
+    second image); fisheye models refused (an equidistant projection is no pinhole, zero
+    coefficients or not); text that is not UTF-8 named."""
+    from synthetic_scene import plane_cameras
+
+    cameras = plane_cameras(4)
+    write_colmap_model(tmp_path / "model", cameras)
+    model = tmp_path / "model"
+    stale = (model / "cameras.txt").read_text().replace(" PINHOLE ", " PINHOLE ").splitlines()
+    stale = [line if line.startswith("#") else " ".join(line.split()[:4] + [str(float(v) * 2) for v in line.split()[4:]])
+             for line in stale]
+    (model / "cameras.txt").write_text("\n".join(stale) + "\n")  # the text form now disagrees with the binary one
+    torch.testing.assert_close(read_colmap_model(model).intrinsics, cameras.intrinsics.double())
+
+    text = tmp_path / "text"
+    text.mkdir()
+    shutil.copy(model / "cameras.txt", text)
+    lines = (model / "images.txt").read_text().splitlines()
+    image_lines = [line for line in lines if not line.startswith("#")][0::2]
+    header = [line for line in lines if line.startswith("#")]
+    (text / "images.txt").write_text("\n".join(header + [image_lines[0] + "   "]) + "\n\n" + "\n".join(image_lines[1:]) + "\n")
+    with pytest.raises(InputError, match=r"images.txt: states 4 images but 3 were read; every image line must be followed"):
+        read_colmap_model(text)
+    (text / "images.txt").write_text("\n".join(image_lines[0:1]) + "   \n\n")
+    assert read_colmap_model(text).names == [cameras.names[0]]  # trailing blanks are no part of the name
+
+    for model_name, params in (("OPENCV_FISHEYE", "100 100 32 24 0 0 0 0"), ("FOV", "100 100 32 24 0"),
+                               ("SIMPLE_RADIAL_FISHEYE", "100 32 24 0")):
+        (text / "cameras.txt").write_text(f"1 {model_name} 64 48 {params}\n")
+        with pytest.raises(InputError, match=f"camera model {model_name} is no perspective .pinhole. camera; undistort"):
+            read_colmap_model(text)
+    (text / "cameras.txt").write_bytes("1 PINHOLE 64 48 100 100 32 24\n".encode())
+    (text / "images.txt").write_bytes(b"1 1 0 0 0 0 0 0 1 caf\xe9.jpg\n\n")  # Latin-1, not UTF-8
+    with pytest.raises(InputError, match="images.txt: not UTF-8 text"):
+        read_colmap_model(text)
+
+
+def test_transforms_json_values_of_the_wrong_kind_are_named(tmp_path):
+    document = {"w": 64, "h": 48, "fl_x": 50, "frames": [{"file_path": "a.png", "transform_matrix": torch.eye(4).tolist()}]}
+    path = tmp_path / "transforms.json"
+    for change, message in (({"cx": None}, "has cx None, which is not a number"), ({"k1": "abc"}, "has k1 'abc'"),
+                            ({"frames": [[1, 2]]}, "frame 0 is list"), ({"frames": {"a": 1}}, "no 'frames' list"),
+                            ({"camera_model": "OPENCV_FISHEYE"}, "camera_model 'OPENCV_FISHEYE' is not a perspective"),
+                            ({"camera_model": "EQUIRECTANGULAR"}, "is not a perspective camera")):
+        path.write_text(json.dumps({**document, **change}))
+        with pytest.raises(InputError, match=message):
+            read_transforms_json(path)
+    # a frame's own field of view wins over the top level's focal length, as the docstring says
+    frame = {"file_path": "a.png", "transform_matrix": torch.eye(4).tolist(), "camera_angle_x": 2 * math.atan(0.5)}
+    path.write_text(json.dumps({**document, "frames": [frame]}))
+    assert read_transforms_json(path).intrinsics[0, 0, 0].item() == pytest.approx(64.0)
+    # without w/h, the image is found by its stem in any case and with any suffix
+    cv2 = pytest.importorskip("cv2")
+    cv2.imwrite(str(tmp_path / "A.TIF"), np.zeros((30, 40, 3), np.uint8))
+    path.write_text(json.dumps({"fl_x": 50, "frames": [{"file_path": "a", "transform_matrix": torch.eye(4).tolist()}]}))
+    assert read_transforms_json(path).sizes == [(40, 30)]

@@ -2,8 +2,9 @@
 
 PATH is a transforms.json (nerfstudio / instant-ngp / LOM), a folder of LOM-style
 transforms_{train,val,test}.json, a COLMAP model folder (text or binary), or a scene folder
-holding one of those (transforms.json, sparse/0, colmap/). A pose of `photos/IMG_01.JPG` matches
-the photo `IMG_01.png`: only the stem counts, since restored or converted photos change suffix.
+holding one of those (sparse/0, colmap/, transforms.json). A pose of `photos/IMG_01.JPG` matches
+the photo `img_01.png`: only the stem counts, in any case, since restored or converted photos
+change suffix (and some tools the case).
 
 Every photo needs a pose, and by default every pose needs a photo: a file with extra poses is
 most likely the file of another capture, so it is an error (`allow_extra_poses=True` accepts a
@@ -19,29 +20,13 @@ from pathlib import Path
 import torch
 
 from lumos3d_cli.errors import InputError, listed
-from lumos3d_cli.io.camera_files import read_cameras, read_transforms_splits, transforms_splits
+from lumos3d_cli.io.camera_files import read_cameras
 from lumos3d_cli.io.cameras import Cameras
-from lumos3d_cli.io.colmap import is_colmap_model, read_colmap_model
 
 logger = logging.getLogger(__name__)
 
 # Aspect ratios that differ by more than this mean the photos were cropped, not resized.
 _ASPECT_TOLERANCE = 0.01
-
-
-def _read_pose_source(path: Path, warn_on_distortion: bool) -> Cameras:
-    """The cameras in PATH, whatever supported form it takes; in a scene folder a COLMAP model
-    first (the folder itself, sparse/0, colmap/), then LOM's splits, then what `read_cameras`
-    finds. Lens distortion is ignored (the photos are taken as pinhole ones), with one warning
-    when `warn_on_distortion`: a distorted photo's pixels sit pixels away from where its pinhole
-    camera puts them (buu's given poses reproject its points 3-4 px off, SfM's own 0.6 px)."""
-    if path.is_dir():
-        for folder in (path, path / "sparse" / "0", path / "colmap"):
-            if folder.is_dir() and is_colmap_model(folder):
-                return read_colmap_model(folder, warn_on_distortion)
-        if transforms_splits(path):
-            return read_transforms_splits(path, warn_on_distortion)
-    return read_cameras(path, warn_on_distortion)
 
 
 def read_given_poses(
@@ -62,8 +47,12 @@ def read_given_poses(
         raise InputError(f"{len(names)} photo names for {len(sizes)} photo sizes")
     if not path.exists():
         raise InputError(f"{path}: no such file or folder", parameter="poses")
-    given = _read_pose_source(path, warn_on_distortion)
-    stems = [Path(name).stem for name in given.names]
+    # lens distortion is ignored (the photos are taken as pinhole ones), with one warning when
+    # `warn_on_distortion`: a distorted photo's pixels sit pixels away from where its pinhole
+    # camera puts them (buu's given poses reproject its points 3-4 px off, SfM's own 0.6 px)
+    given = read_cameras(path, warn_on_distortion)
+    # matched by stem in any case: IMG_01.JPG's pose is img_01.png's (cameras and converters change both)
+    stems = [Path(name).stem.casefold() for name in given.names]
     row_of_stem: dict[str, int] = {}
     conflicting = []
     for row, stem in enumerate(stems):
@@ -78,7 +67,7 @@ def read_given_poses(
     if conflicting:
         raise InputError(f"{path}: differing poses for one photo ({listed(conflicting)}); keep one pose per photo",
                          parameter="poses")
-    photo_stems = [Path(name).stem for name in names]
+    photo_stems = [Path(name).stem.casefold() for name in names]
     missing = [name for name, stem in zip(names, photo_stems) if stem not in row_of_stem]
     if missing:
         raise InputError(f"{path}: no pose for {len(missing)} of {len(names)} photos ({listed(missing)}); "

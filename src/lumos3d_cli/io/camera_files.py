@@ -48,8 +48,11 @@ def find_camera_source(path: Path | str) -> Path | None:
     """The camera file or folder that `path` names or holds, or None.
 
     Accepted: a `.json` file; a COLMAP model folder, text or binary (or one of its cameras/images
-    files); a scene folder with `transforms.json`, `cameras.json`, `sparse/0/` or `colmap/` (in
-    that order); a folder of LOM-style transforms_{test,train,val}.json (read together).
+    files); a scene folder with `sparse/0/`, `colmap/`, `transforms.json` or `cameras.json` (in
+    that order: a COLMAP model first, as `restore --poses` has always read a scene folder, so that
+    `render --poses` of the same folder uses the same cameras, where a transforms.json made from
+    that model by colmap2nerf is re-centred and rescaled); a folder of LOM-style
+    transforms_{test,train,val}.json (read together).
     """
     path = Path(path)
     if path.is_file():
@@ -62,7 +65,7 @@ def find_camera_source(path: Path | str) -> Path | None:
         return None
     if is_colmap_model(path):
         return path
-    for candidate in (path / "transforms.json", path / "cameras.json", path / "sparse" / "0", path / "colmap"):
+    for candidate in (path / "sparse" / "0", path / "colmap", path / "transforms.json", path / "cameras.json"):
         found = find_camera_source(candidate) if candidate.exists() else None
         if found is not None:
             return found

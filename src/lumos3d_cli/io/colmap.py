@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,11 +30,13 @@ from lumos3d_cli.rotations import matrix_to_quaternion, quaternion_to_matrix
 
 logger = logging.getLogger(__name__)
 
-# Camera models whose parameters start with one shared focal length (f, cx, cy, ...).
-_SINGLE_FOCAL = {"SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL", "SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE"}
-# Camera models whose parameters start with (fx, fy, cx, cy, ...).
-_DUAL_FOCAL = {"PINHOLE", "OPENCV", "OPENCV_FISHEYE", "FULL_OPENCV", "FOV", "THIN_PRISM_FISHEYE", "RAD_TAN_THIN_PRISM_FISHEYE"}
+# Perspective camera models whose parameters start with one shared focal length (f, cx, cy, ...).
+_SINGLE_FOCAL = {"SIMPLE_PINHOLE", "SIMPLE_RADIAL", "RADIAL"}
+# Perspective camera models whose parameters start with (fx, fy, cx, cy, ...).
+_DUAL_FOCAL = {"PINHOLE", "OPENCV", "FULL_OPENCV"}
 _PINHOLE = {"SIMPLE_PINHOLE", "PINHOLE"}
+# The others (the fisheye models, FOV, the division models) project otherwise even with every
+# coefficient zero (an equidistant fisheye puts a point at f * angle, not f * tan(angle)): refused.
 
 
 @dataclass(frozen=True)
@@ -58,17 +61,23 @@ class ColmapPoints:
     tracks: list[np.ndarray]
 
 
-def _data_lines(path: Path) -> list[str]:
+def _text(path: Path) -> str:
     try:
-        text = path.read_text()
+        return path.read_text(encoding="utf-8")  # COLMAP writes UTF-8 names, whatever the locale
     except OSError as error:
         raise InputError(f"{path}: cannot read ({error.strerror})") from error
+    except UnicodeDecodeError as error:
+        raise InputError(f"{path}: not UTF-8 text ({error.reason} at byte {error.start}); write the model as COLMAP "
+                         "does, or give its binary form") from error
+
+
+def _data_lines(text: str) -> list[str]:
     return [line for line in text.splitlines() if not line.startswith("#")]
 
 
 def read_colmap_cameras(path: Path) -> dict[int, ColmapCamera]:
     cameras = {}
-    for number, line in enumerate(_data_lines(path), 1):
+    for number, line in enumerate(_data_lines(_text(path)), 1):
         words = line.split()
         if not words:
             continue
@@ -89,7 +98,8 @@ def _pinhole_camera(path: Path, camera_id: int, model: str, width: int, height: 
     elif model in _DUAL_FOCAL:
         fx, fy, cx, cy = params[:4]
     else:
-        raise InputError(f"{path}: camera model {model} is not supported; undistort the images with COLMAP first")
+        raise InputError(f"{path}: camera model {model} is no perspective (pinhole) camera; undistort the images with "
+                         "COLMAP first (colmap image_undistorter)")
     return ColmapCamera(width, height, fx, fy, cx, cy, model)
 
 
@@ -103,24 +113,32 @@ class ColmapImage:
 
 
 def read_colmap_images(path: Path) -> list[ColmapImage]:
-    """Image lines of images.txt (each is followed by a POINTS2D line, possibly empty)."""
-    lines = _data_lines(path)
+    """Image lines of images.txt (each is followed by a POINTS2D line, possibly empty). The count
+    COLMAP writes in the header, when there, is checked: a file whose POINTS2D lines were left out
+    would otherwise lose every second image."""
+    text = _text(path)
+    lines = _data_lines(text)
     images = []
     index = 0
     while index < len(lines):
-        # The name is the rest of the line after nine fields, spaces inside it kept as written.
+        # The name is the rest of the line after nine fields, spaces inside it kept as written
+        # (trailing ones dropped, as COLMAP does).
         words = lines[index].split(maxsplit=9)
         if len(words) < 10:
             index += 1
             continue
         try:
             images.append(ColmapImage(
-                int(words[0]), words[9], tuple(float(v) for v in words[1:5]),
+                int(words[0]), words[9].rstrip(), tuple(float(v) for v in words[1:5]),
                 tuple(float(v) for v in words[5:8]), int(words[8]),
             ))
         except ValueError as error:
             raise InputError(f"{path}: cannot parse image line {lines[index]!r}") from error
         index += 2
+    stated = re.search(r"^#\s*Number of images:\s*(\d+)", text, re.MULTILINE)
+    if stated and int(stated.group(1)) != len(images):
+        raise InputError(f"{path}: states {stated.group(1)} images but {len(images)} were read; every image line must be "
+                         "followed by its POINTS2D line (an empty line if it has none)")
     return images
 
 
@@ -132,10 +150,17 @@ def is_colmap_model(folder: Path) -> bool:
 
 def _read_reconstruction(folder: Path) -> pycolmap.Reconstruction:
     """A text or binary model through pycolmap (InputError when COLMAP cannot read it)."""
+    binary = [(folder / f"{name}.bin").is_file() for name in ("cameras", "images", "points3D")]
+    if any(binary) and not all(binary) and not (folder / "points3D.txt").is_file():
+        raise InputError(f"{folder}: a binary COLMAP model needs cameras.bin, images.bin and points3D.bin; "
+                         f"{', '.join(n + '.bin' for n, ok in zip(('cameras', 'images', 'points3D'), binary) if not ok)} "
+                         "missing: copy the whole model")
     try:
         return pycolmap.Reconstruction(folder)
     except Exception as error:  # pycolmap raises plain RuntimeError/ValueError for unreadable files
-        raise InputError(f"{folder}: not a readable COLMAP model ({str(error).splitlines()[0] if str(error) else type(error).__name__})") from error
+        reason = str(error).splitlines()[0] if str(error) else type(error).__name__
+        raise InputError(f"{folder}: not a readable COLMAP model, damaged or truncated ({reason}); write it again with "
+                         "COLMAP") from error
 
 
 def _read_binary_views(folder: Path) -> tuple[dict[int, ColmapCamera], list[ColmapImage]]:
@@ -164,11 +189,12 @@ def read_colmap_model(folder: Path | str, warn_on_distortion: bool = True) -> Ca
     folder = Path(folder)
     if not is_colmap_model(folder):
         raise InputError(f"{folder}: no cameras.txt + images.txt (or cameras.bin + images.bin); expected a COLMAP model folder")
-    if (folder / "cameras.txt").is_file() and (folder / "images.txt").is_file():
+    binary = all((folder / f"{name}.bin").is_file() for name in ("cameras", "images", "points3D"))
+    if binary or not all((folder / f"{name}.txt").is_file() for name in ("cameras", "images")):
+        cameras, views = _read_binary_views(folder)  # COLMAP and pycolmap read the binary form first
+    else:
         cameras = read_colmap_cameras(folder / "cameras.txt")
         views = read_colmap_images(folder / "images.txt")
-    else:
-        cameras, views = _read_binary_views(folder)
     distorted = [f"{camera_id} ({camera.model})" for camera_id, camera in sorted(cameras.items()) if camera.model not in _PINHOLE]
     if distorted and warn_on_distortion:  # one line for the model, not one per camera
         logger.warning("%s: the distortion parameters of camera(s) %s are ignored (pinhole model)", folder,
@@ -201,7 +227,7 @@ def read_colmap_points(path: Path | str) -> ColmapPoints:
     """Read points3D.txt (POINT3D_ID X Y Z R G B ERROR TRACK[] as IMAGE_ID POINT2D_IDX pairs)."""
     path = Path(path)
     ids, xyz, rgb, error, tracks = [], [], [], [], []
-    for line in _data_lines(path):
+    for line in _data_lines(_text(path)):
         words = line.split()
         if not words:
             continue

@@ -17,10 +17,13 @@ import torch
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import write_bytes_atomic
 from lumos3d_cli.io.cameras import Cameras, make_intrinsics, opencv_to_opengl, opengl_to_opencv
+from lumos3d_cli.io.image_files import IMAGE_SUFFIXES
 
 logger = logging.getLogger(__name__)
 
 _DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
+# nerfstudio's camera_model values of perspective lenses (OPENCV's distortion is ignored with a warning)
+_PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE", "OPENCV", "SIMPLE_RADIAL", "RADIAL", "FULL_OPENCV", "PERSPECTIVE")
 
 
 def _image_size(path: Path, index: int, frame: dict, merged: dict) -> tuple[int, int]:
@@ -31,12 +34,16 @@ def _image_size(path: Path, index: int, frame: dict, merged: dict) -> tuple[int,
         return round(width), round(height)
     from lumos3d_cli.io.images import probe_image  # only needed for files without w/h
 
-    image_path = path.parent / frame.get("file_path", "")
-    candidates = [image_path] + [image_path.with_suffix(s) for s in (".png", ".jpg", ".JPG")]
-    for candidate in candidates:
-        if candidate.is_file():
-            header = probe_image(candidate)
-            return header.width, header.height
+    image_path = path.parent / str(frame.get("file_path", ""))
+    if image_path.is_file():
+        header = probe_image(image_path)
+        return header.width, header.height
+    if image_path.parent.is_dir():  # the file named by its stem, with any suffix and in any case
+        stem = image_path.stem.casefold()
+        for candidate in sorted(image_path.parent.iterdir()):
+            if candidate.stem.casefold() == stem and candidate.suffix.lower() in IMAGE_SUFFIXES and candidate.is_file():
+                header = probe_image(candidate)
+                return header.width, header.height
     raise InputError(f"{path}: frame {frame.get('file_path')!r} has no 'w'/'h' and its image was not found")
 
 
@@ -63,18 +70,27 @@ def read_transforms_json(path: Path | str, warn_on_distortion: bool = True) -> C
     poses, which the lens distortion does not affect."""
     path = Path(path)
     try:
-        document = json.loads(path.read_text())
+        document = json.loads(path.read_text(encoding="utf-8"))  # JSON is UTF-8, whatever the locale
     except (OSError, UnicodeDecodeError) as error:
         raise InputError(f"{path}: cannot read ({error})") from error
     except json.JSONDecodeError as error:
         raise InputError(f"{path}: invalid JSON ({error.msg} at line {error.lineno})") from error
     frames = document.get("frames") if isinstance(document, dict) else None
-    if not frames:
+    if not frames or not isinstance(frames, list):
         raise InputError(f"{path}: no 'frames' list; not a transforms.json camera file")
+    model = document.get("camera_model", "OPENCV")
+    if str(model).upper() not in _PINHOLE_MODELS:  # a fisheye or panorama is no pinhole camera, distortion or not
+        raise InputError(f"{path}: camera_model {model!r} is not a perspective camera; undistort the images to "
+                         "pinhole ones first (e.g. nerfstudio's or COLMAP's undistorter)")
     camera_to_world, fx, fy, cx, cy, sizes, names = [], [], [], [], [], [], []
     distorted = False
     for index, frame in enumerate(frames):
+        if not isinstance(frame, dict):
+            raise InputError(f"{path}: frame {index} is {type(frame).__name__} {str(frame)[:40]}, not an object with a "
+                             "'transform_matrix'; correct the file")
         merged = {**document, **frame}
+        if "camera_angle_x" in frame:  # a frame's own field of view wins over a focal length of the top level
+            merged = {key: value for key, value in merged.items() if key not in ("fl_x", "fl_y") or key in frame}
         try:
             matrix = torch.tensor(frame["transform_matrix"], dtype=torch.float64)
         except (KeyError, TypeError, ValueError) as error:
@@ -92,12 +108,12 @@ def read_transforms_json(path: Path | str, warn_on_distortion: bool = True) -> C
             focal_y = _focal_from_angle(path, index, merged, "camera_angle_y", height) if "camera_angle_y" in merged else focal_x
         else:
             raise InputError(f"{path}: frame {index} has no focal length ('fl_x' or 'camera_angle_x')")
-        distorted |= any(abs(float(merged.get(key, 0.0))) > 0 for key in _DISTORTION_KEYS)
+        distorted |= any(abs(_number(path, index, merged, key)) > 0 for key in _DISTORTION_KEYS if merged.get(key) is not None)
         camera_to_world.append(opengl_to_opencv(matrix))
         fx.append(focal_x)
         fy.append(focal_y)
-        cx.append(float(merged.get("cx", width / 2)))
-        cy.append(float(merged.get("cy", height / 2)))
+        cx.append(_number(path, index, merged, "cx") if "cx" in merged else width / 2)
+        cy.append(_number(path, index, merged, "cy") if "cy" in merged else height / 2)
         sizes.append((width, height))
         names.append(str(frame.get("file_path", "")))
     if distorted and warn_on_distortion:
