@@ -168,6 +168,28 @@ def test_row12_black_and_white_photos_are_named_once(tmp_path, buu, random_check
     assert "did you mean" not in result.err  # buu's dark photos suit the low-light mode
 
 
+def test_row12_empty_photos_are_judged_at_their_own_size_and_a_set_of_them_refused(tmp_path, buu, random_checkpoint, run_cli):
+    """A black photo of another size than the others (stretched, it gained grey levels and passed
+    for an image: fused, it laid black wedges over two views) and a lens cap's frame of codes 0 to 2
+    are named and not fused; photos that are all empty are refused (a made-up scene, exit 0)."""
+    photos = copy_photos(buu, tmp_path / "photos", SIX[:3])
+    rng = np.random.default_rng(0)
+    write_image(photos / "black.png", rng.integers(0, 2, (300, 400, 3)).astype(np.float32) / 255)  # another size
+    write_image(photos / "cap.png", rng.integers(0, 3, (375, 500, 3)).astype(np.float32) / 255)
+    result = run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", random_checkpoint, "--json"))
+    assert result.code == 0, result.err
+    assert "black.png, cap.png are entirely black" in result.err
+    restored = cv2.imread(str(tmp_path / "out" / "restored" / "black.png"))
+    assert restored.shape == (300, 400, 3) and restored.max() <= 1  # its view is the photo itself
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    write_image(empty / "a.png", np.zeros((120, 160, 3), np.float32))
+    write_image(empty / "b.png", np.ones((120, 160, 3), np.float32))
+    expect_input_error(run_cli(*restore_args(empty, tmp_path / "none" / "scene.ply", random_checkpoint)),
+                       "every photo is entirely black or saturated; there is nothing to restore")
+    assert not (tmp_path / "none").exists()
+
+
 def test_row12_a_photo_copied_under_another_name_is_named(tmp_path, buu, random_checkpoint):
     photos = copy_photos(buu, tmp_path / "photos", SIX[:3])
     shutil.copy(photos / SIX[1], photos / "copy.JPG")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -66,19 +66,22 @@ class LoadedPhotos:
 
     pixels: [V, 3, H, W] float32 sRGB in [0, 1], contiguous, every photo at the most common size
     (`ImageBatch`: a photo of another size is stretched to it); original_sizes: (width, height)
-    of each file before any resize.
+    of each file before any resize; originals: the photos of another size, [3, h, w] as decoded,
+    by index.
     """
 
     pixels: np.ndarray
     paths: list[Path]
     original_sizes: list[tuple[int, int]]
     kinds: list[str]
+    originals: dict[int, np.ndarray] = field(default_factory=dict)
 
     def batch(self) -> ImageBatch:
         """The same photos as a torch batch (sharing the pixels' memory)."""
         import torch  # here, not at the top: this module is read before torch is imported
 
-        return ImageBatch(torch.from_numpy(self.pixels), self.paths, self.original_sizes, self.kinds)
+        originals = {index: torch.from_numpy(photo) for index, photo in self.originals.items()}
+        return ImageBatch(torch.from_numpy(self.pixels), self.paths, self.original_sizes, self.kinds, originals)
 
 
 @dataclass
@@ -88,13 +91,15 @@ class ImageBatch:
     images: [V, 3, H, W] float32 sRGB in [0, 1], every photo at the most common size; a photo of
     another size is stretched to it (its aspect ratio changes: whatever measures geometry in it
     must map its pixels back with `original_sizes`, which the stretch keeps exact).
-    original_sizes: (width, height) of each file before any resize.
+    original_sizes: (width, height) of each file before any resize. originals: the photos of
+    another size as decoded, [3, h, w] by index (the stretched copy lost a larger photo's detail).
     """
 
     images: torch.Tensor
     paths: list[Path]
     original_sizes: list[tuple[int, int]]
     kinds: list[str]
+    originals: dict[int, torch.Tensor] = field(default_factory=dict)
 
     @property
     def size(self) -> tuple[int, int]:
@@ -107,11 +112,13 @@ class ImageBatch:
         return any(size != self.size for size in self.original_sizes)
 
     def photo(self, index: int) -> torch.Tensor:
-        """[3, h, w] photo `index` at its own size (the working image resized back when it was
-        stretched)."""
+        """[3, h, w] photo `index` at its own size, as decoded (a batch made without the
+        originals: the working image resized back)."""
         width, height = self.original_sizes[index]
         if (width, height) == self.size:
             return self.images[index]
+        if index in self.originals:
+            return self.originals[index]
         import torch  # here, not at the top: this module is read before torch is imported
 
         pixels = resize_image(np.ascontiguousarray(self.images[index].permute(1, 2, 0).numpy()), width, height)
@@ -158,4 +165,6 @@ def load_photos(
             len(mismatched), len(paths), width, height, shown,
         )
     stacked = np.stack([resize_image(p, width, height) for p in pixels])
-    return LoadedPhotos(np.ascontiguousarray(stacked.transpose(0, 3, 1, 2)), paths, sizes, kinds)
+    originals = {index: np.ascontiguousarray(photo.transpose(2, 0, 1)) for index, photo in enumerate(pixels)
+                 if sizes[index] != (width, height)}
+    return LoadedPhotos(np.ascontiguousarray(stacked.transpose(0, 3, 1, 2)), paths, sizes, kinds, originals)

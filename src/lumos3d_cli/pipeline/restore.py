@@ -158,7 +158,10 @@ def restore_scene(
     # A photo with nothing in it (all black or all saturated) gives no Gaussian and is fitted by no
     # refinement step: its depth and colours are made up, and fused they laid black or white wedges
     # over the other views. Its view is the photo as it is.
-    empty = set().union(*frames_without_content(batch.images))
+    empty = set().union(*photos_without_content(batch))
+    if len(empty) == len(names) > 1:  # (one such photo's restoration is the photo itself, as a view of a set)
+        raise InputError(f"{listed([str(path) for path in batch.paths], 3)}: every photo is entirely black or saturated; "
+                         "there is nothing to restore: give photos that recorded the scene")
     fuse_views = [index not in empty for index in range(len(names))] if empty and len(empty) < len(names) else None
     # one photo with content always among the network's views: a subset of empty ones builds nothing
     required = [fuse_views.index(True)] if fuse_views is not None else []
@@ -238,6 +241,18 @@ def _warn_of_repeated_photos(batch: ImageBatch, empty: set[int]) -> None:
         seen.setdefault(total, []).append(view)
 
 
+def photos_without_content(batch: ImageBatch) -> tuple[list[int], list[int]]:
+    """(indices of the all-black photos, of the all-saturated ones), each judged at its own size
+    (`frames_without_content`: a photo stretched to the batch's size gains levels and passed for
+    an image)."""
+    black, saturated = [], []
+    for index in range(len(batch.paths)):
+        found = frames_without_content(batch.photo(index)[None])
+        black += [index] * len(found[0])
+        saturated += [index] * len(found[1])
+    return black, saturated
+
+
 def check_photo_contents(batch: ImageBatch, patch_size: int, mode: str) -> None:
     """InputError naming a photo too small to hold one network patch (`patch_size` pixels a side);
     a warning naming the photos that are all black or all saturated (nothing to restore there),
@@ -247,7 +262,7 @@ def check_photo_contents(batch: ImageBatch, patch_size: int, mode: str) -> None:
         if min(width, height) < patch_size:
             raise InputError(f"{path}: is {width}x{height} pixels, too small for the network (at least {patch_size} "
                              "pixels a side); leave it out")
-    black, saturated = frames_without_content(batch.images)
+    black, saturated = photos_without_content(batch)
     _warn_of_repeated_photos(batch, {*black, *saturated})
     _warn_of_a_mode_the_photos_contradict(batch, mode)
     for kind, indices in (("black", black), ("saturated", saturated)):

@@ -37,6 +37,11 @@ def test_black_and_saturated_frames_are_found_and_restore_to_finite_values():
     # two 8-bit levels (codes 0 and 1; 254 and 255) are still nothing recorded
     assert frames_without_content(torch.randint(0, 2, (1, 3, 16, 16)) / 255.0) == ([0], [])
     assert frames_without_content(torch.randint(254, 256, (1, 3, 16, 16)) / 255.0) == ([], [0])
+    # a lens cap's frame: codes 0 to 2 of sensor noise (fused, it spread speckle over other views)
+    assert frames_without_content(torch.randint(0, 3, (1, 3, 64, 64)) / 255.0) == ([0], [])
+    assert frames_without_content(torch.randint(253, 256, (1, 3, 64, 64)) / 255.0) == ([], [0])
+    assert frames_without_content(torch.randint(0, 4, (1, 3, 64, 64)) / 255.0) == ([], [])  # code 3: recorded
+    assert frames_without_content(torch.randint(0, 500, (1, 3, 64, 64)) / 65535.0) == ([], [])  # 16-bit: an image
     restored = restore_photos(photos, _operator())
     assert bool(torch.isfinite(restored).all())
     # nothing recorded, nothing restored: the operator's curve would turn the white frame grey

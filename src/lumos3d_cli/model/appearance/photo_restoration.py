@@ -9,32 +9,40 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.colour import linear_to_srgb, luminance, srgb_to_linear
 from lumos3d_cli.model.appearance.operator import AppearanceOperator
 
-# A frame whose pixels are all within one 8-bit step of black (or of white in every channel), in
-# at most two levels, carries no image to restore: no gain brings back what was never recorded. A
-# 16-bit or RAW frame that dark still holds hundreds of levels, an image, and is restored.
+# One 8-bit step from black and from white (the exposure prior's empty scene; a monochrome photo).
 BLACK_LEVEL = 1.0 / 255
 WHITE_LEVEL = 254.0 / 255
+# A frame whose pixels are all within this many 8-bit codes of black (or of white in every
+# channel), in at most one level more, carries no image to restore (a lens cap's frame holds codes
+# 0 to 2 of sensor noise): no gain brings back what was never recorded. A 16-bit or RAW frame that
+# dark still holds hundreds of levels, an image, and is restored.
+EMPTY_CODES = 2
 # A monochrome photo's channels agree within one 8-bit step everywhere and, on average, within
 # this share of its level: a dark 16-bit colour photo lies within one 8-bit step too, but its
 # channels differ by a large share of their level.
 MONOCHROME_SPREAD = 0.01
 
 
-def _at_most_two_levels(view: torch.Tensor) -> bool:
-    """Whether `view` (any shape, in [0, 1]) takes at most two 16-bit levels (a frame of 8-bit
-    codes 0 and 1, say). O(pixels): a 24-megapixel frame is not sorted."""
-    levels = (view * 65535).round()
-    return bool(((levels == levels.min()) | (levels == levels.max())).all())
+def _few_levels(view: torch.Tensor) -> bool:
+    """Whether `view` (any shape, within EMPTY_CODES 8-bit codes of black or of white) takes at
+    most EMPTY_CODES + 1 16-bit levels (a frame of 8-bit codes 0 to 2, say). O(pixels): a
+    24-megapixel frame is not sorted."""
+    levels = (view * 65535).round().long()
+    levels = levels - levels.min()
+    if int(levels.max()) > EMPTY_CODES * 257:  # the levels of codes 0..EMPTY_CODES are 257 apart
+        return False
+    return int((torch.bincount(levels.flatten()) > 0).sum()) <= EMPTY_CODES + 1
 
 
 def frames_without_content(photos: torch.Tensor) -> tuple[list[int], list[int]]:
     """photos [V, 3, H, W] sRGB in [0, 1] at the photos' own size (a resized copy has more
-    levels) -> (indices of all-black views, of all-saturated views)."""
+    levels) -> (indices of all-black views, of all-saturated views): every pixel within
+    EMPTY_CODES 8-bit codes of black (or of white), in at most EMPTY_CODES + 1 levels."""
     flat = photos.detach().reshape(photos.shape[0], -1)
-    black = [view for view in (flat.amax(dim=1) <= BLACK_LEVEL).nonzero().flatten().tolist()
-             if _at_most_two_levels(flat[view])]
-    saturated = [view for view in (flat.amin(dim=1) >= WHITE_LEVEL).nonzero().flatten().tolist()
-                 if _at_most_two_levels(flat[view])]
+    margin = EMPTY_CODES / 255 + 1e-6
+    black = [view for view in (flat.amax(dim=1) <= margin).nonzero().flatten().tolist() if _few_levels(flat[view])]
+    saturated = [view for view in (flat.amin(dim=1) >= 1 - margin).nonzero().flatten().tolist()
+                 if _few_levels(flat[view])]
     return black, saturated
 
 
