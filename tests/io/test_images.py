@@ -156,6 +156,23 @@ def test_truncated_jpeg_is_refused(tmp_path, buu):
         read_image(tmp_path / "cut.jpg")
 
 
+def test_a_jpeg_with_corrupt_data_is_refused_and_libraries_print_nothing(tmp_path, buu, capfd):
+    """Bytes zeroed mid-file: libjpeg decodes on, with shifted colours and garbage blocks in the
+    lower half, and says so only on stderr (OpenCV returned the garbage as the photo)."""
+    data = bytearray((buu / "low" / "1.JPG").read_bytes())
+    middle = len(data) // 2
+    data[middle: middle + 40] = bytes(40)
+    (tmp_path / "damaged.jpg").write_bytes(bytes(data))
+    with pytest.raises(InputError, match=r"damaged\.jpg: the JPEG data is corrupt \(Corrupt JPEG data: .*\): the decoded "
+                                         r"image would hold garbage; replace the file"):
+        read_image(tmp_path / "damaged.jpg")
+    (tmp_path / "broken.png").write_bytes(cv2.imencode(".png", np.zeros((8, 8, 3), np.uint8))[1].tobytes()[:60])
+    with pytest.raises(InputError, match=r"broken\.png: cannot decode as PNG"):
+        read_image(tmp_path / "broken.png")
+    assert read_image(buu / "low" / "1.JPG").pixels.shape == (375, 500, 3)
+    assert "libpng" not in capfd.readouterr().err  # the one line above says it
+
+
 def test_no_images_and_unsupported_types(tmp_path):
     with pytest.raises(InputError, match="folder holds no images"):
         list_images(tmp_path)
@@ -197,6 +214,7 @@ def test_mixed_sizes_are_stretched_to_the_most_common_and_keep_their_own_sizes(t
     np.testing.assert_allclose(photo[:, :, :9].numpy(), 0, atol=1e-6)
     np.testing.assert_allclose(photo[:, :, 11:].numpy(), 200 / 255, atol=1e-6)
     assert torch.equal(batch.photo(0), batch.images[0])
+    assert torch.equal(batch.photo(2), torch.from_numpy(cv2.imread(str(tmp_path / "3.png"))[..., ::-1].copy()).permute(2, 0, 1) / 255.0)
 
 
 def test_photos_of_one_size_are_not_mixed(tmp_path):

@@ -13,12 +13,15 @@ import OpenImageIO as oiio
 from lumos3d_cli.checks import count_non_finite
 from lumos3d_cli.errors import InputError, NonFiniteError
 from lumos3d_cli.io.image_types import DecodedImage, ImageHeader
+from lumos3d_cli.io.native_messages import pass_on, with_native_messages
 
 # IMREAD_COLOR applies EXIF orientation, turns grayscale into 3 channels and drops alpha;
 # IMREAD_ANYDEPTH keeps 16-bit and float samples.
 _READ_FLAGS = cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH
 _TRANSPOSING_ORIENTATIONS = {5, 6, 7, 8}
 _ALPHA_SUFFIXES = {".png", ".tif", ".tiff", ".webp"}  # the photo formats that can carry alpha
+# libjpeg's warnings of damaged data (it decodes on, filling in garbage or grey)
+_JPEG_CORRUPTION = ("Corrupt JPEG data", "Premature end of JPEG file")
 
 logger = logging.getLogger(__name__)
 
@@ -59,6 +62,20 @@ def _alpha_header(path: Path) -> tuple[bool, int]:
 
 
 def _decode(path: Path, data: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """`_decode_pixels`, with what libjpeg and libpng print while decoding captured: a JPEG whose
+    data is corrupt is an InputError naming the file (OpenCV returns its garbage as an image); a
+    file OpenCV cannot decode at all gets this module's one line, not the library's own as well."""
+    (bgr, alpha), printed = with_native_messages(lambda: _decode_pixels(path, data))
+    corrupt = [line for line in printed.splitlines() if line.startswith(_JPEG_CORRUPTION)]
+    if corrupt and bgr is not None:
+        raise InputError(f"{path}: the JPEG data is corrupt ({corrupt[0].strip().rstrip('.')}): the decoded image would "
+                         "hold garbage; replace the file or leave it out")
+    if bgr is not None:
+        pass_on(printed)
+    return bgr, alpha
+
+
+def _decode_pixels(path: Path, data: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
     """(BGR [H, W, 3] as OpenCV's colour decoding gives it, alpha [H, W] or None). A photo with
     alpha is decoded once, unchanged, where no EXIF rotation applies (OpenCV's colour decoding
     drops alpha and turns grey into three channels: the same done here); a rotated one twice."""
