@@ -1,4 +1,4 @@
-"""Guards that keep non-finite values from escaping silently."""
+"""Guards that keep non-finite values, and images outside [0, 1], from passing silently."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from lumos3d_cli.errors import NonFiniteError
+from lumos3d_cli.errors import InputError, NonFiniteError
 from lumos3d_cli.tensors import loaded_torch
 
 if TYPE_CHECKING:
@@ -51,3 +51,17 @@ def require_finite(name: str, values: np.ndarray | torch.Tensor, hint: str = "")
         total = values.numel() if loaded_torch(values) is not None else np.asarray(values).size
         message = f"{name}: {bad} of {total} values are NaN or Inf"
         raise NonFiniteError(f"{message}; {hint}" if hint else message)
+
+
+# How far outside [0, 1] an image may stray (rounding in a colour conversion) before it is taken
+# for another range: 8-bit codes not divided by 255, or a normalised -1..1 or mean-subtracted batch.
+UNIT_RANGE_TOLERANCE = 1e-3
+
+
+def require_unit_range(name: str, images: torch.Tensor) -> None:
+    """InputError naming `name` and the range found unless `images` (non-empty, finite) lie in
+    [0, 1]: the network clamps what it is given, so 0..255 input became a white frame silently."""
+    low, high = float(images.min()), float(images.max())
+    if low < -UNIT_RANGE_TOLERANCE or high > 1 + UNIT_RANGE_TOLERANCE:
+        scale = " (8-bit codes: divide by 255)" if high > 2 else ""
+        raise InputError(f"{name}: values from {low:.4g} to {high:.4g}; give sRGB in [0, 1]{scale}")

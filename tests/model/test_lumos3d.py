@@ -114,6 +114,12 @@ def test_bad_inputs_are_refused_with_a_clear_message(model):
     images[0, 0, 0, 0, 0] = float("nan")
     with pytest.raises(NonFiniteError):
         model(images)
+    # an empty batch or view list failed deep inside (a reshape); 8-bit codes ran as a white frame
+    for empty in (torch.rand(0, 1, 3, 28, 28), torch.rand(1, 0, 3, 28, 28)):
+        with pytest.raises(InputError, match="with B and V at least 1"):
+            model(empty)
+    with pytest.raises(InputError, match=r"model input images: values from .* to .*; give sRGB in \[0, 1\] \(8-bit codes"):
+        model(torch.rand(1, 1, 3, 28, 28) * 255)
 
 
 def test_fusion_settings_are_checked_by_name(model):

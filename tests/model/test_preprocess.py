@@ -75,10 +75,19 @@ def test_numpy_integers_are_sizes_too():
     assert prepare_images(torch.rand(3, 40, 60), np.int64(56), np.int32(14)).network_size == (56, 42)
 
 
-def test_values_beyond_one_are_clamped_whether_or_not_the_size_changes():
-    for height, width in ((42, 56), (40, 40)):
-        prepared = prepare_images(torch.full((3, height, width), 4.0), 56, 14)
-        assert prepared.images.max() == 1.0
+def test_bicubic_overshoot_is_clamped_and_values_outside_the_unit_range_refused():
+    """Bicubic overshoots at a black/white edge: clamped. Images outside [0, 1] (8-bit codes not
+    divided by 255, a normalised batch) were clamped too, into a white frame, silently: refused."""
+    edge = torch.zeros(3, 42, 56)
+    edge[..., 28:] = 1.0
+    prepared = prepare_images(edge, 28, 14)
+    assert 0.0 <= float(prepared.images.min()) and float(prepared.images.max()) <= 1.0
+    for images, message in ((torch.full((3, 40, 40), 255.0), r"values from 255 to 255; give sRGB in \[0, 1\] \(8-bit codes"),
+                            (torch.full((3, 40, 40), -0.5), r"values from -0.5 to -0.5; give sRGB in \[0, 1\]$"),
+                            (torch.zeros(0, 3, 40, 40), r"an empty batch \(0, 3, 40, 40\)")):
+        with pytest.raises(InputError, match=message):
+            prepare_images(images, 56, 14)
+    prepare_images(torch.full((3, 40, 40), 1.0005), 56, 14)  # rounding in a colour conversion: accepted
 
 
 @pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16, torch.float64])

@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-from lumos3d_cli.errors import NonFiniteError
+from lumos3d_cli.errors import InputError, NonFiniteError
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.render.render import render
 
@@ -179,6 +179,9 @@ def test_cameras_that_cannot_render_are_refused_by_name():
         render(gaussians, camera[[]])
     with pytest.raises(ValueError, match=r"^background must be one RGB colour \[3\], got shape \(2,\)"):
         render(gaussians, camera, background=(0.5, 0.5))
+    # 100000 px a side was a MemoryError for 112 GiB of buffers, after the projection
+    with pytest.raises(InputError, match=r"^cameras: images of 100000x16 pixels; render at 1 to 16384 pixels a side"):
+        render(gaussians, camera_at_origin(100000, 16))
 
 
 def test_sh_beyond_the_supported_degree_is_refused_when_the_gaussians_are_made():

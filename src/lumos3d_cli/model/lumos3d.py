@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import torch
 from torch import nn
 
-from lumos3d_cli.checks import require_finite
+from lumos3d_cli.checks import require_finite, require_unit_range
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
@@ -154,8 +154,9 @@ class Lumos3D(nn.Module):
         """The images, checked, in the weights' floating-point type (a float64 or bf16 batch
         would otherwise meet float32 weights in the first convolution; autocast still applies)."""
         patch = self.architecture.patch_size
-        if images.dim() != 5 or images.shape[2] != 3:
-            raise InputError(f"model input must be [B, V, 3, H, W] images, got shape {tuple(images.shape)}")
+        if images.dim() != 5 or images.shape[2] != 3 or images.shape[0] == 0 or images.shape[1] == 0:
+            raise InputError(f"model input must be [B, V, 3, H, W] images with B and V at least 1, got shape "
+                             f"{tuple(images.shape)}")
         if not images.is_floating_point():
             raise InputError(f"model input images are {images.dtype}; give floating-point images in [0, 1]")
         height, width = images.shape[-2:]
@@ -165,6 +166,7 @@ class Lumos3D(nn.Module):
                 "pass the images through Lumos3D.prepare / prepare_images first"
             )
         require_finite("model input images", images)
+        require_unit_range("model input images", images)
         return images.to(next(self.parameters()).dtype)
 
     def fuse_scene(

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
-from lumos3d_cli.checks import require_finite
+from lumos3d_cli.checks import require_finite, require_unit_range
 from lumos3d_cli.errors import InputError
 
 MODES = ("resize", "crop")
@@ -75,7 +75,10 @@ def prepare_images(images: torch.Tensor, image_size: int, patch_size: int, mode:
         if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < (1 if name == "patch_size" else patch_size):
             raise InputError(f"{value!r}: give a whole number of pixels, at least "
                              f"{1 if name == 'patch_size' else f'the patch size {patch_size}'}", parameter=name)
+    if images.numel() == 0:
+        raise InputError(f"images: an empty batch {tuple(images.shape)}; give at least one image")
     require_finite("images", images)
+    require_unit_range("images", images)
     height, width = images.shape[-2:]
     new_width, new_height, resized_height = network_size(width, height, image_size, patch_size, mode)
     flat = images.reshape(-1, 3, height, width)

@@ -20,19 +20,19 @@ from lumos3d_cli.io.video import VideoWriter, probe_video, video_kind
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
 from lumos3d_cli.render.camera_paths import orbit_from_cameras, orbit_from_gaussians
 from lumos3d_cli.render.clipping_range import require_drawable
+from lumos3d_cli.render.constants import MAX_IMAGE_SIDE
 from lumos3d_cli.render.hole_filling import render_shown
 
 logger = logging.getLogger(__name__)
 
 DEFAULT_ORBIT_SIZE = 512
-MAX_SIDE = 16384
 
 
 def output_size(native: tuple[int, int], width: int | None, height: int | None) -> tuple[int, int]:
     """The requested (width, height); one side alone keeps the native aspect ratio."""
     for name, value in (("width", width), ("height", height)):
-        if value is not None and not 1 <= value <= MAX_SIDE:
-            raise InputError(f"{value}: use a size between 1 and {MAX_SIDE} pixels", parameter=name)
+        if value is not None and not 1 <= value <= MAX_IMAGE_SIDE:
+            raise InputError(f"{value}: use a size between 1 and {MAX_IMAGE_SIDE} pixels", parameter=name)
     if width and height:
         return width, height
     if width:
@@ -41,8 +41,8 @@ def output_size(native: tuple[int, int], width: int | None, height: int | None) 
         size, given, name = (max(1, round(height * native[0] / native[1])), height), height, "height"
     else:
         return native
-    if max(size) > MAX_SIDE:  # the other side, from the aspect ratio: a 16x4000 camera at width 96 is 24000 tall
-        raise InputError(f"{given}: makes {size[0]}x{size[1]} frames of a {native[0]}x{native[1]} camera, beyond {MAX_SIDE} "
+    if max(size) > MAX_IMAGE_SIDE:  # the other side, from the aspect ratio: a 16x4000 camera at width 96 is 24000 tall
+        raise InputError(f"{given}: makes {size[0]}x{size[1]} frames of a {native[0]}x{native[1]} camera, beyond {MAX_IMAGE_SIDE} "
                          "pixels a side; give a smaller size, or both width and height", parameter=name)
     return size
 
@@ -55,9 +55,9 @@ def camera_file_cameras(poses: Path, width: int | None = None, height: int | Non
     if width is not None or height is not None:  # each camera keeps its own aspect ratio (photos may differ)
         cameras = cameras.rescaled_to([output_size(size, width, height) for size in cameras.sizes])
     too_large = [f"{name or index} ({w}x{h})" for index, (name, (w, h)) in enumerate(zip(cameras.names, cameras.sizes))
-                 if max(w, h) > MAX_SIDE]  # its own size, or the side computed from the one given
+                 if max(w, h) > MAX_IMAGE_SIDE]  # its own size, or the side computed from the one given
     if too_large:
-        raise InputError(f"{source}: frames larger than {MAX_SIDE} pixels a side: {listed(too_large, 3)}; give a "
+        raise InputError(f"{source}: frames larger than {MAX_IMAGE_SIDE} pixels a side: {listed(too_large, 3)}; give a "
                          "smaller width or height", parameter="poses")
     return cameras, source
 

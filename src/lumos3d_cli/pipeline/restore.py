@@ -16,6 +16,7 @@ from pathlib import Path
 
 import torch
 
+from lumos3d_cli.checks import require_unit_range
 from lumos3d_cli.data.degradations import MODES
 from lumos3d_cli.errors import InputError, NonFiniteError, listed
 from lumos3d_cli.geometry.given_poses import read_given_poses
@@ -137,19 +138,27 @@ def render_views(gaussians: Gaussians, cameras: Cameras, sh_degree: int | None,
 
 
 def restore_scene(
-    batch: ImageBatch, model: Lumos3D, preset: RestorePreset, geometry: str = "auto", poses: Path | str | None = None,
+    batch: ImageBatch, model: Lumos3D, preset: RestorePreset | str, geometry: str = "auto", poses: Path | str | None = None,
     max_views: int | None = None, mode: str = "low-light", progress: JobProgress | None = None,
     early_registration: EarlyRegistration | None = None,
 ) -> RestoredScene:
-    """The job on loaded photos and a loaded model (`build_scene`, which takes structure-from-motion
-    from `early_registration` when it was started before), then every view that has a camera
-    rendered at it, at its photo's own size."""
+    """The job on loaded photos (sRGB in [0, 1]) and a loaded model (`build_scene`, which takes
+    structure-from-motion from `early_registration` when it was started before), then every view
+    that has a camera rendered at it, at its photo's own size. `preset`: a RestorePreset or a
+    preset's name."""
     progress = progress or SilentProgress()
+    if isinstance(preset, str):
+        preset = get_restore_preset(preset)
+    elif not isinstance(preset, RestorePreset):
+        raise InputError(f"preset {preset!r}: give a preset's name or a RestorePreset (get_restore_preset)")
     names = [path.name for path in batch.paths]
     finite = torch.isfinite(batch.images).flatten(1).all(dim=1)
     if not bool(finite.all()):  # a batch made in Python: the files' own readers refuse NaN by name
         broken = [str(batch.paths[index]) for index in (~finite).nonzero().flatten().tolist()]
         raise NonFiniteError(f"{listed(broken, 3)}: the photo's pixels hold NaN or Inf; give finite values in [0, 1]")
+    if len(names) == 0:
+        raise InputError("no photos in the batch; give at least one")
+    require_unit_range("photos", batch.images)
     if batch.mixed_sizes:
         odd = [name for name, size in zip(names, batch.original_sizes) if size != batch.size]
         logger.warning("%d of %d photos differ in size from %dx%d (%s): the network sees them stretched to it, their "

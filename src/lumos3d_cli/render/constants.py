@@ -10,6 +10,7 @@ FAR_PLANE = 1e10
 GAUSSIAN_EXTEND = 3.33  # largest radius in standard deviations
 MIN_COMPENSATION = 0.005  # floor of the antialiasing opacity compensation
 FOV_MARGIN = 0.3  # the EWA Jacobian is evaluated at most this fraction of tan(fov) outside the image
+MAX_IMAGE_SIDE = 16384  # (lumos3d's) a larger frame's buffers alone take gigabytes; 100000 px a side was a MemoryError
 
 # Real SH basis constants for degrees 1-4 (3DGS order); SH_C0 and MAX_SH_DEGREE, which the
 # files and colour conversions share, live in io/gaussians.py.

@@ -10,9 +10,10 @@ from typing import Literal
 import torch
 
 from lumos3d_cli.checks import require_finite
+from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import MAX_SH_DEGREE, Gaussians
-from lumos3d_cli.render.constants import EPS2D, FAR_PLANE, NEAR_PLANE
+from lumos3d_cli.render.constants import EPS2D, FAR_PLANE, MAX_IMAGE_SIDE, NEAR_PLANE
 from lumos3d_cli.render.gsplat_backend import gsplat_available, render_with_gsplat
 from lumos3d_cli.render.rasterizer import RasterizeGaussians, rasterize_with_weights
 from lumos3d_cli.render.reference import rasterize_reference, rasterize_with_weights_reference
@@ -56,6 +57,10 @@ def _check_inputs(gaussians: Gaussians, cameras: Cameras, sh_degree: int) -> tup
         raise ValueError(f"cameras.intrinsics: the focal lengths must be positive, got {focal[(focal <= 0).any(dim=1)][0].tolist()}")
     if len(set(cameras.sizes)) != 1:
         raise ValueError(f"cameras have different image sizes {sorted(set(cameras.sizes))}; use Cameras.rescaled")
+    width, height = cameras.sizes[0]
+    if not (1 <= width <= MAX_IMAGE_SIDE and 1 <= height <= MAX_IMAGE_SIDE):
+        raise InputError(f"cameras: images of {width}x{height} pixels; render at 1 to {MAX_IMAGE_SIDE} pixels a side "
+                         "(Cameras.rescaled)")
     return cameras.sizes[0]
 
 
