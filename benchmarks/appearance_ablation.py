@@ -190,7 +190,8 @@ def _regression_student(mode: str) -> Path:
     `make weights`, runs/default-<mode>/final.safetensors, which this saves a retraining)."""
     operator = load_model(resolve_checkpoint(None, mode))
     regression = with_appearance(operator, "regression")
-    return save_checkpoint(regression, REPO / "runs" / f"ablation-student-{mode}.safetensors", regression.provenance)
+    return save_checkpoint(regression, REPO / "runs" / f"ablation-student-{mode}.safetensors", regression.provenance,
+                           overwrite=True)
 
 
 def _row(label: str, brackets: dict[str, float] | None, two_d, three_d) -> list[str]:

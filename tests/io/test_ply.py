@@ -178,3 +178,32 @@ def test_bad_files(tmp_path):
         read_ply(tmp_path / "missing.ply")
     with pytest.raises(InputError, match="is a folder; give the scene's .ply file"):
         read_ply(tmp_path)
+
+
+def test_the_library_writers_replace_a_file_only_when_asked(tmp_path):
+    """`write_ply`, `write_splat` and `save_checkpoint` replaced any file (a user's, or a link's
+    target with the link turned into a file) without a word."""
+    from lumos3d_cli.io.splat import write_splat
+    from lumos3d_cli.model.checkpoints import save_checkpoint
+    from lumos3d_cli.model.lumos3d import build_model
+
+    gaussians = random_gaussians(8, 1, seed=0)
+    writers = {"scene.ply": lambda path, **kw: write_ply(path, gaussians, **kw),
+               "scene.splat": lambda path, **kw: write_splat(path, gaussians, **kw),
+               "weights.safetensors": lambda path, **kw: save_checkpoint(build_model("tiny", seed=0), path, **kw)}
+    (tmp_path / "target.txt").write_text("the user's")
+    for name, write in writers.items():
+        (tmp_path / name).write_text("mine")
+        with pytest.raises(InputError, match=f"{name}: exists; lumos3d does not replace it unless asked"):
+            write(tmp_path / name)
+        assert (tmp_path / name).read_text() == "mine"
+        link = tmp_path / f"link-{name}"
+        link.symlink_to(tmp_path / "target.txt")
+        with pytest.raises(InputError, match="exists"):
+            write(link)
+        assert link.is_symlink() and (tmp_path / "target.txt").read_text() == "the user's"
+        (tmp_path / f"folder-{name}").mkdir()
+        with pytest.raises(InputError, match="is a folder; give a file name"):
+            write(tmp_path / f"folder-{name}", overwrite=True)
+        write(tmp_path / name, overwrite=True)
+        assert (tmp_path / name).read_bytes() != b"mine"

@@ -48,3 +48,13 @@ def check_output_path(path: Path | str | None, parameter: str | None, folder: bo
     writable_folder = existing if existing.is_dir() else existing.parent
     if not os.access(writable_folder, os.W_OK | os.X_OK):
         raise InputError(f"{path}: no permission to write in {writable_folder}; choose another path", parameter=parameter)
+
+
+def require_new_file(path: Path, overwrite: bool) -> None:
+    """For the library's file writers (`write_ply`, `write_splat`, `save_checkpoint`): InputError
+    when `path` exists (a file, a link or a folder) unless `overwrite`; they replace a file only
+    when asked, as the commands replace only what lumos3d wrote (io/output_set.py)."""
+    if path.is_dir() and not path.is_symlink():
+        raise InputError(f"{path}: is a folder; give a file name")
+    if not overwrite and (path.exists() or path.is_symlink()):
+        raise InputError(f"{path}: exists; lumos3d does not replace it unless asked (overwrite=True), or choose another name")

@@ -19,6 +19,7 @@ import torch
 from lumos3d_cli.errors import InputError, NonFiniteError, listed
 from lumos3d_cli.io.atomic import atomic_path
 from lumos3d_cli.io.gaussians import MAX_SH_DEGREE, Gaussians, sh_coefficient_count
+from lumos3d_cli.io.output_paths import require_new_file
 
 # Opacity is clamped into the open interval before the logit so that 0 and 1 stay finite on disk.
 _OPACITY_EPS = 2.0**-24
@@ -84,9 +85,11 @@ def ply_fields_to_gaussians(fields: np.ndarray, sh_degree: int) -> Gaussians:
     return gaussians.to(torch.float32)
 
 
-def write_ply(path: Path | str, gaussians: Gaussians) -> None:
-    """Write the scene atomically. NaN or Inf in any tensor is an error naming the tensor."""
+def write_ply(path: Path | str, gaussians: Gaussians, overwrite: bool = False) -> None:
+    """Write the scene atomically, to a new file unless `overwrite` (an existing one is an
+    InputError). NaN or Inf in any tensor is an error naming the tensor."""
     path = Path(path)
+    require_new_file(path, overwrite)
     names = ply_property_names(gaussians.sh_degree)
     values = gaussians_to_ply_fields(gaussians)
     header = "\n".join(

@@ -15,6 +15,7 @@ import torch
 
 from lumos3d_cli.io.atomic import write_bytes_atomic
 from lumos3d_cli.io.gaussians import Gaussians, sh_dc_to_rgb
+from lumos3d_cli.io.output_paths import require_new_file
 from lumos3d_cli.rotations import unit_quaternions
 
 SPLAT_DTYPE = np.dtype(
@@ -40,6 +41,8 @@ def gaussians_to_splat(gaussians: Gaussians) -> np.ndarray:
     return records
 
 
-def write_splat(path: Path | str, gaussians: Gaussians) -> None:
-    """Write a `.splat` file atomically."""
+def write_splat(path: Path | str, gaussians: Gaussians, overwrite: bool = False) -> None:
+    """Write a `.splat` file atomically, to a new file unless `overwrite` (an existing one is an
+    InputError)."""
+    require_new_file(Path(path), overwrite)
     write_bytes_atomic(path, gaussians_to_splat(gaussians).tobytes())

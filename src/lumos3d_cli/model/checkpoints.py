@@ -27,6 +27,7 @@ import torch
 
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.output_paths import require_new_file
 from lumos3d_cli.io.state_dicts import check_shapes, listing
 from lumos3d_cli.io.weight_files import read_header, read_weights, resolve_weights_file, write_weights
 from lumos3d_cli.model.architectures import ARCHITECTURES, Architecture, get_architecture
@@ -63,10 +64,13 @@ class Checkpoint:
     fresh_modules: list[str] = field(default_factory=list)
 
 
-def save_checkpoint(model: Lumos3D, path: Path | str, provenance: dict | None = None, dtype: str = "float32") -> Path:
-    """Write `model` in our format (atomically). `provenance` (JSON-serialisable) records how the
-    weights were made, e.g. training data, steps, git commit. `dtype` is the storage precision of
-    floating-point tensors ("float16" halves the file; loading always returns float32)."""
+def save_checkpoint(model: Lumos3D, path: Path | str, provenance: dict | None = None, dtype: str = "float32",
+                    overwrite: bool = False) -> Path:
+    """Write `model` in our format (atomically), to a new file unless `overwrite` (an existing one
+    is an InputError). `provenance` (JSON-serialisable) records how the weights were made, e.g.
+    training data, steps, git commit. `dtype` is the storage precision of floating-point tensors
+    ("float16" halves the file; loading always returns float32)."""
+    require_new_file(Path(path), overwrite)
     config = {"format_version": FORMAT_VERSION, ARCHITECTURE_KEY: to_dict(model.architecture), "provenance": provenance or {}}
     return write_weights(model.state_dict(), Path(path), {METADATA_KEY: json.dumps(config)}, dtype)
 

@@ -429,7 +429,7 @@ class Trainer:
         best = best_earlier_score(self.output / "validation.jsonl", key, step)
         if is_improvement(score, best):
             save_checkpoint(self.model, self.output / SELECTED_FILE,
-                            {**self._provenance(step), "selected_by": key, "score": score})
+                            {**self._provenance(step), "selected_by": key, "score": score}, overwrite=True)
             self._files.record(self.output / SELECTED_FILE)
             logger.info("selected step %d: %s %.4f (best before: %s)", step, key, score,
                         "none" if best is None else f"{best:.4f}")
@@ -575,7 +575,8 @@ class Trainer:
             if result.steps_done > start:
                 self.save(result.steps_done)
             if self.context.is_main and result.steps_done >= self.config.optim.steps:
-                result.final_checkpoint = save_checkpoint(self.model, self.output / FINAL_FILE, self._provenance(result.steps_done))
+                result.final_checkpoint = save_checkpoint(self.model, self.output / FINAL_FILE, self._provenance(result.steps_done),
+                                                          overwrite=True)  # the run's own (RunFiles)
                 self._files.record(result.final_checkpoint)
             if self.config.select is not None and (self.output / SELECTED_FILE).is_file():
                 result.selected_checkpoint = self.output / SELECTED_FILE
