@@ -5,6 +5,7 @@ to fail once the work starts, is not what they complain about."""
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 
@@ -165,3 +166,10 @@ def test_row8_an_earlier_restores_contact_sheet_among_the_photos_is_no_photo(tmp
     again = run_lumos3d(*restore_args(photos, tmp_path / "R" / "scene.ply", random_checkpoint, "--json"))
     assert again.code == 0, again.err
     assert json.loads(again.out)["views"] == ["1.JPG", "2.JPG", "3.JPG"]
+    # the Python API's `load_images` and `degrade` read the same photos (they took the sheet for one)
+    import lumos3d_cli
+
+    assert [path.name for path in lumos3d_cli.load_images(photos).paths] == ["1.JPG", "2.JPG", "3.JPG"]
+    degraded = run_lumos3d("degrade", photos, "-o", tmp_path / "D", "--json")
+    assert degraded.code == 0, degraded.err
+    assert [Path(image["input"]).name for image in json.loads(degraded.out)["images"]] == ["1.JPG", "2.JPG", "3.JPG"]

@@ -11,7 +11,7 @@ from lumos3d_cli.cli.console import ProgressBars, print_json, progress_bar, say
 from lumos3d_cli.cli.interrupts import library_imports
 from lumos3d_cli.data.modes import MODES
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.image_files import list_images
+from lumos3d_cli.io.scene_photos import list_photos
 from lumos3d_cli.pipeline.degrade_outputs import degrade_outputs
 
 EXAMPLES = """
@@ -48,7 +48,7 @@ def degrade_command(
     """Synthesise low-light (the paper's model) or over-exposed images from normal-light ones."""
     if mode not in MODES:
         raise InputError(f"--mode {mode!r}: use one of {', '.join(MODES)}")
-    paths = list_images(inputs)
+    paths = list_photos(inputs)
     outputs = degrade_outputs(paths, output, bit_depth, inputs)
     outputs.check()  # a refusal comes before the libraries load (about 2 s); checked again under the lock
     # The job imports torch, OpenCV and the image readers (seconds): imported here, when the

@@ -16,8 +16,9 @@ from lumos3d_cli.cli.view import serve_until_stopped
 from lumos3d_cli.data.modes import MODES
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.output_paths import check_output_path
+from lumos3d_cli.io.scene_photos import list_photos
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET, GEOMETRY_SOURCES
-from lumos3d_cli.pipeline.restore_paths import check_lpips_weights, check_view_format, list_photos, restore_outputs
+from lumos3d_cli.pipeline.restore_paths import check_lpips_weights, check_view_format, restore_outputs
 from lumos3d_cli.viewer.availability import require_viser
 from lumos3d_cli.viewer.defaults import DEFAULT_HOST, DEFAULT_MAX_SPLATS, DEFAULT_PORT
 from lumos3d_cli.viewer.port import require_free_port

@@ -14,10 +14,11 @@ import numpy as np
 
 from lumos3d_cli.io.colour import linear_to_srgb
 from lumos3d_cli.io.hdr import probe_hdr, read_hdr
-from lumos3d_cli.io.image_files import image_kind, list_images
+from lumos3d_cli.io.image_files import image_kind
 from lumos3d_cli.io.image_types import DecodedImage, ImageHeader
 from lumos3d_cli.io.photo import probe_photo, read_photo
 from lumos3d_cli.io.raw import probe_raw, read_raw
+from lumos3d_cli.io.scene_photos import list_photos
 
 if TYPE_CHECKING:
     import torch
@@ -146,7 +147,7 @@ def load_photos(
     progress: Callable[[Path], None] | None = None,
 ) -> LoadedPhotos:
     """`load_images` without torch: the photos as one numpy array (`LoadedPhotos`)."""
-    paths = list_images(inputs)
+    paths = list_photos(inputs)
     pixels: list[np.ndarray] = []
     kinds: list[str] = []
     for path in paths:

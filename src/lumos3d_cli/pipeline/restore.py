@@ -24,6 +24,7 @@ from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.file_digest import file_sha256
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.io.images import ImageBatch, load_images
+from lumos3d_cli.io.scene_photos import list_photos
 from lumos3d_cli.model.appearance.photo_restoration import frames_without_content
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D
@@ -33,7 +34,7 @@ from lumos3d_cli.pipeline.model_loading import load_restoration_model
 from lumos3d_cli.pipeline.presets import RestorePreset, get_restore_preset
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
 from lumos3d_cli.pipeline.quality import QualityMeter, load_references, mean_metrics
-from lumos3d_cli.pipeline.restore_paths import check_lpips_weights, list_photos
+from lumos3d_cli.pipeline.restore_paths import check_lpips_weights
 from lumos3d_cli.pipeline.scene_geometry import SceneGeometry, check_geometry_source
 from lumos3d_cli.pipeline.scene_stages import build_scene
 from lumos3d_cli.render.hole_filling import render_shown

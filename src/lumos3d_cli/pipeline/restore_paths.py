@@ -1,5 +1,4 @@
-"""What a restore reads and writes, by path: its photos (less an earlier restore's own outputs
-among them) and its output set. Needs neither torch nor an image reader, so that the command
+"""What a restore writes, by path: its output set (its photos: io/scene_photos.py). Needs neither torch nor an image reader, so that the command
 refuses a bad command line before the libraries load (about 2 s)."""
 
 from __future__ import annotations
@@ -9,8 +8,6 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.image_files import list_images
-from lumos3d_cli.io.manifest import Manifest
 from lumos3d_cli.io.output_set import OutputSet
 
 logger = logging.getLogger(__name__)
@@ -30,23 +27,6 @@ def check_lpips_weights(lpips_weights: Path | str | None, reference: Path | str 
     if lpips_weights is not None and reference is None:
         raise InputError(f"{lpips_weights}: LPIPS is scored against reference images; give references or leave the "
                          "weights out", parameter="lpips_weights")
-
-
-def list_photos(photos: Path | str | Sequence[Path | str]) -> list[Path]:
-    """The photos of a restore (`io.image_files.list_images`), less the images an earlier restore
-    wrote among them (its contact sheet, when its output folder was the photo folder): the
-    folder's manifest names them (io/manifest.py), and they are no photos of the scene."""
-    paths = list_images(photos)
-    manifests: dict[Path, Manifest] = {}
-    ours = [path for path in paths if getattr(manifests.setdefault(path.parent, Manifest.read(path.parent)).files.get(
-        path.name), "command", None) == "restore"]
-    if ours:
-        logger.info("not photos: %s, written by an earlier restore", ", ".join(str(path) for path in ours))
-    kept = [path for path in paths if path not in ours]
-    if not kept:
-        raise InputError(f"{', '.join(str(path) for path in ours)}: written by an earlier restore, not photos; give the photos",
-                         parameter="photos")
-    return kept
 
 
 # The files beside the scene, and the folders of lumos3d's own (they hold nothing else).
