@@ -4,6 +4,7 @@ import shutil
 
 import cv2
 import numpy as np
+import pytest
 from assertions import expect_input_error
 
 
@@ -115,3 +116,21 @@ def test_scores_that_are_not_finite_are_empty_cells_in_metrics_csv(tmp_path, cap
     assert written["psnr"] == written["psnr_gt_mean"] == written["sharpness"] == "" and written["ssim"] == "1.0"
     assert json.loads((tmp_path / "report" / "metrics.json").read_text())["rows"][0]["psnr"] is None
     assert "metrics.csv: 3 value(s) are not finite, written as empty cells" in caplog.text
+
+
+def test_the_api_report_is_never_written_into_the_lom_root_it_read(tmp_path):
+    """`lumos3d eval lom --out lom` is refused; `write_eval_report(report, "lom")` wrote metrics and
+    contact sheets into the data set."""
+    from lumos3d_cli.errors import InputError
+    from lumos3d_cli.pipeline.evaluation import EvalReport, write_eval_report
+
+    root = tmp_path / "lom"
+    (root / "buu").mkdir(parents=True)
+    rows = [{"scene": "buu", "method": "lumos3d", "psnr": 20.0, "psnr_gt_mean": 21.0, "ssim": 0.8, "sharpness": 1.0,
+             "lpips": None, "seconds": 1.0}]
+    report = EvalReport({"mode": "low-light", "root": str(root), "rows": rows}, rows, [], ["lumos3d"])
+    for out in (root, root / "buu" / "report"):
+        with pytest.raises(InputError, match="input folder"):
+            write_eval_report(report, out)
+    assert sorted(p.name for p in root.rglob("*")) == ["buu"]
+    write_eval_report(report, tmp_path / "report")

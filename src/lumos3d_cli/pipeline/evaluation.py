@@ -139,7 +139,9 @@ def eval_contact_sheet(result: SceneEvaluation, mode: str, with_baseline: bool) 
 
 def write_eval_report(report: EvalReport, out: Path | str, inputs: Sequence[Path | str | None] = ()) -> None:
     """metrics.json, metrics.csv and contact_sheet_<scene>.png into `out`, all or nothing, never
-    over a file lumos3d did not write nor over `inputs` (io/output_set.py)."""
+    over a file lumos3d did not write nor over or into `inputs` or the LOM root the report read
+    (io/output_set.py)."""
+    inputs = [*inputs, report.document.get("root")]
     with eval_outputs(out, [result.scene for result in report.scenes], inputs).staged() as staging:
         (staging.root / "metrics.json").write_text(json_text(report.document, "metrics.json"))
         buffer = io.StringIO()
