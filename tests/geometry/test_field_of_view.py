@@ -46,6 +46,20 @@ def test_degenerate_predictions_get_the_fallback_lens():
     assert torch.equal(fixed[1], intrinsics[1])
 
 
+def test_a_degenerate_field_of_view_down_alone_gets_square_pixels_at_the_one_across():
+    """The head's field of view of the shorter side alone failed (kitchen at 200x134: 134,000 px
+    down against 817 across): the longer side was plausible, so the view kept pixels 164:1."""
+    size = (200, 134)
+    zero = (size[1] / 2) / math.tan(MIN_FOV / 2)
+    intrinsics = torch.stack([_intrinsics(817.0, zero, size), _intrinsics(240.0, 250.0, size),
+                              _intrinsics(240.0, 500.0, size), _intrinsics(240.0, 100.0, size)])
+    fixed, replaced = plausible_intrinsics(intrinsics, size)
+    assert replaced.tolist() == [True, False, True, True]
+    assert fixed[0, 0, 0] == fixed[0, 1, 1] == 817.0  # the longer side's focal length, square pixels
+    assert (fixed[2:, 0, 0] == 240.0).all() and (fixed[2:, 1, 1] == 240.0).all()
+    assert torch.equal(fixed[1], intrinsics[1])
+
+
 def test_views_no_lens_has_are_named_with_their_own_sizes():
     from lumos3d_cli.geometry.field_of_view import implausible_views
 

@@ -19,6 +19,8 @@ import torch
 PLAUSIBLE_FOV_DEGREES = (3.0, 150.0)
 # The fallback: about a 30 mm lens on a 35 mm frame, a phone's main camera.
 FALLBACK_FOV_DEGREES = 60.0
+# Pixels no camera has: focal lengths across and down further apart than this ratio.
+MAX_PIXEL_ASPECT = 2.0
 
 
 def longer_side_fov(intrinsics: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
@@ -51,14 +53,22 @@ def implausible_views(intrinsics: torch.Tensor, sizes: list[tuple[int, int]]) ->
 def plausible_intrinsics(intrinsics: torch.Tensor, size: tuple[int, int]) -> tuple[torch.Tensor, torch.Tensor]:
     """intrinsics [V, 3, 3] of images of size (width, height) -> (intrinsics [V, 3, 3], replaced
     [V] bool): views whose field of view is outside PLAUSIBLE_FOV_DEGREES (or not finite) get
-    square pixels and FALLBACK_FOV_DEGREES on the longer side; the principal point is kept."""
+    square pixels and FALLBACK_FOV_DEGREES on the longer side; views whose pixels are further from
+    square than MAX_PIXEL_ASPECT (the head's field of view for the shorter side alone failed: a
+    focal length of 134,000 pixels down against 817 across) get square pixels at the longer side's
+    focal length. The principal point is kept."""
     fov = longer_side_fov(intrinsics, size)
     low, high = PLAUSIBLE_FOV_DEGREES
-    replaced = ~(torch.isfinite(fov) & (fov >= low) & (fov <= high))
+    plausible = torch.isfinite(fov) & (fov >= low) & (fov <= high)
+    aspect = intrinsics[:, 0, 0] / intrinsics[:, 1, 1]
+    square = torch.isfinite(aspect) & (aspect >= 1 / MAX_PIXEL_ASPECT) & (aspect <= MAX_PIXEL_ASPECT)
+    replaced = ~(plausible & square)
     if not bool(replaced.any()):
         return intrinsics, replaced
-    focal = max(size) / 2 / math.tan(math.radians(FALLBACK_FOV_DEGREES) / 2)
+    fallback = max(size) / 2 / math.tan(math.radians(FALLBACK_FOV_DEGREES) / 2)
+    longer = intrinsics[:, 0, 0] if size[0] >= size[1] else intrinsics[:, 1, 1]
+    focal = torch.where(plausible, longer, torch.full_like(longer, fallback))
     fixed = intrinsics.clone()
-    fixed[replaced, 0, 0] = focal
-    fixed[replaced, 1, 1] = focal
+    fixed[replaced, 0, 0] = focal[replaced]
+    fixed[replaced, 1, 1] = focal[replaced]
     return fixed, replaced

@@ -9,7 +9,7 @@ from dataclasses import dataclass, replace
 import torch
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.geometry.field_of_view import FALLBACK_FOV_DEGREES, longer_side_fov, plausible_intrinsics
+from lumos3d_cli.geometry.field_of_view import FALLBACK_FOV_DEGREES, plausible_intrinsics
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.appearance.exposure_key import bundled_key_model
 from lumos3d_cli.model.appearance.exposure_prior import exposure_prior_stops, prior_strength
@@ -94,11 +94,16 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mod
         prediction, exposure_stops = replace(prediction, appearance=prediction.appearance.with_gain(stops)), float(stops[0])
     intrinsics, replaced = plausible_intrinsics(prediction.intrinsics[0], prepared.network_size)
     if bool(replaced.any()):
-        degrees = longer_side_fov(prediction.intrinsics[0][replaced], prepared.network_size)
+        predicted = prediction.intrinsics[0][replaced]
+        width, height = prepared.network_size
+        degrees = [f"{across:.3g}x{down:.3g}" for across, down in zip(
+            torch.rad2deg(2 * torch.atan(width / 2 / predicted[:, 0, 0])).tolist()[:5],
+            torch.rad2deg(2 * torch.atan(height / 2 / predicted[:, 1, 1])).tolist()[:5])]
         # one photo has no structure-from-motion, and its restored view does not depend on its camera
         advice = "" if len(replaced) == 1 else " (give --poses or use structure-from-motion for exact cameras)"
-        logger.warning("the network predicted a field of view no lens has (%s degrees) for %d of %d view(s); using %g "
-                       "degrees there%s", ", ".join(f"{value:.3g}" for value in degrees.tolist()[:5]), int(replaced.sum()),
-                       len(replaced), FALLBACK_FOV_DEGREES, advice)
+        logger.warning("the network predicted a field of view no lens has (%s degrees across x down) for %d of %d "
+                       "view(s); using square pixels there, at the longer side's field of view where it is plausible, "
+                       "else %g degrees%s", ", ".join(degrees), int(replaced.sum()), len(replaced), FALLBACK_FOV_DEGREES,
+                       advice)
         prediction = replace(prediction, intrinsics=intrinsics[None])
     return NetworkPass(prediction, prepared, exposure_stops)
