@@ -271,3 +271,49 @@ def test_a_photo_with_alpha_reads_as_opencvs_colour_decoding_gives_it(tmp_path, 
     colour = cv2.imread(str(path), cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH)[..., ::-1]
     expected = colour.astype(np.float32) / np.iinfo(colour.dtype).max
     np.testing.assert_array_equal(read_image(path).pixels, expected)
+
+
+def test_colour_profiles_other_than_srgb_are_named_and_a_linear_png_is_read_as_linear(tmp_path, caplog):
+    """An Adobe RGB JPEG was read as sRGB without a word (17 % less chroma); a 16-bit PNG whose gAMA
+    says linear light was read as sRGB codes (mean 0.009 where viewers show 0.083)."""
+    from lumos3d_cli.io import photo
+    from lumos3d_cli.io.images import to_srgb
+
+    rng = np.random.default_rng(0)
+    pixels = rng.integers(0, 256, (24, 32, 3), dtype=np.uint8)
+    for name, description in (("adobe.jpg", "Adobe RGB (1998)"), ("srgb.jpg", "sRGB IEC61966-2.1"), ("plain.jpg", None)):
+        out = oiio.ImageOutput.create(str(tmp_path / name))
+        spec = oiio.ImageSpec(32, 24, 3, oiio.UINT8)
+        if description is not None:
+            profile = _icc_profile(description)
+            spec.attribute("ICCProfile", oiio.TypeDesc(f"uint8[{len(profile)}]"), profile)
+        assert out.open(str(tmp_path / name), spec) and out.write_image(pixels)
+        out.close()
+    photo._warned_profiles.clear()
+    with caplog.at_level(logging.WARNING, logger="lumos3d_cli.io.photo"):
+        for name in ("adobe.jpg", "srgb.jpg", "plain.jpg", "adobe.jpg"):
+            read_image(tmp_path / name)
+    assert caplog.text.count("colour profile is 'Adobe RGB (1998)'") == 1 and "sRGB IEC" not in caplog.text
+    linear = np.full((8, 8, 3), 0.2, np.float32)
+    out = oiio.ImageOutput.create(str(tmp_path / "linear.png"))
+    spec = oiio.ImageSpec(8, 8, 3, oiio.UINT16)
+    spec.attribute("oiio:ColorSpace", "lin_rec709_scene")
+    assert out.open(str(tmp_path / "linear.png"), spec) and out.write_image(linear)
+    out.close()
+    decoded = read_image(tmp_path / "linear.png")
+    assert decoded.encoding == "linear" and np.allclose(decoded.pixels, 0.2, atol=1e-4)
+    assert np.allclose(to_srgb(decoded), linear_to_srgb(np.float32(0.2)), atol=1e-3)
+
+
+def _icc_profile(description: str) -> np.ndarray:
+    """A minimal ICC v2 profile: its header and a 'desc' tag naming it (what OpenImageIO decodes)."""
+    import struct
+
+    text = description.encode("ascii") + b"\0"
+    desc = b"desc" + bytes(4) + struct.pack(">I", len(text)) + text
+    desc += bytes(-len(desc) % 4)
+    size = 128 + 4 + 12 + len(desc)
+    header = struct.pack(">I", size) + b"none" + bytes([2, 16, 0, 0]) + b"mntrRGB XYZ " + bytes(12) + b"acsp"
+    header += bytes(128 - len(header))
+    table = struct.pack(">I", 1) + b"desc" + struct.pack(">II", 144, len(desc))
+    return np.frombuffer(header + table + desc, np.uint8)
