@@ -176,6 +176,11 @@ def test_a_jpeg_with_corrupt_data_is_refused_and_libraries_print_nothing(tmp_pat
 def test_no_images_and_unsupported_types(tmp_path):
     with pytest.raises(InputError, match="folder holds no images"):
         list_images(tmp_path)
+    (tmp_path / "images").mkdir()  # a scene folder in nerfstudio's layout: the photos one level down
+    cv2.imwrite(str(tmp_path / "images" / "1.png"), np.zeros((4, 4, 3), np.uint8))
+    with pytest.raises(InputError, match=r"folder holds no images .*; its subfolder images does: give that folder"):
+        list_images(tmp_path)
+    (tmp_path / "images" / "1.png").unlink()
     with pytest.raises(InputError, match="no such file or folder"):
         list_images(tmp_path / "missing")
     (tmp_path / "a.gif").write_bytes(b"GIF89a")

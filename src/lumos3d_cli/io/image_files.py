@@ -71,7 +71,9 @@ def list_images(inputs: Path | str | Sequence[Path | str]) -> list[Path]:
             unread = sorted((p.name for p in entries if p.suffix.lower() in UNREAD_IMAGE_SUFFIXES), key=natural_sort_key)
             if not found:
                 also = f"; {listed(unread)} cannot be read: convert them to JPEG or PNG" if unread else ""
-                raise InputError(f"{path}: folder holds no images ({', '.join(sorted(IMAGE_SUFFIXES))}){also}")
+                holding = sorted((p.name for p in entries if p.is_dir() and _holds_images(p)), key=natural_sort_key)
+                inside = f"; its subfolder {listed(holding)} does: give that folder" if holding and not unread else ""
+                raise InputError(f"{path}: folder holds no images ({', '.join(sorted(IMAGE_SUFFIXES))}){also}{inside}")
             if unread:
                 logger.warning("%s: skipped %s: a format lumos3d does not read; convert to JPEG or PNG to include them",
                                path, listed(unread))
@@ -85,6 +87,15 @@ def list_images(inputs: Path | str | Sequence[Path | str]) -> list[Path]:
             raise InputError(f"{path}: no such file or folder")
     check_distinct(paths)
     return paths
+
+
+def _holds_images(folder: Path) -> bool:
+    """Whether `folder` holds an image file (not looking further down)."""
+    try:
+        return any(p.suffix.lower() in IMAGE_SUFFIXES and p.is_file() and not p.name.startswith(".")
+                   for p in folder.iterdir())
+    except OSError:
+        return False
 
 
 def check_distinct(paths: Sequence[Path]) -> None:
