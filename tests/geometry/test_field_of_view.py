@@ -69,3 +69,18 @@ def test_views_no_lens_has_are_named_with_their_own_sizes():
     # a portrait photo measures along its height: 60 degrees for the landscape one, 90 for it
     assert implausible_views(torch.stack([_intrinsics(250 * 3 ** 0.5, 250 * 3 ** 0.5, (500, 375)),
                                           _intrinsics(250, 250, (375, 500))]), [(500, 375), (375, 500)]) == {}
+
+
+def test_a_stretched_photo_is_judged_square_at_its_own_size():
+    """A portrait 16:9 photo among landscape ones is stretched to the landscape working size: its
+    correct camera is far from square there (the check took it for a failed prediction and made
+    its camera 1500 x 4698 at its own size); judged at its own size it is kept, and a failed
+    one is made square there."""
+    size = (512, 288)  # the network's size of 16:9 landscape photos
+    own = (288 / 512) / (512 / 288)  # a 288x512 portrait photo's width factor over its height factor
+    correct = _intrinsics(300.0, 300.0 * own, size)  # square at its own size
+    failed = _intrinsics(300.0, 300.0 * own * 40, size)
+    fixed, replaced = plausible_intrinsics(torch.stack([correct, failed]), size, torch.tensor([own, own]))
+    assert replaced.tolist() == [False, True]
+    assert torch.equal(fixed[0], correct)
+    assert fixed[1, 0, 0] / fixed[1, 1, 1] * own == pytest.approx(1.0)  # square at its own size

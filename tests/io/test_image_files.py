@@ -33,6 +33,13 @@ def test_two_files_with_one_name_are_refused(folders):
     with pytest.raises(InputError, match=r"two photos named 'IMG_1'"):  # a camera's RAW+JPEG pair, say
         list_images(folders / "c")
     assert [p.name for p in list_images([folders / "a", folders / "c" / "IMG_1.png"])] == ["1.jpg", "2.jpg", "IMG_1.png"]
+    # names that differ in case alone: one view's outputs (restored/a.png) on a case-insensitive disk,
+    # and one pose for both (poses match stems in any case)
+    (folders / "d").mkdir()
+    for name in ("A.jpg", "a.png"):
+        (folders / "d" / name).write_bytes((folders / "a" / "1.jpg").read_bytes())
+    with pytest.raises(InputError, match=r"two photos named 'a'"):
+        list_images(folders / "d")
 
 
 def test_entries_named_as_images_that_are_not_files_are_skipped_by_name(tmp_path, caplog):

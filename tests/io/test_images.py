@@ -1,4 +1,5 @@
 import logging
+import re
 
 import cv2
 import numpy as np
@@ -156,16 +157,24 @@ def test_truncated_jpeg_is_refused(tmp_path, buu):
         read_image(tmp_path / "cut.jpg")
 
 
-def test_a_jpeg_with_corrupt_data_is_refused_and_libraries_print_nothing(tmp_path, buu, capfd):
+def test_a_jpeg_with_corrupt_data_is_refused_and_libraries_print_nothing(tmp_path, buu, capfd, caplog):
     """Bytes zeroed mid-file: libjpeg decodes on, with shifted colours and garbage blocks in the
     lower half, and says so only on stderr (OpenCV returned the garbage as the photo)."""
     data = bytearray((buu / "low" / "1.JPG").read_bytes())
     middle = len(data) // 2
     data[middle: middle + 40] = bytes(40)
     (tmp_path / "damaged.jpg").write_bytes(bytes(data))
-    with pytest.raises(InputError, match=r"damaged\.jpg: the JPEG data is corrupt \(Corrupt JPEG data: .*\): the decoded "
-                                         r"image would hold garbage; replace the file"):
+    with pytest.raises(InputError, match=r"damaged\.jpg: the JPEG data is corrupt \(Corrupt JPEG data: premature end of "
+                                         r"data segment\): the decoded image would hold garbage; replace the file"):
         read_image(tmp_path / "damaged.jpg")
+    # stray bytes before the end marker (an editor's padding) decode intact: a warning, not a refusal
+    padded = bytearray((buu / "low" / "1.JPG").read_bytes())
+    padded[-2:-2] = b"\x12\x34"
+    (tmp_path / "padded.jpg").write_bytes(bytes(padded))
+    with caplog.at_level(logging.WARNING, logger="lumos3d_cli.io.photo"):
+        decoded = read_image(tmp_path / "padded.jpg")
+    assert np.array_equal(decoded.pixels, read_image(buu / "low" / "1.JPG").pixels)
+    assert re.search(r"padded.jpg: libjpeg reports \d extraneous bytes before marker 0xd9; the image decoded", caplog.text)
     (tmp_path / "broken.png").write_bytes(cv2.imencode(".png", np.zeros((8, 8, 3), np.uint8))[1].tobytes()[:60])
     with pytest.raises(InputError, match=r"broken\.png: cannot decode as PNG"):
         read_image(tmp_path / "broken.png")

@@ -190,6 +190,16 @@ def test_row12_empty_photos_are_judged_at_their_own_size_and_a_set_of_them_refus
     assert not (tmp_path / "none").exists()
 
 
+def test_row12_a_photo_too_large_to_render_is_refused_before_the_work(tmp_path, buu, random_checkpoint, run_cli):
+    """Its view renders at its own size: beyond 16384 pixels a side the render refused it after the
+    network, structure-from-motion and refinement, naming no photo."""
+    photos = copy_photos(buu, tmp_path / "photos", SIX[:2])
+    write_image(photos / "panorama.png", np.full((20, 16400, 3), 0.1, np.float32))
+    result = run_cli(*restore_args(photos, tmp_path / "out" / "scene.ply", random_checkpoint))
+    expect_input_error(result, "panorama.png: is 16400x20 pixels; lumos3d renders views of at most 16384 pixels a side")
+    assert not (tmp_path / "out").exists()
+
+
 def test_row12_a_photo_copied_under_another_name_is_named(tmp_path, buu, random_checkpoint):
     photos = copy_photos(buu, tmp_path / "photos", SIX[:3])
     shutil.copy(photos / SIX[1], photos / "copy.JPG")

@@ -227,10 +227,11 @@ def test_bad_data_met_mid_run_keeps_the_steps_done(tiny_config, monkeypatch):
         return load_batch(step)
 
     monkeypatch.setattr(trainer, "_load_batch", damaged_at_step_3)
-    with pytest.raises(InputError, match=r"006.jpg: cannot be read \(truncated\); a checkpoint after step 3 was saved: "
-                                         r"fix the file or exclude its scene \(data.exclude\), then add --resume"):
+    with pytest.raises(InputError, match=r"006.jpg: cannot be read \(truncated\); the checkpoint of the 3 steps done is "
+                                         r"saved: fix the file or exclude its scene \(data.exclude\), then add --resume"):
         trainer.run()
     run = Path(str(config).replace(".yaml", ""))
     assert (run / "checkpoints" / "latest").read_text().strip() == "step_00000003"
-    resumed = Trainer(load_config(config, []), setup_distributed("cpu")).run(resume=True)
+    # the advice taken: the damaged photo's scene left out, the run continued from step 3
+    resumed = Trainer(load_config(config, ["data.exclude=[statue]"]), setup_distributed("cpu")).run(resume=True)
     assert resumed.steps_done == 6 and resumed.history[0].step == 3

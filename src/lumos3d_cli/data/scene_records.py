@@ -57,7 +57,8 @@ def _attach_cameras(record: SceneRecord, cameras: Cameras) -> None:
 
 
 def _attach_colmap(record: SceneRecord, sparse: Path) -> None:
-    _attach_cameras(record, read_colmap_model(sparse))
+    # the text form throughout: the points and their tracks below are read from it
+    _attach_cameras(record, read_colmap_model(sparse, text=True))
     if not (sparse / "points3D.txt").is_file():
         return
     points = read_colmap_points(sparse / "points3D.txt")

@@ -50,25 +50,31 @@ def implausible_views(intrinsics: torch.Tensor, sizes: list[tuple[int, int]]) ->
     return found
 
 
-def plausible_intrinsics(intrinsics: torch.Tensor, size: tuple[int, int]) -> tuple[torch.Tensor, torch.Tensor]:
+def plausible_intrinsics(intrinsics: torch.Tensor, size: tuple[int, int],
+                         stretch: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """intrinsics [V, 3, 3] of images of size (width, height) -> (intrinsics [V, 3, 3], replaced
     [V] bool): views whose field of view is outside PLAUSIBLE_FOV_DEGREES (or not finite) get
-    square pixels and FALLBACK_FOV_DEGREES on the longer side; views whose pixels are further from
-    square than MAX_PIXEL_ASPECT (the head's field of view for the shorter side alone failed: a
-    focal length of 134,000 pixels down against 817 across) get square pixels at the longer side's
-    focal length. The principal point is kept."""
+    square pixels and FALLBACK_FOV_DEGREES on the longer side; views whose pixels, at their
+    photo's own size, are further from square than MAX_PIXEL_ASPECT (the head's field of view for
+    the shorter side alone failed: a focal length of 134,000 pixels down against 817 across) get
+    square pixels at the longer side's focal length. `stretch` [V]: each photo's width factor over
+    its height factor on its way to `size` (a photo of another aspect ratio, stretched: its
+    pixels are square at its own size, not here); None: 1. The principal point is kept."""
     fov = longer_side_fov(intrinsics, size)
     low, high = PLAUSIBLE_FOV_DEGREES
     plausible = torch.isfinite(fov) & (fov >= low) & (fov <= high)
-    aspect = intrinsics[:, 0, 0] / intrinsics[:, 1, 1]
-    square = torch.isfinite(aspect) & (aspect >= 1 / MAX_PIXEL_ASPECT) & (aspect <= MAX_PIXEL_ASPECT)
+    own = torch.ones(len(intrinsics), dtype=torch.float64) if stretch is None else stretch.double().cpu()
+    aspect = (intrinsics[:, 0, 0] / intrinsics[:, 1, 1]).double().cpu() * own  # fx / fy at the photo's own size
+    square = (torch.isfinite(aspect) & (aspect >= 1 / MAX_PIXEL_ASPECT) & (aspect <= MAX_PIXEL_ASPECT)).to(plausible.device)
     replaced = ~(plausible & square)
     if not bool(replaced.any()):
         return intrinsics, replaced
     fallback = max(size) / 2 / math.tan(math.radians(FALLBACK_FOV_DEGREES) / 2)
     longer = intrinsics[:, 0, 0] if size[0] >= size[1] else intrinsics[:, 1, 1]
     focal = torch.where(plausible, longer, torch.full_like(longer, fallback))
+    # square at the photo's own size, where fx / fy is the ratio here times the stretch
+    focal_across, focal_down = (focal, focal * own.to(focal)) if size[0] >= size[1] else (focal / own.to(focal), focal)
     fixed = intrinsics.clone()
-    fixed[replaced, 0, 0] = focal[replaced]
-    fixed[replaced, 1, 1] = focal[replaced]
+    fixed[replaced, 0, 0] = focal_across[replaced]
+    fixed[replaced, 1, 1] = focal_down[replaced]
     return fixed, replaced

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import logging
 import math
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -112,12 +111,28 @@ class ColmapImage:
     camera_id: int
 
 
+def _is_image_line(line: str) -> bool:
+    """Whether `line` reads as an images.txt image line (IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID
+    NAME) rather than a POINTS2D line (numbers only, three per observation)."""
+    words = line.split()
+    if len(words) < 10:
+        return False
+    try:
+        int(words[0]), [float(v) for v in words[1:8]], int(words[8])
+    except ValueError:
+        return False
+    try:
+        [float(v) for v in words]
+    except ValueError:
+        return True  # a name that is no number
+    return len(words) % 3 != 0
+
+
 def read_colmap_images(path: Path) -> list[ColmapImage]:
-    """Image lines of images.txt (each is followed by a POINTS2D line, possibly empty). The count
-    COLMAP writes in the header, when there, is checked: a file whose POINTS2D lines were left out
+    """Image lines of images.txt, each followed by its POINTS2D line (possibly empty). An image
+    line followed by another image line is refused: a file whose POINTS2D lines were left out
     would otherwise lose every second image."""
-    text = _text(path)
-    lines = _data_lines(text)
+    lines = _data_lines(_text(path))
     images = []
     index = 0
     while index < len(lines):
@@ -134,11 +149,10 @@ def read_colmap_images(path: Path) -> list[ColmapImage]:
             ))
         except ValueError as error:
             raise InputError(f"{path}: cannot parse image line {lines[index]!r}") from error
+        if index + 1 < len(lines) and _is_image_line(lines[index + 1]):
+            raise InputError(f"{path}: image {words[9].rstrip()!r} is followed by another image line, not its POINTS2D "
+                             "line; every image line must be followed by one (an empty line if it has none)")
         index += 2
-    stated = re.search(r"^#\s*Number of images:\s*(\d+)", text, re.MULTILINE)
-    if stated and int(stated.group(1)) != len(images):
-        raise InputError(f"{path}: states {stated.group(1)} images but {len(images)} were read; every image line must be "
-                         "followed by its POINTS2D line (an empty line if it has none)")
     return images
 
 
@@ -182,15 +196,17 @@ def _read_binary_views(folder: Path) -> tuple[dict[int, ColmapCamera], list[Colm
     return cameras, views
 
 
-def read_colmap_model(folder: Path | str, warn_on_distortion: bool = True) -> Cameras:
-    """Read the cameras of a sparse model folder (cameras.txt + images.txt, or cameras.bin +
-    images.bin); views sorted by image name. Distortion parameters are ignored (pinhole), with
-    a warning unless `warn_on_distortion` is False (a caller that read the model once already)."""
+def read_colmap_model(folder: Path | str, warn_on_distortion: bool = True, text: bool = False) -> Cameras:
+    """Read the cameras of a sparse model folder (cameras.bin + images.bin + points3D.bin first, as
+    COLMAP does, else cameras.txt + images.txt; `text`: the text form, for a caller that reads its
+    points3D.txt too); views sorted by image name. Distortion parameters are ignored (pinhole),
+    with a warning unless `warn_on_distortion` is False (a caller that read the model once already)."""
     folder = Path(folder)
     if not is_colmap_model(folder):
         raise InputError(f"{folder}: no cameras.txt + images.txt (or cameras.bin + images.bin); expected a COLMAP model folder")
-    binary = all((folder / f"{name}.bin").is_file() for name in ("cameras", "images", "points3D"))
-    if binary or not all((folder / f"{name}.txt").is_file() for name in ("cameras", "images")):
+    has_text = all((folder / f"{name}.txt").is_file() for name in ("cameras", "images"))
+    binary = all((folder / f"{name}.bin").is_file() for name in ("cameras", "images", "points3D")) and not (text and has_text)
+    if binary or not has_text:
         cameras, views = _read_binary_views(folder)  # COLMAP and pycolmap read the binary form first
     else:
         cameras = read_colmap_cameras(folder / "cameras.txt")

@@ -100,14 +100,15 @@ def _holds_images(folder: Path) -> bool:
 
 def check_distinct(paths: Sequence[Path]) -> None:
     """InputError when a file comes twice (named twice, or in a folder also given) or two files
-    share a name stem (`a/1.jpg` and `b/1.jpg`, or a camera's `IMG_1.CR2` + `IMG_1.JPG` pair):
+    share a name stem in any case (`a/1.jpg` and `b/1.jpg`, `A.jpg` and `a.jpg`, or a camera's
+    `IMG_1.CR2` + `IMG_1.JPG` pair):
     views and their outputs are named by the stem, so one would overwrite the other. An error
     rather than dropping one: which of two same-named photos is meant is the user's call."""
     seen: dict[str, Path] = {}
     for path in paths:
-        earlier = seen.get(path.stem)
+        earlier = seen.get(path.stem.casefold())  # in any case: A.jpg and a.jpg share restored/a.png on macOS
         if earlier is None:
-            seen[path.stem] = path
+            seen[path.stem.casefold()] = path
             continue
         if earlier.resolve() == path.resolve():
             raise InputError(f"{path}: the same photo is given twice; pass each photo once")

@@ -26,7 +26,12 @@ def with_native_messages(call: Callable[[], T]) -> tuple[T, str]:
             saved = os.dup(2)
         except OSError:
             return call(), ""
-        with tempfile.TemporaryFile() as capture:
+        try:
+            capture = tempfile.TemporaryFile()
+        except OSError:  # no usable temporary folder: nothing is captured, nothing is lost
+            os.close(saved)
+            return call(), ""
+        with capture:
             os.dup2(capture.fileno(), 2)
             try:
                 result = call()

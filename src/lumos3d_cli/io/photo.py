@@ -21,8 +21,13 @@ from lumos3d_cli.io.native_messages import pass_on, with_native_messages
 _READ_FLAGS = cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH
 _TRANSPOSING_ORIENTATIONS = {5, 6, 7, 8}
 _ALPHA_SUFFIXES = {".png", ".tif", ".tiff", ".webp"}  # the photo formats that can carry alpha
-# libjpeg's warnings of damaged data (it decodes on, filling in garbage or grey)
+# libjpeg's warnings of damaged data (it decodes on, filling in garbage or grey): a bad Huffman or
+# arithmetic code, a segment or the file ending early, a lost restart marker
 _JPEG_CORRUPTION = ("Corrupt JPEG data", "Premature end of JPEG file")
+# ... but stray bytes before a marker are most often padding an editor left (the image decodes intact)
+_JPEG_STRAY_BYTES = "extraneous bytes before marker"
+# what the decoders print (libjpeg, libpng, OpenCV's log): read here, not passed on
+_DECODER_MESSAGES = ("Corrupt JPEG data", "Premature end of JPEG file", "libpng ", "[ WARN:", "[ERROR:", "Invalid SOS")
 
 logger = logging.getLogger(__name__)
 _warned_profiles: set[str] = set()
@@ -90,12 +95,19 @@ def _decode(path: Path, data: np.ndarray, header: _Header) -> tuple[np.ndarray |
     data is corrupt is an InputError naming the file (OpenCV returns its garbage as an image); a
     file OpenCV cannot decode at all gets this module's one line, not the library's own as well."""
     (bgr, alpha), printed = with_native_messages(lambda: _decode_pixels(path, data, header))
-    corrupt = [line for line in printed.splitlines() if line.startswith(_JPEG_CORRUPTION)]
-    if corrupt and bgr is not None:
-        raise InputError(f"{path}: the JPEG data is corrupt ({corrupt[0].strip().rstrip('.')}): the decoded image would "
-                         "hold garbage; replace the file or leave it out")
-    if bgr is not None:
-        pass_on(printed)
+    lines = printed.splitlines(keepends=True)
+    # what another thread printed meanwhile goes where it was going
+    pass_on("".join(line for line in lines if not line.startswith(_DECODER_MESSAGES)))
+    if bgr is None:
+        return bgr, alpha  # read_photo's one line says it
+    stray = [line.strip() for line in lines if _JPEG_STRAY_BYTES in line]
+    corrupt = [line.strip() for line in lines if line.startswith(_JPEG_CORRUPTION) and _JPEG_STRAY_BYTES not in line]
+    if corrupt:
+        raise InputError(f"{path}: the JPEG data is corrupt ({corrupt[0].rstrip('.')}): the decoded image would hold "
+                         "garbage; replace the file or leave it out")
+    if stray:  # padding an editor left before the end marker, mostly; damage now and then
+        logger.warning("%s: libjpeg reports %s; the image decoded, but look at its restored view", path,
+                       stray[0].removeprefix("Corrupt JPEG data: ").rstrip("."))
     return bgr, alpha
 
 

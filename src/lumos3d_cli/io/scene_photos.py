@@ -27,6 +27,5 @@ def list_photos(photos: Path | str | Sequence[Path | str]) -> list[Path]:
         logger.info("not photos: %s, written by an earlier restore", ", ".join(str(path) for path in ours))
     kept = [path for path in paths if path not in ours]
     if not kept:
-        raise InputError(f"{', '.join(str(path) for path in ours)}: written by an earlier restore, not photos; give the photos",
-                         parameter="photos")
+        raise InputError(f"{', '.join(str(path) for path in ours)}: written by an earlier restore, not photos; give the photos")
     return kept

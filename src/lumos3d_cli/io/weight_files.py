@@ -94,7 +94,7 @@ def write_weights(tensors: dict[str, torch.Tensor], path: Path, metadata: dict[s
     stored = {}
     for name, tensor in tensors.items():
         tensor = tensor.detach().to("cpu", torch.float32 if tensor.is_floating_point() else tensor.dtype)
-        if tensor.is_floating_point():  # a file no loader would accept (`check_tensors`) is not written
+        if tensor.is_floating_point():  # a file no loader would accept (`read_checkpoint`) is not written
             require_finite(name, tensor, "the weights are damaged (a diverged training run?); nothing was written")
         if tensor.is_floating_point() and storage != torch.float32:
             limit = torch.finfo(storage).max

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import torch
@@ -71,11 +72,16 @@ def network_image_size(model: Lumos3D, preset: RestorePreset) -> int:
     return preset.network_image_size(model.architecture.image_size, model.architecture.patch_size)
 
 
-def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mode: str = "low-light") -> NetworkPass:
+def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mode: str = "low-light",
+                empty_views: Sequence[int] | None = None, stretch: torch.Tensor | None = None) -> NetworkPass:
     """images [V, 3, H, W] at the photos' size -> the network's predictions for them; a view
     whose predicted field of view no lens has gets a typical one (`geometry.field_of_view`), and
     a predicted restoration operator is followed by the exposure prior
-    (`model.appearance.exposure_prior`) at the preset's strength or the `mode`'s own."""
+    (`model.appearance.exposure_prior`) at the preset's strength or the `mode`'s own, metered
+    without the `empty_views` (all black or saturated; None: judged here, on `images`).
+    `stretch` [V]: how far each photo's own aspect ratio was widened to make it `images`' (its
+    width factor over its height factor; None: none was), so that its pixels are judged square
+    at its own size."""
     prepared = prepare_images(images, network_image_size(model, preset), model.architecture.patch_size)
     device = next(model.parameters()).device
     with torch.no_grad():
@@ -85,14 +91,16 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mod
                               "checkpoint")
     exposure_stops = None
     if prediction.appearance is not None:
-        # on the working photos (their own size unless they differ): the network's resized copies have more levels
-        black, saturated = frames_without_content(images)
+        if empty_views is None:  # on the working photos: the network's resized copies have more levels
+            black, saturated = frames_without_content(images)
+        else:
+            black, saturated = list(empty_views), []
         stops = exposure_prior_stops(prediction.appearance, prepared.images[None].to(device),
                                      prior_strength(mode, preset.exposure_prior),
                                      key_model=bundled_key_model() if preset.exposure_key == "content" else None,
                                      unmetered=[{*black, *saturated}])
         prediction, exposure_stops = replace(prediction, appearance=prediction.appearance.with_gain(stops)), float(stops[0])
-    intrinsics, replaced = plausible_intrinsics(prediction.intrinsics[0], prepared.network_size)
+    intrinsics, replaced = plausible_intrinsics(prediction.intrinsics[0], prepared.network_size, stretch)
     if bool(replaced.any()):
         predicted = prediction.intrinsics[0][replaced]
         width, height = prepared.network_size

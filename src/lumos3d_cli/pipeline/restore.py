@@ -37,6 +37,7 @@ from lumos3d_cli.pipeline.quality import QualityMeter, load_references, mean_met
 from lumos3d_cli.pipeline.restore_paths import check_lpips_weights
 from lumos3d_cli.pipeline.scene_geometry import SceneGeometry, check_geometry_source
 from lumos3d_cli.pipeline.scene_stages import build_scene
+from lumos3d_cli.render.constants import MAX_IMAGE_SIDE
 from lumos3d_cli.render.hole_filling import render_shown
 from lumos3d_cli.render.view_threads import map_views
 
@@ -264,7 +265,8 @@ def photos_without_content(batch: ImageBatch) -> tuple[list[int], list[int]]:
 
 
 def check_photo_contents(batch: ImageBatch, patch_size: int, mode: str) -> None:
-    """InputError naming a photo too small to hold one network patch (`patch_size` pixels a side);
+    """InputError naming a photo too small to hold one network patch (`patch_size` pixels a side)
+    or too large to render its view (MAX_IMAGE_SIDE);
     a warning naming the photos that are all black or all saturated (nothing to restore there),
     one naming photos that are copies of others, and one when the photos contradict `mode`."""
     names = [path.name for path in batch.paths]
@@ -272,6 +274,9 @@ def check_photo_contents(batch: ImageBatch, patch_size: int, mode: str) -> None:
         if min(width, height) < patch_size:
             raise InputError(f"{path}: is {width}x{height} pixels, too small for the network (at least {patch_size} "
                              "pixels a side); leave it out")
+        if max(width, height) > MAX_IMAGE_SIDE:  # its view is rendered at its own size (render.render)
+            raise InputError(f"{path}: is {width}x{height} pixels; lumos3d renders views of at most {MAX_IMAGE_SIDE} "
+                             "pixels a side: downscale it")
     black, saturated = photos_without_content(batch)
     _warn_of_repeated_photos(batch, {*black, *saturated})
     _warn_of_a_mode_the_photos_contradict(batch, mode)

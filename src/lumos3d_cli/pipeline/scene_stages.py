@@ -69,7 +69,13 @@ def with_full_resolution_colours(prediction: Lumos3DPrediction, restored: torch.
 
 def _network_pass(job: SceneJob, selected: list[int]) -> NetworkPass:
     job.progress.start("network", 1)
-    network = run_network(job.model, job.photos[selected], job.preset, job.mode)
+    empty = None if job.fuse_views is None else [index for index, view in enumerate(selected) if not job.fuse_views[view]]
+    stretch = None
+    if job.sizes is not None:  # a photo of another aspect, stretched to the working size (network_pass.run_network)
+        height, width = job.photos.shape[-2:]
+        stretch = torch.tensor([(job.sizes[view][0] / width) / (job.sizes[view][1] / height) for view in selected],
+                               dtype=torch.float64)
+    network = run_network(job.model, job.photos[selected], job.preset, job.mode, empty_views=empty, stretch=stretch)
     job.progress.advance("network")
     return network
 

@@ -549,9 +549,10 @@ class Trainer:
                     # (under torchrun the other ranks wait in this step's all-reduce: torchrun ends them)
                     if self.context.enabled or step == start:
                         raise
-                    self.save(step)
-                    raise InputError(f"{error}; a checkpoint after step {step} was saved: fix the file or exclude its "
-                                     "scene (data.exclude), then add --resume") from error
+                    if not (self.config.checkpoint_every and step % self.config.checkpoint_every == 0):
+                        self.save(step)  # (at a multiple of checkpoint_every it was saved after the last step)
+                    raise InputError(f"{error}; the checkpoint of the {step} steps done is saved: fix the file or exclude "
+                                     "its scene (data.exclude), then add --resume") from error
                 self._kept_work = True
                 result.history.append(report)
                 result.steps_done = step + 1

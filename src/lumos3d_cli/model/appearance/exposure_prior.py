@@ -71,7 +71,8 @@ def _metered(restored_linear: torch.Tensor, key: float, max_stops: float) -> tup
         below = brightness < key
         low = torch.where(below, middle, low)
         high = torch.where(below, high, middle)
-    # as photo_restoration.frames_without_content: nothing above one 8-bit step of black, or below white
+    # a scene with nothing to meter: no pixel above one 8-bit step of black, or none below white (the
+    # photos that are empty themselves, photo_restoration.frames_without_content, are left out before)
     encoded = linear_to_srgb(flat.clamp(0.0, 1.0))
     empty = (encoded.amax(dim=1) <= BLACK_LEVEL) | (encoded.amin(dim=1) >= WHITE_LEVEL)
     return (low + high) / 2, empty
