@@ -85,3 +85,18 @@ def test_warmup_then_cosine():
     assert factors[10] == pytest.approx(1.0) and factors[60] == pytest.approx(0.55)
     assert factors[-1] == pytest.approx(0.1, abs=1e-3)
     assert all(a >= b for a, b in zip(factors[10:], factors[11:]))
+
+
+def test_settings_a_short_run_never_reaches_are_warned_of(tiny_config, caplog):
+    """A 4-step test of a config warming up over 100 steps peaked at 4 % of optim.lr; a selection
+    with validate_every beyond the run selected nothing; neither was said."""
+    import logging
+
+    from lumos3d_cli.train.config import warn_of_idle_settings
+
+    config = load_config(tiny_config(name="short"), ["optim.steps=4", "optim.warmup_steps=100", "validate_every=10",
+                                                     "select=psnr"])
+    with caplog.at_level(logging.WARNING, logger="lumos3d_cli.train.config"):
+        warn_of_idle_settings(config)
+    assert "optim.warmup_steps 100 is more than optim.steps 4: the learning rate never reaches optim.lr" in caplog.text
+    assert "select: psnr, but validate_every 10 is more than optim.steps 4: no validation runs" in caplog.text

@@ -203,6 +203,8 @@ def test_files_may_move_on_resume_but_not_appear_or_go():
     assert not _may_differ("brackets.root", None, "/data/brackets")  # the bracket loss switched on mid-run
     assert not _may_differ("teacher", "/t.safetensors", None) and not _may_differ("optim.lr", 2e-4, 0.05)
     assert _may_differ("data.root", "scenes", "/data/scenes")  # a bare relative folder that moved
+    assert not _may_differ("teacher", "low-light", "over-exposure")  # another bundled model, not a file that moved
+    assert _may_differ("teacher", "runs/t/final.safetensors", "/moved/final.safetensors")
 
 
 def test_a_damaged_config_in_the_newest_checkpoint_falls_back_like_damaged_weights(tiny_config):
@@ -235,3 +237,12 @@ def test_bad_data_met_mid_run_keeps_the_steps_done(tiny_config, monkeypatch):
     # the advice taken: the damaged photo's scene left out, the run continued from step 3
     resumed = Trainer(load_config(config, ["data.exclude=[statue]"]), setup_distributed("cpu")).run(resume=True)
     assert resumed.steps_done == 6 and resumed.history[0].step == 3
+
+
+def test_a_new_run_beside_the_current_folder_given_as_dot(tmp_path, monkeypatch):
+    """`lumos3d train ... output=. --new-run` in a run folder: "PosixPath('.') has an empty name"."""
+    from lumos3d_cli.train.run_folder import numbered_folder
+
+    (tmp_path / "run").mkdir()
+    monkeypatch.chdir(tmp_path / "run")
+    assert numbered_folder(Path(".")) == tmp_path / "run-2"

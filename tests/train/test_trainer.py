@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from lumos3d_cli.errors import InputError, RunError
+from lumos3d_cli.errors import InputError, NonFiniteError, RunError
 from lumos3d_cli.model.checkpoints import read_checkpoint
 from lumos3d_cli.train.config import load_config
 from lumos3d_cli.train.distributed import setup_distributed
@@ -356,3 +356,50 @@ def test_a_run_folder_whose_list_cannot_be_read_refuses_rather_than_adopts(tiny_
     with pytest.raises(InputError, match="was not written by this training run"):  # config.yaml comes first
         _trainer(config).run(resume=True)
     assert (run / "final.safetensors").read_bytes() == b"the user's"
+
+
+def test_a_run_stopped_at_a_validation_step_validates_it_on_resume(tiny_config):
+    """A signal after step 4 of a run validating every 2 saved and stopped before the validation
+    due there; the resumed run never made it up (validation.jsonl lacked step 4)."""
+    config = tiny_config(name="stopped", validate_every=2, validation_samples=1)
+    run = Path(str(config).replace(".yaml", ""))
+    _trainer(config).run(stop_after=4)
+    assert [json.loads(line)["step"] for line in (run / "validation.jsonl").read_text().splitlines()] == [2]
+    _trainer(config).run(resume=True)
+    assert [json.loads(line)["step"] for line in (run / "validation.jsonl").read_text().splitlines()] == [2, 4, 6]
+
+
+def test_resume_refusals_a_missing_checkpoint_config_fewer_steps_and_another_teacher(tiny_config):
+    config = tiny_config(name="guarded", optim__steps=6)
+    run = Path(str(config).replace(".yaml", ""))
+    _trainer(config).run(stop_after=2)
+    (run / "checkpoints" / "step_00000002" / "config.yaml").unlink()  # the run's own config.yaml is compared instead
+    with pytest.raises(InputError, match=r"differs from the run's in optim.lr"):
+        _trainer(config, ["optim.lr=0.5"]).run(resume=True)
+    _trainer(config, ["optim.steps=4"]).run(resume=True)
+    with pytest.raises(InputError, match=r"optim.steps 3: the run has done 4 steps already; .* give at least 4"):
+        _trainer(config, ["optim.steps=3"]).run(resume=True)
+
+
+def test_a_photo_holding_nan_stops_training_as_bad_data(tiny_config, tmp_path, shared_data):
+    """A float TIFF of NaN samples among a scene's photos: each step drawing it was skipped as a
+    non-finite loss and the run ended "final", exit 0 (or "training diverged: lower optim.lr")."""
+    import shutil
+
+    import numpy as np
+    import OpenImageIO as oiio
+
+    root = tmp_path / "root"
+    shutil.copytree(shared_data / "scenes" / "statue", root / "statue")
+    images = sorted((root / "statue" / "images").iterdir())
+    nan = np.full((32, 48, 3), np.nan, np.float32)
+    tiff = tmp_path / "nan.tif"
+    out = oiio.ImageOutput.create(str(tiff))
+    assert out.open(str(tiff), oiio.ImageSpec(48, 32, 3, oiio.FLOAT)) and out.write_image(nan)
+    out.close()
+    for image in images:  # every photo (their names keep the cameras'), so the first step draws one
+        image.write_bytes(tiff.read_bytes())
+    config = tiny_config(name="nan", data__root=str(root), data__scenes=["statue"], stage="teacher")
+    with pytest.raises(InputError, match=r"statue/images/.*: .* NaN or Inf") as error:
+        _trainer(config).run()
+    assert not isinstance(error.value, NonFiniteError)

@@ -34,8 +34,8 @@ from torch.utils.data import Dataset
 
 from lumos3d_cli.data.augment import crop_and_resize, crop_box
 from lumos3d_cli.data.modes import MODES
+from lumos3d_cli.data.photo_reading import read_training_photo
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.images import read_image, to_srgb
 
 logger = logging.getLogger(__name__)
 
@@ -125,7 +125,7 @@ def read_srgb(path: Path) -> torch.Tensor:
     """One photo -> [3, H, W] float32 sRGB in [0, 1]; InputError naming a missing file."""
     if not path.is_file():
         raise InputError(f"{path} is listed in brackets.json but missing; restore the brackets folder")
-    return torch.from_numpy(to_srgb(read_image(path))).permute(2, 0, 1).contiguous()
+    return torch.from_numpy(read_training_photo(path)).permute(2, 0, 1).contiguous()
 
 
 class BracketDataset(Dataset):

@@ -11,10 +11,10 @@ import torch
 from torch.utils.data import Dataset
 
 from lumos3d_cli.data.augment import centred_box, crop_and_resize, crop_box, mirror
+from lumos3d_cli.data.photo_reading import read_training_photo
 from lumos3d_cli.data.scene_records import SceneRecord
 from lumos3d_cli.data.view_sampling import candidate_views, sample_views
 from lumos3d_cli.io.cameras import invert_rigid, to_homogeneous
-from lumos3d_cli.io.images import read_image, to_srgb
 
 logger = logging.getLogger(__name__)
 
@@ -96,7 +96,7 @@ class MultiViewDataset(Dataset):
         if key in self._cache:
             self._cache.move_to_end(key)
             return self._cache[key].float()
-        pixels = to_srgb(read_image(self.records[scene].image_paths[view]))
+        pixels = read_training_photo(self.records[scene].image_paths[view])
         image = torch.from_numpy(pixels).permute(2, 0, 1).to(torch.float16)
         self._cache[key] = image
         self._cached_bytes += image.nbytes

@@ -8,6 +8,8 @@ reconstruction + cross-illumination distillation from a frozen teacher + the Lum
 
 from __future__ import annotations
 
+import logging
+
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,6 +23,8 @@ from lumos3d_cli.losses.appearance import SSIM_WEIGHT
 from lumos3d_cli.losses.loss_config import LossConfig
 from lumos3d_cli.train.selection import SELECTION_SCORES
 from lumos3d_cli.typed_config import apply_override, from_dict, to_dict
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass
@@ -160,8 +164,10 @@ class TrainConfig:
             raise ValueError("multiview_loss: appearance scores a restoration: it needs stage 'student'")
         if not 0 <= self.seed < 2**63:  # what numpy's and torch's generators both take, and an int64 holds
             raise ValueError(f"seed: {self.seed} must be a whole number from 0 to 2**63 - 1")
-        if self.batch_size < 1 or self.optim.steps < 1 or self.validation_samples < 1:
-            raise ValueError("batch_size, optim.steps and validation_samples must be at least 1")
+        for key, value in (("batch_size", self.batch_size), ("optim.steps", self.optim.steps),
+                           ("validation_samples", self.validation_samples)):
+            if value < 1:
+                raise ValueError(f"{key}: {value} must be at least 1")
         for key in ("log_every", "max_nonfinite_steps", "validation_views"):
             if getattr(self, key) < 1:
                 raise ValueError(f"{key}: {getattr(self, key)} must be at least 1")
@@ -177,6 +183,18 @@ class TrainConfig:
                 raise ValueError("select needs validations: set validate_every")
         if self.validate_at_start and not self.validate_every:
             raise ValueError("validate_at_start adds a validation to those of validate_every: set validate_every")
+
+
+def warn_of_idle_settings(config: TrainConfig) -> None:
+    """Warnings for settings a run of this length never reaches (a short test of a long config:
+    allowed, but said): a warmup longer than the run, a selection with no validation in it."""
+    optim = config.optim
+    if optim.warmup_steps > optim.steps:
+        logger.warning("optim.warmup_steps %d is more than optim.steps %d: the learning rate never reaches optim.lr "
+                       "(it peaks at %.2g of it)", optim.warmup_steps, optim.steps, optim.steps / optim.warmup_steps)
+    if config.select is not None and config.validate_every > optim.steps and not config.validate_at_start:
+        logger.warning("select: %s, but validate_every %d is more than optim.steps %d: no validation runs, so nothing "
+                       "is selected", config.select, config.validate_every, optim.steps)
 
 
 def training_inputs(config: TrainConfig, config_file: Path | str) -> list[Path]:

@@ -46,7 +46,7 @@ def _is_path(value: Any) -> bool:
 def _may_differ(key: str, saved: Any, current: Any) -> bool:
     if key in MAY_CHANGE:
         return True
-    if key == "model":  # a checkpoint that moved, not another architecture
+    if key in ("model", "teacher"):  # a checkpoint that moved, not another architecture or bundled model
         return _is_path(saved) and _is_path(current)
     return key in MAY_MOVE and saved is not None and current is not None
 

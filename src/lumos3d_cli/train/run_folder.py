@@ -74,6 +74,8 @@ def other_outputs(output: Path) -> str | None:
 
 def numbered_folder(output: Path) -> Path:
     """The first of `output`-2, `output`-3 ... that holds no run and no other command's outputs."""
+    if not output.name:  # "." or "..": the folder's own name
+        output = output.resolve()
     number = 2
     while (earlier_run(output.with_name(f"{output.name}-{number}")) is not None
            or other_outputs(output.with_name(f"{output.name}-{number}")) is not None):

@@ -46,6 +46,13 @@ class RunLogs:
                 kept = [line for line in path.read_text().splitlines() if line and json.loads(line)["step"] <= last_kept]
                 write_bytes_atomic(path, ("\n".join(kept) + "\n" if kept else "").encode())
 
+    def validated_steps(self) -> set[int]:
+        """The steps validation.jsonl has a validation after."""
+        path = self.output / "validation.jsonl"
+        if not path.is_file():
+            return set()
+        return {int(json.loads(line)["step"]) for line in path.read_text().splitlines() if line}
+
     def close(self) -> None:
         if self._tensorboard is not None:
             self._tensorboard.close()

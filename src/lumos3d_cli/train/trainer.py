@@ -15,6 +15,7 @@ import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 import torch
@@ -39,7 +40,7 @@ from lumos3d_cli.train.checkpointing import (
     resume_candidates,
     save_training_checkpoint,
 )
-from lumos3d_cli.train.config import TrainConfig, config_to_yaml
+from lumos3d_cli.train.config import TrainConfig, config_to_yaml, warn_of_idle_settings
 from lumos3d_cli.train.distributed import DistributedContext, all_reduce_mean, any_rank
 from lumos3d_cli.io.output_lock import folder_lock
 from lumos3d_cli.train.run_files import RunFiles
@@ -124,6 +125,8 @@ class Trainer:
         self.on_resume = on_resume
         self.output = Path(config.output)
         self.device = context.device
+        if context.is_main:
+            warn_of_idle_settings(config)
         torch.manual_seed(config.seed)
         self.dataset = self._dataset()
         self.model = self._student().to(self.device)
@@ -359,14 +362,18 @@ class Trainer:
         problems = []
         run_id = self.run_identity.run_id if self.run_identity is not None else None
         for folder in resume_candidates(self.output, run_id):
+            config_file = folder / CONFIG_FILE
             try:
-                saved = read_run_config(folder / CONFIG_FILE, TrainConfig)
+                saved = read_run_config(config_file, TrainConfig)
+                if saved is None:  # a checkpoint without its config (removed, or an earlier release's): the run's
+                    config_file = self.output / CONFIG_FILE
+                    saved = read_run_config(config_file, TrainConfig)
             except InputError as error:  # a damaged checkpoint, as one whose weights cannot be read
                 logger.warning("skipping checkpoint %s: %s", folder.name, error)
                 problems.append(str(error))
                 continue
             if saved is not None:  # a config that changes what the run learns is refused, not skipped
-                require_same_training(folder / CONFIG_FILE, saved, self.config)
+                require_same_training(config_file, saved, self.config)
             try:
                 state = load_training_checkpoint(folder, self.model)
             except InputError as error:
@@ -389,6 +396,18 @@ class Trainer:
             return state.step
         raise InputError(f"{self.output}: no intact checkpoint to resume from ({'; '.join(problems)})")
 
+    def _keep_the_steps_done(self, error: InputError, steps_done: int, start: int) -> NoReturn:
+        """Bad data met mid-run (a damaged photo, hours in), by a step or a validation: the weights
+        of the `steps_done` are saved, so the run goes on with --resume once the file is fixed or
+        its scene excluded; then `error` is raised, saying so. (Under torchrun the other ranks
+        wait in this step's all-reduce until torchrun ends them: only one process saves.)"""
+        if self.context.enabled or steps_done == start:
+            raise error
+        if not (self.config.checkpoint_every and steps_done % self.config.checkpoint_every == 0):
+            self.save(steps_done)  # (at a multiple of checkpoint_every it is saved already)
+        raise InputError(f"{error}; the checkpoint of the {steps_done} steps done is saved: fix the file or exclude its "
+                         "scene (data.exclude), then add --resume") from error
+
     def _log(self, report: StepReport) -> None:
         if self._logs is not None:
             self._logs.append_step(report.step, report.learning_rate, report.skipped, report.seconds, self.nonfinite_total,
@@ -410,7 +429,7 @@ class Trainer:
         if not self.context.is_main:
             return None
         extra = self.brackets.scores(self.model.eval(), self.device) if self.brackets is not None else None
-        samples = self._validation_samples()  # read first: NaN in an image file is the data's, exit 2
+        samples = list(self._validation_samples())  # read first: a damaged image is the data's (exit 2), not divergence
         try:
             line, path = validate(self.model, samples, step, self.output, self.config.validation_views,
                                   self.config.loss.background, self._autocast, extra)
@@ -512,6 +531,9 @@ class Trainer:
             self._started_fresh = True
             self._files.record(self.output / RUN_FILE)
         start = self.resume() if resume else 0
+        if start > self.config.optim.steps:  # it went on with "6/3" and wrote "final" weights of 6 steps as 3's
+            raise InputError(f"optim.steps {self.config.optim.steps}: the run has done {start} steps already; a resume "
+                             f"trains on to optim.steps, so give at least {start}")
         if resume:  # before anything is replaced: the files of the user's stay as they are
             refusal = None
             if self.context.is_main:
@@ -536,6 +558,9 @@ class Trainer:
             self._files.record(self.output / "config.yaml")
         if self.config.validate_at_start and start == 0:
             self.validate(0)
+        elif (resume and start > 0 and self.config.validate_every and start % self.config.validate_every == 0
+              and (not self.context.is_main or start not in self._logs.validated_steps())):
+            self.validate(start)  # due when a signal stopped the run, which saved before validating
         # A signal the process was started with ignored (nohup: SIGHUP) stays ignored.
         previous = {s: signal.signal(s, self._request_stop) for s in STOP_SIGNALS if signal.getsignal(s) is not signal.SIG_IGN}
         result = TrainResult(start)
@@ -544,21 +569,14 @@ class Trainer:
                 try:
                     report = self.step(step)
                 except InputError as error:
-                    # bad data met mid-run (a damaged photo, hours in): the weights of the steps done are
-                    # kept, so the run goes on with --resume once the file is fixed or its scene excluded
-                    # (under torchrun the other ranks wait in this step's all-reduce: torchrun ends them)
-                    if self.context.enabled or step == start:
-                        raise
-                    if not (self.config.checkpoint_every and step % self.config.checkpoint_every == 0):
-                        self.save(step)  # (at a multiple of checkpoint_every it was saved after the last step)
-                    raise InputError(f"{error}; the checkpoint of the {step} steps done is saved: fix the file or exclude "
-                                     "its scene (data.exclude), then add --resume") from error
+                    self._keep_the_steps_done(error, step, start)
                 self._kept_work = True
                 result.history.append(report)
                 result.steps_done = step + 1
                 if report.skipped:
                     logger.warning("step %d skipped: non-finite loss or gradient (%d in a row)", step, self.nonfinite_in_a_row)
-                if step % self.config.log_every == 0 or step == end - 1:
+                # the run's last step, not --max-steps': a resumed run's logs read as an uninterrupted run's
+                if step % self.config.log_every == 0 or step == self.config.optim.steps - 1:
                     self._log(report)
                 if self.on_step is not None:
                     self.on_step(report)
@@ -572,7 +590,10 @@ class Trainer:
                 if self.config.checkpoint_every and (step + 1) % self.config.checkpoint_every == 0:
                     self.save(step + 1)
                 if self.config.validate_every and (step + 1) % self.config.validate_every == 0:
-                    self.validate(step + 1)
+                    try:
+                        self.validate(step + 1)
+                    except InputError as error:
+                        self._keep_the_steps_done(error, step + 1, start)
             if result.steps_done > start:
                 self.save(result.steps_done)
             if self.context.is_main and result.steps_done >= self.config.optim.steps:
