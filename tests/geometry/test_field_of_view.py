@@ -84,3 +84,13 @@ def test_a_stretched_photo_is_judged_square_at_its_own_size():
     assert replaced.tolist() == [False, True]
     assert torch.equal(fixed[0], correct)
     assert fixed[1, 0, 0] / fixed[1, 1, 1] * own == pytest.approx(1.0)  # square at its own size
+
+
+def test_focal_ratio_is_the_median_over_views_and_axes():
+    from lumos3d_cli.geometry.field_of_view import focal_ratio
+
+    predicted = torch.stack([_intrinsics(265.0, 265.0, (224, 168))] * 3)
+    measured = torch.stack([_intrinsics(843.0, 843.0, (224, 168)), _intrinsics(800.0, 800.0, (224, 168)),
+                            _intrinsics(265.0, 265.0, (224, 168))])
+    assert focal_ratio(measured, predicted) == pytest.approx(800.0 / 265.0)
+    assert focal_ratio(predicted, predicted) == 1.0

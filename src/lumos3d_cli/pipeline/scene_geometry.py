@@ -31,7 +31,7 @@ from lumos3d_cli.geometry.consistency import depth_consistency
 from lumos3d_cli.geometry.depth_alignment import MIN_POINTS, align_depth
 from lumos3d_cli.geometry.depth_correction import GRID as DEPTH_CORRECTION_GRID
 from lumos3d_cli.geometry.depth_correction import correct_depth
-from lumos3d_cli.geometry.field_of_view import implausible_views
+from lumos3d_cli.geometry.field_of_view import FOCAL_DISAGREEMENT, focal_ratio, implausible_views
 from lumos3d_cli.geometry.given_poses import read_given_poses
 from lumos3d_cli.geometry.photo_consistency import sweep_depth
 from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
@@ -287,6 +287,19 @@ def _aligned_depth(
     return depth * similarity.scale, {"form": "camera similarity scale", "scale": similarity.scale, "views": len(selected)}
 
 
+def _warn_of_disagreeing_focal_lengths(network_cameras: Cameras, network: NetworkPass) -> None:
+    """A warning when structure-from-motion's focal lengths of the network's views (in network
+    pixels) and the network's own differ by more than FOCAL_DISAGREEMENT: on few photos the
+    former can settle on a wrong one that still reprojects its points well."""
+    predicted = network.prediction.intrinsics[0].detach().double().cpu()
+    ratio = focal_ratio(network_cameras.intrinsics.double(), predicted)
+    if 1 / FOCAL_DISAGREEMENT <= ratio <= FOCAL_DISAGREEMENT:
+        return
+    logger.warning("structure-from-motion's focal lengths are %.2gx the network's for these photos: one of them is wrong "
+                   "(with few photos, structure-from-motion's often is); if the views look stretched or blurred, try "
+                   "--geometry network, more photos, or --poses", ratio)
+
+
 def place_views(
     registration: ViewRegistration, network: NetworkPass, selected: list[int], names: list[str],
     images: torch.Tensor | None = None, sweep: DepthSweepSettings | None = None,
@@ -331,6 +344,8 @@ def place_views(
     cameras = Cameras(cameras.extrinsics.double(), cameras.intrinsics.double(), cameras.sizes,
                       [name for view, name in enumerate(names) if view in position_of_view or bool(known[view])])
     network_cameras = _to_network(network, selected_cameras)
+    if registration.source == "sfm":
+        _warn_of_disagreeing_focal_lengths(network_cameras, network)
     points, reprojection_error = _points_in_frame(registration)
     depth, alignment_report = _aligned_depth(network, selected, network_cameras, points, selected_names, selected_cameras)
     sweep_report = None
