@@ -130,7 +130,7 @@ def test_degrade_refuses_seeds_beyond_the_generator_and_jpeg_beyond_its_sizes(ru
 def test_degrade_single_file_and_raw(run_cli, shared_data, tmp_path):
     result = run_cli("degrade", shared_data / "raw" / "Blackmagic.dng", "-o", tmp_path / "dark.png", "--quiet")
     assert result.code == 0, result.err
-    assert cv2.imread(str(tmp_path / "dark.png")).shape == (2176, 4128, 3)
+    assert cv2.imread(str(tmp_path / "dark.png")).shape == (2160, 4096, 3)  # the DNG's default crop
     assert listing(tmp_path) == ["dark.png"]
 
 
@@ -259,7 +259,7 @@ def test_info_on_cameras_images_and_scene_folders(run_cli, shared_data, buu):
     images = json.loads(run_cli("info", buu / "low", "--json").out)
     assert images["count"] == 25 and images["raw"] == 0 and images["first"] == "1.JPG" and images["last"] == "25.JPG"
     raw = json.loads(run_cli("info", shared_data / "raw" / "Blackmagic.dng", "--json").out)
-    assert raw["raw"] == 1 and raw["sizes"] == {"4128x2176": 1} and raw["bit_depths"] == {"16": 1}
+    assert raw["raw"] == 1 and raw["sizes"] == {"4096x2160": 1} and raw["bit_depths"] == {"16": 1}
     scene = json.loads(run_cli("info", shared_data / "scenes" / "kitchen", "--json").out)
     kinds = [s["kind"] for s in scene["summaries"]]
     assert kinds == ["images", "cameras"] and scene["summaries"][1]["count"] == 17

@@ -115,18 +115,23 @@ def test_camera_raw_is_linear_and_white_balanced(shared_data):
     path = shared_data / "raw" / "Blackmagic.dng"
     image = read_image(path)
     assert image.kind == "raw" and image.encoding == "linear" and image.bit_depth == 16
-    assert image.pixels.shape == (2176, 4128, 3) and image.pixels.dtype == np.float32
+    # the DNG's default crop (DefaultCropOrigin 16, 8; DefaultCropSize 4096 x 2160 of 4128 x 2176):
+    # uncropped, its last three columns were black and the two before them dark
+    assert image.pixels.shape == (2160, 4096, 3) and image.pixels.dtype == np.float32
     assert image.pixels.min() >= 0 and image.pixels.max() <= 1
+    assert image.pixels[:, -3:].mean() > 0.25 * image.pixels.mean()
     # Oracle: LibRaw's own sRGB-curve rendering of the same file must equal our linear output
     # encoded with the sRGB curve (up to LibRaw's 16-bit rounding and its toe approximation).
     with rawpy.imread(str(path)) as raw:
         reference = raw.postprocess(gamma=(2.4, 12.92), no_auto_bright=True, output_bps=16, use_camera_wb=True)
-    reference = reference.astype(np.float32) / 65535
+        crop = raw.sizes
+    reference = reference[crop.crop_top_margin: crop.crop_top_margin + crop.crop_height,
+                          crop.crop_left_margin: crop.crop_left_margin + crop.crop_width].astype(np.float32) / 65535
     assert np.abs(linear_to_srgb(image.pixels) - reference).mean() < 0.01
     # Linear data of a normally exposed photo sits far below its sRGB encoding.
     assert image.pixels.mean() < 0.5 * reference.mean()
     header = probe_image(path)
-    assert (header.width, header.height, header.kind) == (4128, 2176, "raw")
+    assert (header.width, header.height, header.kind) == (4096, 2160, "raw")
 
 
 def test_unsupported_raw_is_named(tmp_path):

@@ -58,13 +58,27 @@ def read_raw(path: Path) -> DecodedImage:
             )
         except rawpy.LibRawError as error:
             raise _refusal(path, "decode", error) from error
+        left, top, width, height = _default_crop(raw.sizes)
+    rgb16 = rgb16[top: top + height, left: left + width]
     return DecodedImage(path, rgb16.astype(np.float32) / 65535.0, "linear", 16, "raw")
+
+
+def _default_crop(sizes) -> tuple[int, int, int, int]:
+    """(left, top, width, height) of the picture a RAW viewer shows within LibRaw's output: the
+    file's default crop (a DNG's DefaultCrop: Blackmagic.dng's 4128x2176 sensor area holds a
+    4096x2160 picture, its outer columns black or dark), else the whole output. Applied to
+    unrotated images only (LibRaw flip 0): no rotated RAW with a crop was at hand to test the
+    rotated boxes."""
+    whole = (0, 0, sizes.width, sizes.height) if sizes.flip not in (5, 6) else (0, 0, sizes.height, sizes.width)
+    box = (sizes.crop_left_margin, sizes.crop_top_margin, sizes.crop_width, sizes.crop_height)
+    left, top, width, height = box
+    if sizes.flip != 0 or width <= 0 or height <= 0 or left < 0 or top < 0 \
+            or left + width > sizes.width or top + height > sizes.height:
+        return whole
+    return box
 
 
 def probe_raw(path: Path) -> ImageHeader:
     with _open(path) as raw:
-        sizes = raw.sizes
-        width, height = sizes.width, sizes.height
-        if sizes.flip in (5, 6):  # LibRaw flip codes that rotate by 90 degrees
-            width, height = height, width
+        _, _, width, height = _default_crop(raw.sizes)
         return ImageHeader(path, width, height, 3, 16, "raw", "linear")
