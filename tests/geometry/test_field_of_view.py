@@ -94,3 +94,16 @@ def test_focal_ratio_is_the_median_over_views_and_axes():
                             _intrinsics(265.0, 265.0, (224, 168))])
     assert focal_ratio(measured, predicted) == pytest.approx(800.0 / 265.0)
     assert focal_ratio(predicted, predicted) == 1.0
+
+
+def test_the_fallback_lens_lands_on_a_stretched_photos_own_longer_side():
+    """A portrait photo stretched to a landscape working size whose field of view failed: the
+    fallback's 60 degrees went across it (its shorter side), 91.5 down."""
+    size = (512, 288)
+    own = (288 / 512) / (512 / 288)
+    zero = (size[0] / 2) / math.tan(MIN_FOV / 2)
+    fixed, replaced = plausible_intrinsics(_intrinsics(zero, zero, size)[None], size, torch.tensor([own]))
+    assert replaced.tolist() == [True]
+    down = math.degrees(2 * math.atan(size[1] / 2 / fixed[0, 1, 1].item()))
+    assert down == pytest.approx(FALLBACK_FOV_DEGREES)  # the photo's longer side: its height
+    assert fixed[0, 0, 0] / fixed[0, 1, 1] * own == pytest.approx(1.0)

@@ -172,14 +172,34 @@ def test_a_jpeg_with_corrupt_data_is_refused_and_libraries_print_nothing(tmp_pat
     with pytest.raises(InputError, match=r"damaged\.jpg: the JPEG data is corrupt \(Corrupt JPEG data: premature end of "
                                          r"data segment\): the decoded image would hold garbage; replace the file"):
         read_image(tmp_path / "damaged.jpg")
-    # stray bytes before the end marker (an editor's padding) decode intact: a warning, not a refusal
-    padded = bytearray((buu / "low" / "1.JPG").read_bytes())
-    padded[-2:-2] = b"\x12\x34"
-    (tmp_path / "padded.jpg").write_bytes(bytes(padded))
+    # padding before the end marker (an editor's zeros) decodes intact: a warning, not a refusal
+    original = (buu / "low" / "1.JPG").read_bytes()
+    (tmp_path / "padded.jpg").write_bytes(original[:-2] + bytes(6) + original[-2:])
     with caplog.at_level(logging.WARNING, logger="lumos3d_cli.io.photo"):
         decoded = read_image(tmp_path / "padded.jpg")
     assert np.array_equal(decoded.pixels, read_image(buu / "low" / "1.JPG").pixels)
-    assert re.search(r"padded.jpg: libjpeg reports \d extraneous bytes before marker 0xd9; the image decoded", caplog.text)
+    assert re.search(r"padded.jpg: libjpeg reports \d extraneous bytes before marker 0xd9: padding", caplog.text)
+    # bytes inserted into the image data of a JPEG without restart markers: libjpeg reports the same
+    # kind of line ("26 extraneous bytes before marker 0xd9"), about image data it stopped decoding
+    # early (a fifth to a half of the pixels garbage): refused
+    rng = np.random.default_rng(0)
+    y, x = np.mgrid[0:256, 0:256]
+    picture = (np.stack([x, y, (x + y) // 2], -1) + rng.integers(0, 30, (256, 256, 3))).clip(0, 255).astype(np.uint8)
+    encoded = cv2.imencode(".jpg", picture, [cv2.IMWRITE_JPEG_QUALITY, 90])[1].tobytes()
+    refused = 0
+    for trial in range(12):
+        damaged = bytearray(encoded)
+        at = int(rng.integers(len(damaged) // 4, 3 * len(damaged) // 4))
+        damaged[at:at] = rng.integers(1, 255, 3, dtype=np.uint8).tobytes()
+        (tmp_path / "inserted.jpg").write_bytes(bytes(damaged))
+        caplog.clear()
+        try:
+            read_image(tmp_path / "inserted.jpg")
+        except InputError as error:
+            assert "extraneous bytes before marker 0xd9" in str(error)
+            refused += 1
+        assert "padding" not in caplog.text
+    assert refused >= 3
     (tmp_path / "broken.png").write_bytes(cv2.imencode(".png", np.zeros((8, 8, 3), np.uint8))[1].tobytes()[:60])
     with pytest.raises(InputError, match=r"broken\.png: cannot decode as PNG"):
         read_image(tmp_path / "broken.png")

@@ -230,12 +230,16 @@ def test_bad_data_met_mid_run_keeps_the_steps_done(tiny_config, monkeypatch):
 
     monkeypatch.setattr(trainer, "_load_batch", damaged_at_step_3)
     with pytest.raises(InputError, match=r"006.jpg: cannot be read \(truncated\); the checkpoint of the 3 steps done is "
-                                         r"saved: fix the file or exclude its scene \(data.exclude\), then add --resume"):
+                                         r"saved: replace the file, then add --resume \(or start a new run with its scene "
+                                         r"in data.exclude\)"):
         trainer.run()
     run = Path(str(config).replace(".yaml", ""))
     assert (run / "checkpoints" / "latest").read_text().strip() == "step_00000003"
-    # the advice taken: the damaged photo's scene left out, the run continued from step 3
-    resumed = Trainer(load_config(config, ["data.exclude=[statue]"]), setup_distributed("cpu")).run(resume=True)
+    # the file replaced (here: the reader works again), the run continues from step 3; leaving its
+    # scene out instead would change what validation scores, which a resume refuses
+    with pytest.raises(InputError, match=r"differs from the run's in data.exclude"):
+        Trainer(load_config(config, ["data.exclude=[statue]"]), setup_distributed("cpu")).run(resume=True)
+    resumed = Trainer(load_config(config, []), setup_distributed("cpu")).run(resume=True)
     assert resumed.steps_done == 6 and resumed.history[0].step == 3
 
 
@@ -246,3 +250,6 @@ def test_a_new_run_beside_the_current_folder_given_as_dot(tmp_path, monkeypatch)
     (tmp_path / "run").mkdir()
     monkeypatch.chdir(tmp_path / "run")
     assert numbered_folder(Path(".")) == tmp_path / "run-2"
+    (tmp_path / "run" / "sub").mkdir()
+    monkeypatch.chdir(tmp_path / "run" / "sub")
+    assert numbered_folder(Path("..")) == tmp_path / "run-2"  # was "sub/..-2"

@@ -53,31 +53,38 @@ def implausible_views(intrinsics: torch.Tensor, sizes: list[tuple[int, int]]) ->
 def plausible_intrinsics(intrinsics: torch.Tensor, size: tuple[int, int],
                          stretch: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """intrinsics [V, 3, 3] of images of size (width, height) -> (intrinsics [V, 3, 3], replaced
-    [V] bool): views whose field of view is outside PLAUSIBLE_FOV_DEGREES (or not finite) get
-    square pixels and FALLBACK_FOV_DEGREES on the longer side; views whose pixels, at their
-    photo's own size, are further from square than MAX_PIXEL_ASPECT (the head's field of view for
-    the shorter side alone failed: a focal length of 134,000 pixels down against 817 across) get
-    square pixels at the longer side's focal length. `stretch` [V]: each photo's width factor over
-    its height factor on its way to `size` (a photo of another aspect ratio, stretched: its
-    pixels are square at its own size, not here); None: 1. The principal point is kept."""
-    fov = longer_side_fov(intrinsics, size)
+    [V] bool), judging each view as its photo: views whose field of view of the photo's longer side
+    is outside PLAUSIBLE_FOV_DEGREES (or not finite) get square pixels and FALLBACK_FOV_DEGREES
+    there; views whose pixels are further from square than MAX_PIXEL_ASPECT (the head's field of
+    view for the shorter side alone failed: a focal length of 134,000 pixels down against 817
+    across) get square pixels at the longer side's focal length. `stretch` [V]: each photo's own
+    width over `size`'s width, divided by its own height over `size`'s height (a photo of another
+    aspect ratio stretched to `size`: its pixels are square at its own size, not here, and its
+    longer side may be the other one); None: 1. A field of view across or down is the same at any
+    scale, so it is judged here. The principal point is kept."""
+    width, height = size
+    own = torch.ones(len(intrinsics), dtype=torch.float64) if stretch is None else stretch.double().cpu()
+    fx, fy = intrinsics[:, 0, 0].double().cpu(), intrinsics[:, 1, 1].double().cpu()
+    across = (width / height) * own >= 1  # the photo's own longer side
+    fov = torch.rad2deg(2 * torch.atan(torch.where(across, width / 2 / fx, height / 2 / fy)))
     low, high = PLAUSIBLE_FOV_DEGREES
     plausible = torch.isfinite(fov) & (fov >= low) & (fov <= high)
-    own = torch.ones(len(intrinsics), dtype=torch.float64) if stretch is None else stretch.double().cpu()
-    aspect = (intrinsics[:, 0, 0] / intrinsics[:, 1, 1]).double().cpu() * own  # fx / fy at the photo's own size
-    square = (torch.isfinite(aspect) & (aspect >= 1 / MAX_PIXEL_ASPECT) & (aspect <= MAX_PIXEL_ASPECT)).to(plausible.device)
+    aspect = fx / fy * own  # fx / fy at the photo's own size
+    square = torch.isfinite(aspect) & (aspect >= 1 / MAX_PIXEL_ASPECT) & (aspect <= MAX_PIXEL_ASPECT)
     replaced = ~(plausible & square)
     if not bool(replaced.any()):
-        return intrinsics, replaced
-    fallback = max(size) / 2 / math.tan(math.radians(FALLBACK_FOV_DEGREES) / 2)
-    longer = intrinsics[:, 0, 0] if size[0] >= size[1] else intrinsics[:, 1, 1]
-    focal = torch.where(plausible, longer, torch.full_like(longer, fallback))
+        return intrinsics, replaced.to(intrinsics.device)
+    tangent = math.tan(math.radians(FALLBACK_FOV_DEGREES) / 2)
+    longer_focal = torch.where(across, torch.where(plausible, fx, width / 2 / tangent),
+                               torch.where(plausible, fy, height / 2 / tangent))
     # square at the photo's own size, where fx / fy is the ratio here times the stretch
-    focal_across, focal_down = (focal, focal * own.to(focal)) if size[0] >= size[1] else (focal / own.to(focal), focal)
+    new_fx = torch.where(across, longer_focal, longer_focal / own)
+    new_fy = torch.where(across, longer_focal * own, longer_focal)
     fixed = intrinsics.clone()
-    fixed[replaced, 0, 0] = focal_across[replaced]
-    fixed[replaced, 1, 1] = focal_down[replaced]
-    return fixed, replaced
+    rows = replaced.to(intrinsics.device)
+    fixed[rows, 0, 0] = new_fx.to(fixed)[rows]
+    fixed[rows, 1, 1] = new_fy.to(fixed)[rows]
+    return fixed, rows
 
 
 # Structure-from-motion's focal lengths and the network's further apart than this (median ratio)

@@ -4,6 +4,7 @@ warning where it hides pixels)."""
 from __future__ import annotations
 
 import logging
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,8 +25,8 @@ _ALPHA_SUFFIXES = {".png", ".tif", ".tiff", ".webp"}  # the photo formats that c
 # libjpeg's warnings of damaged data (it decodes on, filling in garbage or grey): a bad Huffman or
 # arithmetic code, a segment or the file ending early, a lost restart marker
 _JPEG_CORRUPTION = ("Corrupt JPEG data", "Premature end of JPEG file")
-# ... but stray bytes before a marker are most often padding an editor left (the image decodes intact)
-_JPEG_STRAY_BYTES = "extraneous bytes before marker"
+# ... but stray bytes before the end marker may be padding an editor left (`_is_end_padding`)
+_JPEG_STRAY_BYTES = re.compile(r"(\d+) extraneous bytes before marker 0x([0-9a-fA-F]{2})")
 # what the decoders print (libjpeg, libpng, OpenCV's log): read here, not passed on
 _DECODER_MESSAGES = ("Corrupt JPEG data", "Premature end of JPEG file", "libpng ", "[ WARN:", "[ERROR:", "Invalid SOS")
 
@@ -100,15 +101,27 @@ def _decode(path: Path, data: np.ndarray, header: _Header) -> tuple[np.ndarray |
     pass_on("".join(line for line in lines if not line.startswith(_DECODER_MESSAGES)))
     if bgr is None:
         return bgr, alpha  # read_photo's one line says it
-    stray = [line.strip() for line in lines if _JPEG_STRAY_BYTES in line]
-    corrupt = [line.strip() for line in lines if line.startswith(_JPEG_CORRUPTION) and _JPEG_STRAY_BYTES not in line]
+    reports = [line.strip() for line in lines if line.startswith(_JPEG_CORRUPTION)]
+    corrupt = [line for line in reports if not _is_end_padding(line, data)]
     if corrupt:
         raise InputError(f"{path}: the JPEG data is corrupt ({corrupt[0].rstrip('.')}): the decoded image would hold "
                          "garbage; replace the file or leave it out")
-    if stray:  # padding an editor left before the end marker, mostly; damage now and then
-        logger.warning("%s: libjpeg reports %s; the image decoded, but look at its restored view", path,
-                       stray[0].removeprefix("Corrupt JPEG data: ").rstrip("."))
+    if reports:
+        logger.warning("%s: libjpeg reports %s: padding before its end marker, which it skipped", path,
+                       reports[0].removeprefix("Corrupt JPEG data: ").rstrip("."))
     return bgr, alpha
+
+
+def _is_end_padding(report: str, data: np.ndarray) -> bool:
+    """Whether libjpeg's `report` of stray bytes is about padding an editor left before the end
+    marker (bytes 0x00 or 0xFF just before the file's last FF D9, the image intact) rather than
+    image data it stopped decoding early (damage: the bytes before the end are entropy-coded data)."""
+    found = _JPEG_STRAY_BYTES.search(report)
+    if found is None or found.group(2).lower() != "d9":
+        return False
+    count, raw = int(found.group(1)), data.tobytes()
+    end = raw.rfind(b"\xff\xd9")
+    return 0 < count <= end and set(raw[end - count: end]) <= {0x00, 0xFF}
 
 
 def _decode_pixels(path: Path, data: np.ndarray, header: _Header) -> tuple[np.ndarray | None, np.ndarray | None]:

@@ -44,12 +44,15 @@ def even_subset(count: int, limit: int, required: list[int] = ()) -> list[int]:
 @dataclass
 class NetworkPass:
     """The forward pass over the selected views: `prediction` (batch of one scene), the prepared
-    images (network size, and the map between network and photo pixels) and the gain in stops
-    the exposure prior added to the predicted operator (None: the model predicts no operator)."""
+    images (network size, and the map between network and photo pixels), the gain in stops the
+    exposure prior added to the predicted operator (None: the model predicts no operator) and
+    `replaced_cameras` [S] bool: the views whose predicted field of view no lens has was replaced
+    (`geometry.field_of_view.plausible_intrinsics`; None: none)."""
 
     prediction: Lumos3DPrediction
     prepared: PreparedImages
     exposure_stops: float | None = None
+    replaced_cameras: torch.Tensor | None = None
 
     @property
     def network_size(self) -> tuple[int, int]:
@@ -79,9 +82,9 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mod
     a predicted restoration operator is followed by the exposure prior
     (`model.appearance.exposure_prior`) at the preset's strength or the `mode`'s own, metered
     without the `empty_views` (all black or saturated; None: judged here, on `images`).
-    `stretch` [V]: how far each photo's own aspect ratio was widened to make it `images`' (its
-    width factor over its height factor; None: none was), so that its pixels are judged square
-    at its own size."""
+    `stretch` [V]: each photo's own width over `images`' width, divided by its own height over
+    `images`' height (a photo of another aspect ratio stretched to them; None: none was), so that
+    its camera is judged at its own size (`geometry.field_of_view.plausible_intrinsics`)."""
     prepared = prepare_images(images, network_image_size(model, preset), model.architecture.patch_size)
     device = next(model.parameters()).device
     with torch.no_grad():
@@ -114,4 +117,4 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mod
                        "else %g degrees%s", ", ".join(degrees), int(replaced.sum()), len(replaced), FALLBACK_FOV_DEGREES,
                        advice)
         prediction = replace(prediction, intrinsics=intrinsics[None])
-    return NetworkPass(prediction, prepared, exposure_stops)
+    return NetworkPass(prediction, prepared, exposure_stops, replaced.cpu())

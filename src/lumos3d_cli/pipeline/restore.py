@@ -178,7 +178,7 @@ def restore_scene(
     required = [fuse_views.index(True)] if fuse_views is not None else []
     built = build_scene(batch.images, names, model, preset, geometry, poses, max_views, mode, progress,
                         required_views=required, fuse_views=fuse_views, sizes=batch.original_sizes,
-                        early_registration=early_registration)
+                        early_registration=early_registration, empty_views=sorted(empty))
     cameras = built.geometry.cameras
     missing = [name for name in names if name not in cameras.names]
     if missing:

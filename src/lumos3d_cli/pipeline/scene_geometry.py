@@ -287,17 +287,24 @@ def _aligned_depth(
     return depth * similarity.scale, {"form": "camera similarity scale", "scale": similarity.scale, "views": len(selected)}
 
 
-def _warn_of_disagreeing_focal_lengths(network_cameras: Cameras, network: NetworkPass) -> None:
+def _warn_of_disagreeing_focal_lengths(network_cameras: Cameras, network: NetworkPass, registered: torch.Tensor) -> None:
     """A warning when structure-from-motion's focal lengths of the network's views (in network
     pixels) and the network's own differ by more than FOCAL_DISAGREEMENT: on few photos the
-    former can settle on a wrong one that still reprojects its points well."""
-    predicted = network.prediction.intrinsics[0].detach().double().cpu()
-    ratio = focal_ratio(network_cameras.intrinsics.double(), predicted)
+    former can settle on a wrong one that still reprojects its points well. Compared on the views
+    structure-from-motion registered (`registered` [S] bool) whose predicted camera the network
+    kept (a replaced one is a fallback lens, not a prediction)."""
+    compared = registered.clone()
+    if network.replaced_cameras is not None:
+        compared &= ~network.replaced_cameras
+    if not bool(compared.any()):
+        return
+    predicted = network.prediction.intrinsics[0].detach().double().cpu()[compared]
+    ratio = focal_ratio(network_cameras.intrinsics.double()[compared], predicted)
     if 1 / FOCAL_DISAGREEMENT <= ratio <= FOCAL_DISAGREEMENT:
         return
-    logger.warning("structure-from-motion's focal lengths are %.2gx the network's for these photos: one of them is wrong "
-                   "(with few photos, structure-from-motion's often is); if the views look stretched or blurred, try "
-                   "--geometry network, more photos, or --poses", ratio)
+    logger.warning("structure-from-motion's focal lengths are %.1fx the network's for these photos: one of them is wrong "
+                   "(on few photos structure-from-motion can settle on a wrong one); if the views look stretched or "
+                   "blurred, try the network's cameras (--geometry network), more photos, or --poses", ratio)
 
 
 def place_views(
@@ -345,7 +352,7 @@ def place_views(
                       [name for view, name in enumerate(names) if view in position_of_view or bool(known[view])])
     network_cameras = _to_network(network, selected_cameras)
     if registration.source == "sfm":
-        _warn_of_disagreeing_focal_lengths(network_cameras, network)
+        _warn_of_disagreeing_focal_lengths(network_cameras, network, known_selected.cpu())
     points, reprojection_error = _points_in_frame(registration)
     depth, alignment_report = _aligned_depth(network, selected, network_cameras, points, selected_names, selected_cameras)
     sweep_report = None

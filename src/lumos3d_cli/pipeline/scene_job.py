@@ -30,7 +30,9 @@ class SceneJob:
     the views the network must see (`required_views`) and, for evaluation's holdout, the views
     whose Gaussians are fused (`fuse_views` [V] bool; None: all), and structure-from-motion's run
     on the blind tone curve when it was started before the job (`early_registration`; None: the
-    job runs it). `device` is the model's: the
+    job runs it), and the photos found all black or saturated at their own size (`empty_views`,
+    which the exposure prior meters without; None: judged on the working tensor). `device` is the
+    model's: the
     network pass, the Gaussians, the budget and the refinement stay on it.
 
     What the stages make: `network` (the forward pass over the `selected` views, indices into the
@@ -58,6 +60,7 @@ class SceneJob:
     fuse_views: Sequence[bool] | None = None
     sizes: Sequence[tuple[int, int]] | None = None
     early_registration: EarlyRegistration | None = None
+    empty_views: Sequence[int] | None = None
     network: NetworkPass | None = None
     selected: list[int] = field(default_factory=list)
     brightened: Brightened | None = None

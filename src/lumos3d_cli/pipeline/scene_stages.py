@@ -69,7 +69,7 @@ def with_full_resolution_colours(prediction: Lumos3DPrediction, restored: torch.
 
 def _network_pass(job: SceneJob, selected: list[int]) -> NetworkPass:
     job.progress.start("network", 1)
-    empty = None if job.fuse_views is None else [index for index, view in enumerate(selected) if not job.fuse_views[view]]
+    empty = None if job.empty_views is None else [index for index, view in enumerate(selected) if view in job.empty_views]
     stretch = None
     if job.sizes is not None:  # a photo of another aspect, stretched to the working size (network_pass.run_network)
         height, width = job.photos.shape[-2:]
@@ -317,6 +317,7 @@ def build_scene(
     poses: Path | str | None = None, max_views: int | None = None, mode: str = "low-light",
     progress: JobProgress | None = None, required_views: Sequence[int] = (), fuse_views: Sequence[bool] | None = None,
     sizes: Sequence[tuple[int, int]] | None = None, early_registration: EarlyRegistration | None = None,
+    empty_views: Sequence[int] | None = None,
 ) -> SceneJob:
     """photos [V, 3, H, W] named `names` -> cameras and fused Gaussians, through SCENE_STAGES.
     `sizes`: each photo's own (width, height) when it was stretched into `images`
@@ -330,7 +331,9 @@ def build_scene(
     network, which always include `required_views` and the views only the network can place.
     `fuse_views` [V] bool (evaluation's holdout) keeps only those views' Gaussians.
     `early_registration`: structure-from-motion on these photos' blind tone curve, started before
-    the job (`pipeline.early_registration`), for the preset's size.
+    the job (`pipeline.early_registration`), for the preset's size. `empty_views`: the photos found
+    all black or saturated at their own size (the exposure prior meters without them; None: they
+    are judged on `images`).
 
     The preset sets the grid of pixel Gaussians (`pipeline.gaussian_grid`), their voxels (a
     multiple of each point's pixel footprint), the budget (`render.gaussian_budget`: what no
@@ -342,7 +345,7 @@ def build_scene(
         raise ValueError("the early registration was started for other photos or another size")
     job = SceneJob(images, list(names), model, preset, geometry, poses, max_views, mode,
                    progress if progress is not None else SilentProgress(), required_views, fuse_views, sizes,
-                   early_registration)
+                   early_registration, empty_views)
     for name, stage in SCENE_STAGES:
         started = time.perf_counter()
         job = stage(job)

@@ -18,11 +18,11 @@ import yaml
 from lumos3d_cli.errors import InputError, listed
 from lumos3d_cli.typed_config import from_dict, to_dict
 
-# A resumed run may train longer (its schedule follows) and report differently; and it may leave
-# out a scene (`data.exclude`), as a run stopped by a damaged photo advises.
+# A resumed run may train longer (its schedule follows) and report differently. (Not `data.exclude`:
+# a scene left out changes which samples validation scores, and selection compares scores across it.)
 MAY_CHANGE = frozenset({
     "output", "optim.steps", "device", "gradient_checkpointing", "log_every", "checkpoint_every",
-    "validate_every", "validate_at_start", "validation_views", "max_nonfinite_steps", "tensorboard", "data.exclude",
+    "validate_every", "validate_at_start", "validation_views", "max_nonfinite_steps", "tensorboard",
 })
 # Files that may move with the data: another path is fine, but not a file where there was none (the
 # bracket loss switched on mid-run) or none where there was one. `model` also names architectures

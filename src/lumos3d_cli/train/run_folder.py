@@ -74,8 +74,10 @@ def other_outputs(output: Path) -> str | None:
 
 def numbered_folder(output: Path) -> Path:
     """The first of `output`-2, `output`-3 ... that holds no run and no other command's outputs."""
-    if not output.name:  # "." or "..": the folder's own name
+    if output.name in ("", ".", ".."):  # "." or "..": the folder's own name
         output = output.resolve()
+    if not output.name:
+        raise InputError(f"{output}: a new run needs a named output folder beside which to number it; give one")
     number = 2
     while (earlier_run(output.with_name(f"{output.name}-{number}")) is not None
            or other_outputs(output.with_name(f"{output.name}-{number}")) is not None):

@@ -398,15 +398,15 @@ class Trainer:
 
     def _keep_the_steps_done(self, error: InputError, steps_done: int, start: int) -> NoReturn:
         """Bad data met mid-run (a damaged photo, hours in), by a step or a validation: the weights
-        of the `steps_done` are saved, so the run goes on with --resume once the file is fixed or
-        its scene excluded; then `error` is raised, saying so. (Under torchrun the other ranks
+        of the `steps_done` are saved, so the run goes on with --resume once the file is replaced;
+        then `error` is raised, saying so. (Under torchrun the other ranks
         wait in this step's all-reduce until torchrun ends them: only one process saves.)"""
         if self.context.enabled or steps_done == start:
             raise error
         if not (self.config.checkpoint_every and steps_done % self.config.checkpoint_every == 0):
             self.save(steps_done)  # (at a multiple of checkpoint_every it is saved already)
-        raise InputError(f"{error}; the checkpoint of the {steps_done} steps done is saved: fix the file or exclude its "
-                         "scene (data.exclude), then add --resume") from error
+        raise InputError(f"{error}; the checkpoint of the {steps_done} steps done is saved: replace the file, then add "
+                         "--resume (or start a new run with its scene in data.exclude)") from error
 
     def _log(self, report: StepReport) -> None:
         if self._logs is not None:
