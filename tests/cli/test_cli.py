@@ -286,6 +286,21 @@ def test_info_on_a_restore_output_folder_shows_its_scene(run_cli, tmp_path):
     assert "mesh.ply: not a 3D Gaussian scene" in result.err and "left out of the summary" in " ".join(result.err.split())
 
 
+def test_info_on_a_folder_of_weight_files_summarises_each(run_cli, tmp_path):
+    """A training run's folder (final.safetensors, selected.safetensors): "holds no images, cameras,
+    checkpoint or .ply"."""
+    from lumos3d_cli.model.checkpoints import save_checkpoint
+    from lumos3d_cli.model.lumos3d import build_model
+
+    for name in ("final.safetensors", "selected.safetensors"):
+        save_checkpoint(build_model("tiny", seed=0), tmp_path / name, {"steps": 2})
+    result = run_cli("info", tmp_path, "--json")
+    assert result.code == 0, result.err
+    summaries = json.loads(result.out)["summaries"]
+    assert [Path(s["path"]).name for s in summaries] == ["final.safetensors", "selected.safetensors"]
+    assert all(s["kind"] == "checkpoint" and s["architecture"] == "tiny" for s in summaries)
+
+
 def test_info_bad_inputs(run_cli, tmp_path):
     expect_input_error(run_cli("info", tmp_path / "missing.ply"), "missing.ply: no such file or folder")
     (tmp_path / "notes.txt").write_text("hi")

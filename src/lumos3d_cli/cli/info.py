@@ -133,6 +133,16 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
         summaries.append(summarize_camera_file(path))
     if any((path / name).is_file() for name in FOLDER_FILES):  # a checkpoint folder, as restore --checkpoint takes one
         summaries.append(summarize_checkpoint(path))
+    elif not summaries:  # a folder of weight files (a training run's final.safetensors, a converted file): each
+        weights = sorted(p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")
+                         and p.suffix.lower() in (".safetensors", ".pt", ".pth"))
+        for weight_file in weights:
+            try:
+                summaries.append(summarize_checkpoint(weight_file))
+            except InputError as error:
+                if len(weights) == 1:
+                    raise
+                logging.getLogger(__name__).warning("%s; left out of the summary", error)
     if not summaries:
         raise InputError(f"{path}: holds no images, cameras, checkpoint or .ply; nothing to summarise")
     return summaries
