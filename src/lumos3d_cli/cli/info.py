@@ -112,15 +112,9 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
             return [summarize_camera_file(path)]
         raise InputError(f"{path}: cannot summarise '{path.suffix}' files; pass a .ply, checkpoint, camera file, image or folder")
     # a restore's output folder: its scene (its PNGs are the contact sheet; restored/ holds the views)
-    scenes = sorted(p for p in path.glob("*.ply") if p.is_file() and not p.name.startswith("."))
-    summaries = []
-    for scene in scenes:  # one .ply that is no Gaussian scene (a mesh beside it) does not hide the others
-        try:
-            summaries.append(summarize_gaussian_file(scene))
-        except InputError as error:
-            if len(scenes) == 1:
-                raise
-            logging.getLogger(__name__).warning("%s; left out of the summary", error)
+    scenes = _files_in(path, (".ply",))
+    # one .ply that is no Gaussian scene (a mesh beside it) does not hide the others
+    summaries = _each_summary(scenes, summarize_gaussian_file)
     image_folders = [path] if _has_images(path) and not scenes else []
     if not image_folders and (path / "images").is_dir() and _has_images(path / "images"):
         image_folders = [path / "images"]
@@ -134,17 +128,28 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
     if any((path / name).is_file() for name in FOLDER_FILES):  # a checkpoint folder, as restore --checkpoint takes one
         summaries.append(summarize_checkpoint(path))
     elif not summaries:  # a folder of weight files (a training run's final.safetensors, a converted file): each
-        weights = sorted(p for p in path.iterdir() if p.is_file() and not p.name.startswith(".")
-                         and p.suffix.lower() in (".safetensors", ".pt", ".pth"))
-        for weight_file in weights:
-            try:
-                summaries.append(summarize_checkpoint(weight_file))
-            except InputError as error:
-                if len(weights) == 1:
-                    raise
-                logging.getLogger(__name__).warning("%s; left out of the summary", error)
+        summaries = _each_summary(_files_in(path, (".safetensors", ".pt", ".pth")), summarize_checkpoint)
     if not summaries:
         raise InputError(f"{path}: holds no images, cameras, checkpoint or .ply; nothing to summarise")
+    return summaries
+
+
+def _files_in(folder: Path, suffixes: tuple[str, ...]) -> list[Path]:
+    """The folder's files (not hidden ones) with one of `suffixes`, sorted."""
+    return sorted(p for p in folder.iterdir() if p.is_file() and not p.name.startswith(".") and p.suffix.lower() in suffixes)
+
+
+def _each_summary(files: list[Path], summarize) -> list[dict]:
+    """`summarize` of each of `files`; one that cannot be summarised is named in a warning and
+    left out, unless it is the only one (then its error is the command's)."""
+    summaries = []
+    for file in files:
+        try:
+            summaries.append(summarize(file))
+        except InputError as error:
+            if len(files) == 1:
+                raise
+            logging.getLogger(__name__).warning("%s; left out of the summary", error)
     return summaries
 
 
