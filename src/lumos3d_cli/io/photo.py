@@ -28,7 +28,7 @@ _JPEG_CORRUPTION = ("Corrupt JPEG data", "Premature end of JPEG file")
 # ... but stray bytes before the end marker may be padding an editor left (`_is_end_padding`)
 _JPEG_STRAY_BYTES = re.compile(r"(\d+) extraneous bytes before marker 0x([0-9a-fA-F]{2})")
 # what the decoders print (libjpeg, libpng, OpenCV's log): read here, not passed on
-_DECODER_MESSAGES = ("Corrupt JPEG data", "Premature end of JPEG file", "libpng ", "[ WARN:", "[ERROR:", "Invalid SOS")
+_DECODER_MESSAGES = (*_JPEG_CORRUPTION, "libpng ", "[ WARN:", "[ERROR:", "Invalid SOS")
 
 logger = logging.getLogger(__name__)
 _warned_profiles: set[str] = set()
