@@ -11,6 +11,7 @@ import pytest
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io import atomic
 from lumos3d_cli.io.atomic import COMMIT_JOURNAL, atomic_path, remove_leftovers
+from lumos3d_cli.io.manifest import Manifest, describe_file
 
 
 def _tree(folder):
@@ -74,6 +75,8 @@ def test_a_commit_a_killed_run_left_half_done_is_finished_by_the_next(tmp_path):
     (staging / ".replaced" / "0").write_text("old scene")
     (tmp_path / "scene.ply").write_text("new scene")
     (tmp_path / "cameras.json").write_text("old cameras")
+    old_manifest = Manifest(tmp_path, {"cameras.json": describe_file(tmp_path / "cameras.json", "restore", "restore")})
+    (tmp_path / ".lumos3d-manifest.json").write_text(old_manifest.document())  # the old cameras are lumos3d's
     (staging / "cameras.json").write_text("new cameras")
     (staging / ".manifest.4").write_text("new manifest")
     moves = [[tmp_path / "scene.ply", staging / ".replaced" / "0", "destination-exists"],

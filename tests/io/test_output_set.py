@@ -327,6 +327,46 @@ def test_the_next_run_of_the_same_command_finishes_a_killed_commit_then_runs(tmp
     assert _tree(out) == [MANIFEST_NAME, "scene.ply", "summary.json", "views", "views/1.png"]
 
 
+def test_finishing_a_killed_commit_keeps_what_the_user_made_or_edited_since(tmp_path, monkeypatch, caplog):
+    """The recovery replayed the journal blind: a file the user put where the killed run had
+    moved its old output away was overwritten, and an old output the user edited since was moved
+    away and deleted with the staging folder."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png", "2.png"], text="first")
+    assert _kill_mid_commit(out, monkeypatch, after=1)  # scene.ply moved away, the new one not yet in
+    assert not (out / "scene.ply").exists()
+    (out / "scene.ply").write_text("the user's")
+    with open(out / "summary.json", "a") as handle:
+        handle.write(" edited")
+    monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)
+    monkeypatch.setattr(atomic, "_cleaned", set())
+    atomic.remove_leftovers(out)
+    assert (out / "scene.ply").read_text() == "the user's"
+    assert (out / "summary.json").read_text() == "first edited"
+    assert (out / "views" / "1.png").read_text() == "killed" and not (out / "views" / "2.png").exists()
+    assert "kept: made after a run was killed" in caplog.text and "kept: changed since lumos3d wrote it" in caplog.text
+    with pytest.raises(InputError, match="was changed since lumos3d wrote it"):  # theirs now: a next run refuses
+        _restore_like(out, ["1.png"], text="third")
+
+
+def test_a_killed_commit_whose_process_id_was_reused_is_still_finished(tmp_path, monkeypatch):
+    """Only the process id told a killed run from a live one: with the id taken by another process
+    (after a reboot, in a container) the half-done commit was never finished, a later run was
+    refused (calling the killed run's new files the user's), and once the id was free the journal
+    was replayed over the newer outputs. The journal names its writer's start time and boot."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png", "2.png"], text="first")
+    assert _kill_mid_commit(out, monkeypatch)  # its writer: this process, which still lives
+    monkeypatch.setattr(atomic, "_cleaned", set())
+    assert not atomic.holds_unfinished_commit(out)  # the writer itself is still at work, as far as can be told
+    started = atomic._start_time(os.getpid())
+    monkeypatch.setattr(atomic, "_start_time", lambda pid: str(int(started) + 1))  # the id's process started later
+    assert atomic.holds_unfinished_commit(out)
+    _restore_like(out, ["1.png"], text="third")
+    assert _tree(out) == [MANIFEST_NAME, "scene.ply", "summary.json", "views", "views/1.png"]
+    assert (out / "scene.ply").read_text() == "third"
+
+
 def test_a_copied_folder_never_replays_the_journal_it_carries(tmp_path, monkeypatch):
     out = tmp_path / "out"
     _restore_like(out, ["1.png"], text="first")
@@ -439,6 +479,50 @@ def test_a_lock_file_that_is_not_lumos3ds_is_never_written_or_removed(tmp_path):
     assert precious.read_text() == "the user's" and (tmp_path / "own" / LOCK_NAME).read_text() == "the user's own .lumos3d.lock"
 
 
+def test_a_file_of_the_users_under_the_manifests_name_is_refused_not_replaced(tmp_path):
+    """A user's notes named .lumos3d-manifest.json drew two "cannot be read" warnings and were
+    replaced by a manifest."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / MANIFEST_NAME).write_text("my private notes")
+    with pytest.raises(InputError, match=r"\.lumos3d-manifest\.json: is not lumos3d's manifest file but takes its name"):
+        _restore_like(out, ["1.png"])
+    assert (out / MANIFEST_NAME).read_text() == "my private notes" and not (out / "scene.ply").exists()
+
+
+def test_a_lock_file_that_cannot_be_removed_at_the_end_leaves_the_runs_own_error(tmp_path, monkeypatch, caplog):
+    """The output folder made read-only during a run: removing the lock raised PermissionError
+    from the lock's exit, an internal error that hid the run's own message."""
+    out = tmp_path / "out"
+    out.mkdir()
+    original = os.unlink
+
+    def read_only(path, *args, **kwargs):
+        if Path(path).name == LOCK_NAME:
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return original(path, *args, **kwargs)
+
+    monkeypatch.setattr(os, "unlink", read_only)
+    with pytest.raises(InputError, match="the run's own"):
+        with folder_lock(out, "restore"):
+            raise InputError("the run's own refusal")
+    assert f"{LOCK_NAME}: cannot be removed (Permission denied)" in caplog.text
+
+
+def test_readers_of_a_folder_a_killed_commit_left_half_done_are_warned(tmp_path, monkeypatch, caplog):
+    """render, view, restore --poses and degrade read a folder holding a killed run's half-moved
+    outputs (the new cameras beside the old scene) without a word."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png", "2.png"], text="first")
+    atomic.warn_if_mid_commit(out / "scene.ply")
+    assert "was killed while it moved its outputs" not in caplog.text  # a whole folder: no warning
+    assert _kill_mid_commit(out, monkeypatch)
+    monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)
+    monkeypatch.setattr(atomic, "_warned_mid_commit", set())
+    atomic.warn_if_mid_commit(out / "views" / "1.png")  # a folder of outputs inside it: the same set
+    assert f"{out}: a run writing here was killed while it moved its outputs into place" in caplog.text
+
+
 def test_a_manifest_naming_a_file_outside_its_folder_never_removes_it(tmp_path):
     out = tmp_path / "out"
     _restore_like(out, ["1.png"], text="first")
@@ -476,6 +560,19 @@ def test_another_runs_outputs_inside_a_folder_of_lumos3ds_own_refuse_the_run_and
     (out / "views" / "00000.png").unlink()
     _restore_like(out, ["2.png"], text="second")
     assert _tree(out / "views") == ["2.png"]
+
+
+def test_a_run_into_another_runs_folder_of_outputs_names_that_run(tmp_path):
+    """`degrade P -o out/restored` where restore wrote out/restored/1.png said the file "was not
+    written by lumos3d": it was, and out's manifest lists it."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"])
+    before = snapshot(out)
+    with pytest.raises(InputError, match=r"views/1.png: an output of an earlier `restore`, part of its outputs in "):
+        frames = OutputSet(out / "views", "degrade", "degrade").add_file("1.png")
+        with frames.staged() as staging:
+            (staging.root / "1.png").write_text("dark")
+    assert snapshot(out) == before
 
 
 def test_a_scene_of_another_name_never_takes_over_an_earlier_scenes_side_files(tmp_path):

@@ -82,6 +82,20 @@ def test_non_finite_gaussians_are_refused(tmp_path):
     assert not (tmp_path / "a.ply").exists()
 
 
+@pytest.mark.parametrize("name", ["means", "quats", "scales", "sh"])
+def test_float64_values_beyond_float32_are_refused_not_written_as_inf(tmp_path, name):
+    """A float64 scene with a coordinate of 1e39 is finite, and was written as Inf (a scale as a
+    log-scale of 89.8, which reading refuses); the .splat held Inf too."""
+    from lumos3d_cli.io.splat import write_splat
+
+    gaussians = random_gaussians(4, 1).to(torch.float64)
+    getattr(gaussians, name).view(-1)[0] = 1e39
+    for write, path in ((write_ply, tmp_path / "a.ply"), (write_splat, tmp_path / "a.splat")):
+        with pytest.raises(ValueError, match=rf"\.{name}: 1 value\(s\) beyond float32's range \(1e\+39"):
+            write(path, gaussians)
+        assert not path.exists()
+
+
 def test_a_log_scale_too_large_for_float32_is_named_as_such(tmp_path):
     """exp(1e4) is Inf: the file holds no NaN, so the refusal says what the value is."""
     records = np.zeros(2, dtype=[(name, "f4") for name in ply_property_names(0)])

@@ -1,8 +1,11 @@
 import numpy as np
+import pytest
 import torch
 
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.io.splat import write_splat
+
+from factories import random_gaussians
 
 C0 = 0.28209479177387814  # docs/formats.md: rgb = 0.5 + C0 * f_dc
 
@@ -29,3 +32,13 @@ def test_splat_layout_and_values(tmp_path):
     second = data[32:]
     np.testing.assert_array_equal(np.frombuffer(second[24:28], np.uint8), [128, 128, 128, 255])
     np.testing.assert_array_equal(np.frombuffer(second[28:32], np.uint8), [255, 128, 128, 128])
+
+
+def test_values_that_are_not_activated_are_refused_as_by_write_ply(tmp_path):
+    """A scale of -1 and an opacity of 2 were written to the .splat as they were (alpha 255)."""
+    for name, value in (("scales", -1.0), ("opacities", 2.0)):
+        gaussians = random_gaussians(3, 0)
+        getattr(gaussians, name).view(-1)[0] = value
+        with pytest.raises(ValueError, match=rf"scene to export\.{name}: 1 value\(s\) outside the activated range"):
+            write_splat(tmp_path / "a.splat", gaussians)
+    assert not (tmp_path / "a.splat").exists()

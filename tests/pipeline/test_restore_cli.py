@@ -224,3 +224,22 @@ def test_uncovered_pixels_are_filled_unless_asked_to_stay_black(run_cli, buu, tm
     assert (filled_view >= black_view - 1).all()  # filling adds (1 - alpha) x colour: it never darkens
     if black["unobserved_fraction"][0] > 0.001:
         assert np.abs(filled_view - black_view).max() > 12
+
+
+def test_the_output_folder_is_held_before_structure_from_motion_starts(run_cli, buu, tmp_path, monkeypatch):
+    """The lock was taken after structure-from-motion had started: a second run into the same
+    folder was refused only when the first reached its network pass, a minute of duplicated work."""
+    from lumos3d_cli.io.output_lock import LOCK_NAME
+    from lumos3d_cli.pipeline import early_registration
+
+    photos = _copy(buu, tmp_path, ["1.JPG", "2.JPG", "3.JPG"])
+    out = tmp_path / "out"
+    held = []
+
+    def observed(*args, **kwargs):
+        held.append((out / LOCK_NAME).is_file())
+        raise InputError("stopped here by the test")
+
+    monkeypatch.setattr(early_registration, "start_early_registration", observed)
+    expect_input_error(run_cli("restore", photos, "-o", out / "scene.ply"), "stopped here by the test")
+    assert held == [True] and not out.exists()  # held then, and the folder it made is gone again

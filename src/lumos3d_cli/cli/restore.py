@@ -86,35 +86,38 @@ def restore_command(
     # The job's modules import torch, pycolmap, trimesh, viser and imageio-ffmpeg (seconds): imported
     # here, when the command runs, so that `--help` and a refused command line stay fast. Where
     # structure-from-motion needs nothing from the network, it starts before torch is imported
-    # (pipeline/early_registration.py), on photos read once for the whole job.
+    # (pipeline/early_registration.py), on photos read once for the whole job. The output folder is
+    # held from before that start: a second run into it was refused only once the first had
+    # reached its network pass, after a minute of duplicated work.
     early = None
-    try:
-        with library_imports():
-            from lumos3d_cli.pipeline.early_registration import start_early_registration
-            from lumos3d_cli.pipeline.presets import get_restore_preset
+    with outputs.reserved():
+        try:
+            with library_imports():
+                from lumos3d_cli.pipeline.early_registration import start_early_registration
+                from lumos3d_cli.pipeline.presets import get_restore_preset
 
-            early = start_early_registration(paths, get_restore_preset(preset), geometry, poses)
-            from lumos3d_cli.io.video import video_kind
-            from lumos3d_cli.pipeline.orbit_video import DEFAULT_ORBIT_FRAMES
-            from lumos3d_cli.pipeline.restore import restore
-            from lumos3d_cli.pipeline.restore_outputs import write_restored_scene
-        if video is not None:
-            video_kind(video)
-        with outputs.reserved(), progress_bar() as bars:
-            scene = restore(
-                paths, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,
-                max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians, gaussian_grid=gaussian_grid,
-                exposure_prior=exposure_prior, exposure_key=exposure_key, fill_unobserved=fill_unobserved, densify=densify,
-                depth_sweep=depth_sweep,
-                denoise_photo=denoise, device=device, reference=reference, lpips_weights=lpips_weights,
-                progress=ProgressBars(bars), early_registration=early,
-            )
-            frames = bars.add_task("orbit video", total=DEFAULT_ORBIT_FRAMES, visible=video is not None)
-            summary = write_restored_scene(scene, output, output_format, video, inputs,
-                                           on_video_frame=lambda: bars.advance(frames))
-    finally:
-        if early is not None:  # a refused or interrupted job stops COLMAP and removes its folder
-            early.close()
+                early = start_early_registration(paths, get_restore_preset(preset), geometry, poses)
+                from lumos3d_cli.io.video import video_kind
+                from lumos3d_cli.pipeline.orbit_video import DEFAULT_ORBIT_FRAMES
+                from lumos3d_cli.pipeline.restore import restore
+                from lumos3d_cli.pipeline.restore_outputs import write_restored_scene
+            if video is not None:
+                video_kind(video)
+            with progress_bar() as bars:
+                scene = restore(
+                    paths, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,
+                    max_views=max_views, refine_steps=refine_steps, max_gaussians=max_gaussians,
+                    gaussian_grid=gaussian_grid, exposure_prior=exposure_prior, exposure_key=exposure_key,
+                    fill_unobserved=fill_unobserved, densify=densify, depth_sweep=depth_sweep, denoise_photo=denoise,
+                    device=device, reference=reference, lpips_weights=lpips_weights, progress=ProgressBars(bars),
+                    early_registration=early,
+                )
+                frames = bars.add_task("orbit video", total=DEFAULT_ORBIT_FRAMES, visible=video is not None)
+                summary = write_restored_scene(scene, output, output_format, video, inputs,
+                                               on_video_frame=lambda: bars.advance(frames))
+        finally:
+            if early is not None:  # a refused or interrupted job stops COLMAP and removes its folder
+                early.close()
     if json_output:
         print_json(summary)
     else:

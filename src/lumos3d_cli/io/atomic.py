@@ -27,6 +27,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.manifest import MANIFEST_NAME, Manifest
 from lumos3d_cli.io.output_paths import blocking_file
 
 logger = logging.getLogger(__name__)
@@ -60,6 +61,18 @@ def _process_exists(pid: int) -> bool:
     except PermissionError:  # another user's live process
         return True
     return True
+
+
+def owner_tag() -> str:
+    """"<pid>-<host>" of this process, as temporary names carry it."""
+    return f"{os.getpid()}-{_HOST}"
+
+
+def owner_has_ended(tag: str) -> bool:
+    """Whether the process of an `owner_tag`, one on this host, has ended (False for another
+    host's, which cannot be told from here)."""
+    pid, _, host = tag.partition("-")
+    return host == _HOST and pid.isdigit() and not _process_exists(int(pid))
 
 
 def _is_leftover(name: str) -> bool:
@@ -96,7 +109,7 @@ def write_commit_journal(staging: Path, folder: Path, moves: list[tuple[Path, Pa
     folder = Path(folder).resolve()
     moves = [(_real(source), _real(destination), done_when) for source, destination, done_when in moves]
     others = sorted({str(path.parent) for move in moves for path in move[:2] if not _is_inside(path, folder)})
-    document = {"folder": str(folder), "other_folders": others,
+    document = {"folder": str(folder), "other_folders": others, "writer": _writer_record(),
                 "moves": [[str(source), str(destination), done_when] for source, destination, done_when in moves]}
     temporary = staging / f"{COMMIT_JOURNAL}.tmp"
     with open(temporary, "w") as handle:
@@ -104,6 +117,57 @@ def write_commit_journal(staging: Path, folder: Path, moves: list[tuple[Path, Pa
         handle.flush()
         os.fsync(handle.fileno())
     os.replace(temporary, staging / COMMIT_JOURNAL)
+
+
+def _read_text(path: str) -> str | None:
+    try:
+        with open(path) as handle:
+            return handle.read()
+    except OSError:
+        return None
+
+
+def _boot_id() -> str | None:
+    """This boot of the machine (Linux; None elsewhere)."""
+    text = _read_text("/proc/sys/kernel/random/boot_id")
+    return None if text is None else text.strip()
+
+
+def _start_time(pid: int) -> str | None:
+    """When process `pid` started, in clock ticks since boot (Linux; None when it does not exist
+    or this cannot be told)."""
+    text = _read_text(f"/proc/{pid}/stat")
+    fields = None if text is None else text.rpartition(")")[2].split()
+    return fields[19] if fields is not None and len(fields) > 19 else None
+
+
+def _writer_record() -> dict:
+    """Who writes a commit journal: its process id alone is not enough, as ids are reused (after
+    a reboot, in containers), and a live process of the same id made a killed commit look alive."""
+    return {"pid": os.getpid(), "boot": _boot_id(), "started": _start_time(os.getpid())}
+
+
+def _journal_writer_ended(staging: Path) -> bool:
+    """Whether the process that wrote `staging`'s journal has ended although a process of its id
+    lives (another boot, or another start time): False when the journal says too little to tell."""
+    try:
+        writer = json.loads((staging / COMMIT_JOURNAL).read_text())["writer"]
+        pid, boot, started = int(writer["pid"]), writer["boot"], writer["started"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+    if boot is not None and _boot_id() is not None and boot != _boot_id():
+        return True
+    return started is not None and _start_time(pid) != started
+
+
+def _is_killed_commit(entry: Path) -> bool:
+    """A staging folder of this host holding the journal of a commit whose writer has ended:
+    by its name (`_is_leftover`), or by its journal when its process id has been reused."""
+    if _is_leftover(entry.name):
+        return True
+    match = _OWNER.search(entry.name)
+    return (entry.name.startswith(".") and match is not None and match["host"] == _HOST
+            and (entry / COMMIT_JOURNAL).is_file() and _journal_writer_ended(entry))
 
 
 def _is_inside(path: Path, folder: Path) -> bool:
@@ -179,9 +243,27 @@ def holds_unfinished_commit(folder: Path | str) -> bool:
     can be finished here, or a marker of a journal in another folder that still exists. Its files
     are then neither the old set nor the new one until `remove_leftovers` finishes the commit,
     under the folder's lock."""
-    entries = [entry for entry in _entries(folder) if _is_leftover(entry.name)]
+    entries = [entry for entry in _entries(folder) if _is_killed_commit(entry)]
     return (any((entry / COMMIT_JOURNAL).is_file() and _journal_moves(entry) is not None for entry in entries)
             or bool(set(_pending_journals(entries))))
+
+
+_warned_mid_commit: set[Path] = set()
+
+
+def warn_if_mid_commit(path: Path | str) -> None:
+    """Warn (once per folder) when `path`, a file or folder a command reads, lies in an output
+    folder, or in a folder of outputs inside one (restored/, colmap/), that a killed run left
+    mid-commit: its files mix the earlier outputs and the killed run's until a run writing there
+    finishes the commit. Reading commands write nothing there, so they only say so."""
+    path = Path(path).absolute()
+    folder = path if path.is_dir() else path.parent
+    for candidate in (folder, folder.parent):
+        if candidate not in _warned_mid_commit and holds_unfinished_commit(candidate):
+            _warned_mid_commit.add(candidate)
+            logger.warning("%s: a run writing here was killed while it moved its outputs into place, so the files may "
+                           "mix its outputs and an earlier run's; run that command into it again to finish", candidate)
+            return
 
 
 def finish_commit(staging: Path) -> bool:
@@ -201,9 +283,32 @@ def finish_commit(staging: Path) -> bool:
         if not (source.exists() or source.is_symlink()):  # removed since by hand: nothing to move
             logger.warning("%s: missing, so it cannot be moved to %s to finish a killed run's commit", source, destination)
             continue
+        # The folder may have changed since the kill: an old output the user has edited (or
+        # replaced) since is theirs and stays; a new output does not go where a file now is.
+        if done_when == "destination-exists" and not _still_written_by_lumos3d(source):
+            logger.warning("%s: kept: changed since lumos3d wrote it, so it is yours now (a killed run's commit was "
+                           "to replace it)", source)
+            continue
+        if (done_when == "source-gone" and destination.name != MANIFEST_NAME
+                and (destination.exists() or destination.is_symlink())):
+            logger.warning("%s: kept: made after a run was killed while writing it; that run's new %s was "
+                           "dropped", destination, destination.name)
+            continue
         destination.parent.mkdir(parents=True, exist_ok=True)
         os.replace(source, destination)
     return True
+
+
+def _still_written_by_lumos3d(path: Path) -> bool:
+    """Whether `path` (a file, or a folder of outputs such as restored/) is what its folder's
+    manifest says lumos3d wrote there, every file of a folder included."""
+    if path.is_dir() and not path.is_symlink():
+        manifest = Manifest.read(path.parent)
+        prefix = f"{path.name}/"
+        listed = {name for name in manifest.files if name.startswith(prefix)}
+        present = {manifest.relative(file) for file in path.rglob("*") if not file.is_dir() or file.is_symlink()}
+        return present <= listed and all(manifest.owns(path.parent / name) for name in present)
+    return Manifest.read(path.parent).owns(path)
 
 
 def _remove_dead_owners_temporaries(folder: Path, owner: str) -> None:
@@ -230,7 +335,7 @@ def remove_leftovers(folder: Path | str, again: bool = False) -> list[Path]:
     folder = Path(folder).absolute()
     if folder in _cleaned and not again:  # `again`: a command's start, where another run may have died since
         return []
-    entries = [entry for entry in _entries(folder) if _is_leftover(entry.name)]
+    entries = [entry for entry in _entries(folder) if _is_killed_commit(entry)]
     _cleaned.add(folder)
     pending = set(_pending_journals(entries))
     removed = []

@@ -7,6 +7,7 @@ from pathlib import Path
 import torch
 
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.atomic import warn_if_mid_commit
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.colmap import is_colmap_model, read_colmap_model
 from lumos3d_cli.io.transforms_json import read_transforms_json
@@ -79,6 +80,7 @@ def read_cameras(path: Path | str, warn_on_distortion: bool = True) -> Cameras:
         if not Path(path).exists():
             raise InputError(f"{path}: no such file or folder")
         raise InputError(f"{path}: no cameras found; {_HINT}")
+    warn_if_mid_commit(source)
     if source.is_dir():
         if is_colmap_model(source):
             return read_colmap_model(source, warn_on_distortion)

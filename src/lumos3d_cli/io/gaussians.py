@@ -113,6 +113,16 @@ class Gaussians:
                                  f"{'opacities lie in [0, 1]' if name == 'opacities' else 'scales are not negative'}): "
                                  "give activated values (sigmoid of the opacity logit, exp of the log-scale)")
 
+    def require_float32_range(self, where: str = "Gaussians") -> None:
+        """ValueError naming the first tensor with a value beyond float32's range (3.4e38): the
+        files store float32, where such a value (finite in float64) became Inf."""
+        limit = float(torch.finfo(torch.float32).max)
+        for name, tensor in self.tensors().items():
+            beyond = tensor.detach().abs() > limit
+            if bool(beyond.any()):
+                raise ValueError(f"{where}.{name}: {int(beyond.sum())} value(s) beyond float32's range "
+                                 f"({float(tensor.detach()[beyond][0]):g}; at most {limit:.3g}): the file stores float32")
+
     @staticmethod
     def concatenate(parts: list[Gaussians]) -> Gaussians:
         first = parts[0]

@@ -13,6 +13,7 @@ import contextlib
 import datetime
 import fcntl
 import json
+import logging
 import os
 import socket
 import stat
@@ -22,6 +23,8 @@ from pathlib import Path
 from lumos3d_cli.errors import InputError
 
 LOCK_NAME = ".lumos3d.lock"
+
+logger = logging.getLogger(__name__)
 
 # folder (absolute) -> [descriptor, depth] of the locks this process holds
 _held: dict[Path, list[int]] = {}
@@ -131,6 +134,10 @@ def folder_lock(folder: Path | str, command: str) -> Iterator[None]:
             del _held[folder]
             # Remove the name while still holding the lock: a waiting run that opened the old
             # file sees it unnamed and starts again (see `_acquire`).
-            with contextlib.suppress(FileNotFoundError):
+            try:
                 os.unlink(folder / LOCK_NAME)
+            except FileNotFoundError:
+                pass
+            except OSError as error:  # the folder made read-only meanwhile: the run's own error matters more
+                logger.warning("%s: cannot be removed (%s); a later run replaces it", folder / LOCK_NAME, error.strerror)
             os.close(entry[0])

@@ -215,7 +215,10 @@ class OutputSet:
             check_output_path(folder, self.parameter if folder == self.folder else None, folder=True)
             for name in RESERVED_NAMES:
                 own = folder / name
-                if own.is_symlink() or (own.exists() and not own.is_file()):
+                # a file of the user's under the manifest's name was replaced by a manifest (the
+                # lock's record is checked when the lock is taken)
+                foreign_manifest = name == MANIFEST_NAME and own.is_file() and not Manifest.is_manifest(own)
+                if own.is_symlink() or (own.exists() and not own.is_file()) or foreign_manifest:
                     raise InputError(f"{own}: is not lumos3d's {'lock' if name == LOCK_NAME else 'manifest'} file but "
                                      "takes its name; move it away or choose another output")
         for name in self._folders:  # moved whole at the commit: a read-only one failed only then, after the work
@@ -508,5 +511,10 @@ def _refuse_unless_ours(manifest: Manifest, path: Path) -> None:
     if manifest.relative(path) in manifest.files:
         raise InputError(f"{path}: was changed since lumos3d wrote it, so it is yours now; lumos3d never overwrites or "
                          "deletes files it did not write: move it away or choose another output")
+    outer = Manifest.read(path.parent.parent)  # an output inside another run's folder of outputs (restored/)
+    if outer.owns(path):
+        command = outer.files[outer.relative(path)].command
+        raise InputError(f"{path}: an output of an earlier `{command}`, part of its outputs in {path.parent.parent}; "
+                         "this run would take it over: choose another output")
     raise InputError(f"{path}: exists and was not written by lumos3d; lumos3d never overwrites or deletes files it did "
                      "not write: move it away or choose another output")

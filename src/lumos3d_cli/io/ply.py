@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from lumos3d_cli.errors import InputError, NonFiniteError, listed
-from lumos3d_cli.io.atomic import atomic_path
+from lumos3d_cli.io.atomic import atomic_path, warn_if_mid_commit
 from lumos3d_cli.io.gaussians import MAX_SH_DEGREE, Gaussians, sh_coefficient_count
 from lumos3d_cli.io.output_paths import require_new_file
 
@@ -49,6 +49,7 @@ def gaussians_to_ply_fields(gaussians: Gaussians) -> np.ndarray:
     """Gaussians -> [N, P] float32 in the order of `ply_property_names`."""
     gaussians.require_finite("scene to save")
     gaussians.require_activated("scene to save")
+    gaussians.require_float32_range("scene to save")
     g = gaussians.detach().to(device="cpu", dtype=torch.float64)
     n, k = len(g), g.sh.shape[1]
     opacity = g.opacities.clamp(_OPACITY_EPS, 1 - _OPACITY_EPS)
@@ -227,6 +228,7 @@ def read_ply(path: Path | str) -> Gaussians:
     """Read a Gaussian `.ply` (any 3DGS-layout file) into activated Gaussians. NaN or Inf in a
     property a scene uses, or a log-scale whose exp overflows, is an error naming the file and the
     properties (`info` counts them instead)."""
+    warn_if_mid_commit(path)
     table, degree = read_ply_fields(path)
     names = ply_property_names(degree)
     log_scales = table[:, [names.index(f"scale_{axis}") for axis in range(3)]]

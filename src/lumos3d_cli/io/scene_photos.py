@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.io.atomic import warn_if_mid_commit
 from lumos3d_cli.io.image_files import list_images
 from lumos3d_cli.io.manifest import Manifest
 
@@ -20,6 +21,8 @@ def list_photos(photos: Path | str | Sequence[Path | str]) -> list[Path]:
     """The photos in `photos` (a folder, or files), in order: `list_images` less an earlier
     restore's outputs (module docstring); InputError when nothing else is left."""
     paths = list_images(photos)
+    for folder in dict.fromkeys(path.parent for path in paths):
+        warn_if_mid_commit(folder)
     manifests: dict[Path, Manifest] = {}
     ours = [path for path in paths if getattr(manifests.setdefault(path.parent, Manifest.read(path.parent)).files.get(
         path.name), "command", None) == "restore"]

@@ -26,6 +26,8 @@ SPLAT_DTYPE = np.dtype(
 def gaussians_to_splat(gaussians: Gaussians) -> np.ndarray:
     """Gaussians -> structured array of SPLAT_DTYPE records in the viewer's order."""
     gaussians.require_finite("scene to export")
+    gaussians.require_activated("scene to export")
+    gaussians.require_float32_range("scene to export")
     g = gaussians.detach().to(device="cpu", dtype=torch.float64)
     importance = g.scales.prod(dim=1) * g.opacities
     order = torch.argsort(-importance, stable=True)
