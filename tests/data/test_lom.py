@@ -107,3 +107,20 @@ def test_one_name_is_a_scene_and_no_names_are_refused(mixed_case_scene):
     assert [scene.name for scene in find_lom_scenes(root, "low-light", None)] == ["mixed"]
     with pytest.raises(InputError, match="^scenes \\[\\]: name at least one scene"):
         find_lom_scenes(root, "low-light", [])
+
+
+def test_a_scene_given_as_dot_or_dotdot_is_named_after_its_folder(mixed_case_scene, monkeypatch):
+    """`eval .` named the scene "" (contact_sheet_.png, an empty scene column) and `eval ..` "..". """
+    monkeypatch.chdir(mixed_case_scene)
+    assert [scene.name for scene in find_lom_scenes(".", "low-light")] == ["mixed"]
+    monkeypatch.chdir(mixed_case_scene / "high")
+    assert [scene.name for scene in find_lom_scenes("..", "low-light")] == ["mixed"]
+
+
+@pytest.mark.parametrize("frames", [5, [5], [{"file_path": 5}], "high/img_2.jpg"])
+def test_test_frames_of_the_wrong_kind_are_named(mixed_case_scene, frames):
+    """`"frames": 5` was reported as "a frame without a file_path ('int' object is not iterable)"."""
+    _write(mixed_case_scene / "transforms_test.json", frames)
+    with pytest.raises(InputError, match="transforms_test.json: (\"frames\" must be a list of objects|a frame's file_path "
+                                         "is not a path)"):
+        read_lom_scene(mixed_case_scene, "low-light")

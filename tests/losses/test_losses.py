@@ -149,3 +149,5 @@ def test_trunk_loader_is_strict(tmp_path):
         load_trunk("vgg19", tmp_path / "vgg16.pth")
     with pytest.raises(InputError, match="weight file not found"):
         load_trunk("vgg19", tmp_path / "missing.pth")
+    with pytest.raises(InputError, match="is a folder; give the weight file itself"):  # was "not found"
+        load_trunk("vgg19", tmp_path)

@@ -96,3 +96,22 @@ def test_non_finite_points_are_refused():
     points = torch.tensor([[0.0, 0.0, float("nan")]])
     with pytest.raises(NonFiniteError):
         voxelize(points, torch.zeros(1, 1), torch.zeros(1), 0.1)
+
+
+@pytest.mark.parametrize("size", [0.0, -0.1, float("nan"), float("inf"), torch.tensor([0.1, 0.0, 0.1])])
+def test_voxel_sizes_that_are_not_positive_and_finite_are_refused(size):
+    """A size of 0 or NaN fused three distinct points into one voxel; a negative one was used."""
+    points = torch.tensor([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
+    with pytest.raises(ValueError, match="voxel size .*: must be positive and finite"):
+        voxelize(points, torch.zeros(3, 1), torch.zeros(3), size)
+
+
+def test_cells_beyond_int64_are_refused_not_wrapped_into_one():
+    """Points at +-1e17 with voxels of 0.01 (1e19 cells) wrapped in .long(): +1e17 fell into the
+    voxel of -1e17 and the two fused at the origin; a voxel of 1e-30 merged points 1 and 2."""
+    far = torch.tensor([[1e17, 0, 0], [-1e17, 0, 0], [5, 0, 0]])
+    with pytest.raises(ValueError, match="beyond 2\\^61 voxels"):
+        voxelize(far, torch.zeros(3, 1), torch.zeros(3), 0.01)
+    with pytest.raises(ValueError, match="beyond 2\\^61 voxels"):
+        voxel_cells(torch.tensor([[0.0, 0, 0], [1, 0, 0]]), 1e-30)
+    assert len(voxelize(far, torch.zeros(3, 1), torch.zeros(3), 1e3)) == 3

@@ -65,6 +65,15 @@ def test_eval_bad_inputs(run_cli, lom_copy, tmp_path, random_checkpoint):
     for weights in (tmp_path / "missing.pth", tmp_path / "garbage.pth"):  # named as the LPIPS weights, not as a checkpoint
         expect_input_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out,
                                    "--lpips-weights", weights), f"--lpips-weights {weights}: ", "give a torchvision vgg16 weight file")
+    # under holdout the test frames go through the network but not into the scene: refused before
+    # the model loads (named an option eval does not have, --fuse-views, after the network pass)
+    result = run_cli("eval", lom_copy.parent, "--protocol", "holdout", "--max-views", 3, "--checkpoint", random_checkpoint,
+                     "--out", out, "--geometry", "network")
+    expect_input_error(result, "--max-views 3: under the holdout protocol buu's 3 test frame(s)", "raise it above 3")
+    assert "fuse" not in result.err
+    shutil.copytree(lom_copy, lom_copy.parent / "mean")  # its rows could not be told from the mean rows
+    expect_input_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out),
+                       "mean: a scene named 'mean' cannot be told from the report's mean rows")
     assert not out.exists()
 
 
@@ -103,6 +112,14 @@ def test_a_model_trained_for_the_other_mode_is_named(run_cli, buu, tmp_path, cap
                      "--max-views", 4, "--geometry", "network", "--refine-steps", 0, "--baseline", "none")
     assert result.code == 0, result.err
     assert "was trained for low-light photos but the mode is over-exposure" in result.err + caplog.text
+    report = json.loads((tmp_path / "report" / "metrics.json").read_text())  # no baseline scored or written
+    assert "gamma" not in report["frames"]["buu"] and {row["method"] for row in report["rows"]} == {"lumos3d"}
+
+
+def test_scores_that_are_not_finite_show_as_n_a_in_the_table():
+    from lumos3d_cli.cli.eval import _cell
+
+    assert [_cell(value, 2) for value in (float("inf"), float("nan"), None, 21.456)] == ["n/a", "n/a", "n/a", "21.46"]
 
 
 def test_scores_that_are_not_finite_are_empty_cells_in_metrics_csv(tmp_path, caplog):

@@ -10,6 +10,7 @@ import pytest
 import torch
 from skimage.metrics import peak_signal_noise_ratio
 
+from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.refine.adam import FusedAdam
@@ -232,6 +233,12 @@ def test_no_usable_camera_is_an_error(sparse_buu):
 def test_targets_must_match_the_cameras(sparse_buu):
     with pytest.raises(ValueError, match=r"\[V, 3, H, W\]"):
         refine_gaussians(sparse_buu.gaussians, sparse_buu.cameras, sparse_buu.targets[:2], FAST)
+
+
+def test_targets_outside_the_unit_range_are_refused(sparse_buu):
+    """Targets of 0..255 were fitted as they were (a loss of 89.7 at every step)."""
+    with pytest.raises(InputError, match=r"refinement targets: values from .* give sRGB in \[0, 1\] \(8-bit codes"):
+        refine_gaussians(sparse_buu.gaussians, sparse_buu.cameras, sparse_buu.targets * 255, FAST)
 
 
 @pytest.mark.cuda

@@ -30,8 +30,9 @@ def test_a_scene_behind_every_camera_is_named_so_and_a_partly_drawable_one_passe
     camera = camera_at_origin(64, 48)
     behind = random_scene(50, 1)
     behind.means[:, 2] *= -1
-    with pytest.raises(InputError, match="behind every camera"):
+    with pytest.raises(InputError, match="behind every camera .*check that the cameras face the scene") as refused:
         require_drawable(behind.means, camera)
+    assert "units" not in str(refused.value)  # the remedy is the orientation, not the units
     mixed = torch.cat([behind.means, torch.tensor([[0.0, 0.0, 2.0]], dtype=torch.float64)])
     require_drawable(mixed, camera)
 

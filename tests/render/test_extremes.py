@@ -69,6 +69,20 @@ def test_the_kernel_and_its_twin_agree_on_gaussians_far_larger_than_the_scene(sc
     torch.testing.assert_close(twin.images, kernel.images, atol=1e-5, rtol=0)
 
 
+@pytest.mark.parametrize("length", [1e18, 1e19])
+def test_a_needle_longer_than_an_int64_of_pixels_is_drawn_by_the_kernel(length):
+    """The kernel rounded the projected radius up to an int64 before capping it: past 9.2e18 px it
+    wrapped negative and the needle was culled (alpha 0) where the twin drew it across the image."""
+    gaussians = Gaussians(torch.tensor([[0.0, 0.0, 2.0]]), torch.tensor([[1.0, 0.0, 0.0, 0.0]]),
+                          torch.tensor([[length, 0.05, 0.05]]), torch.tensor([0.9]), torch.zeros(1, 1, 3))
+    camera = camera_at_origin(32, 32)
+    kernel = render(gaussians, camera, backend="cpu")
+    twin = render(gaussians, camera, backend="reference")
+    assert kernel.alphas.sum() > 30  # a line across the 32-px image
+    torch.testing.assert_close(kernel.alphas, twin.alphas, atol=1e-5, rtol=0)
+    assert kernel.radii.tolist() == twin.radii.tolist() and kernel.radii[0, 0, 0] == 2**30
+
+
 def test_values_outside_the_activated_ranges_are_refused():
     """An opacity of 2 rendered (the kernel and its twin differing) and was saved as 1; a negative
     scale rendered as its size and was saved as 1e-30; a background of 2 was composited."""
@@ -187,3 +201,27 @@ def test_cameras_that_cannot_render_are_refused_by_name():
 def test_sh_beyond_the_supported_degree_is_refused_when_the_gaussians_are_made():
     with pytest.raises(ValueError, match="36 coefficients per channel \\(SH degree 5\\); degrees 0 to 4"):
         Gaussians(torch.zeros(1, 3), torch.tensor([[1.0, 0, 0, 0]]), torch.ones(1, 3), torch.ones(1), torch.zeros(1, 36, 3))
+
+
+@pytest.mark.parametrize("eps2d", [-0.1, float("nan"), float("inf")])
+def test_a_dilation_that_is_not_finite_and_non_negative_is_refused(eps2d):
+    """eps2d NaN rendered black from both backends without a word; Inf gave NaN images in the twin."""
+    from lumos3d_cli.render.settings import RasterSettings
+
+    with pytest.raises(ValueError, match="eps2d=.* must be finite and >= 0"):
+        RasterSettings(16, 12, 0, eps2d=eps2d)
+
+
+def test_integer_gaussians_and_a_missing_gsplat_are_named():
+    """int64 Gaussians rendered on the CPU kernel but failed inside the twin's matmul; backend
+    'gsplat' without gsplat was a bare ModuleNotFoundError."""
+    from lumos3d_cli.render.gsplat_backend import gsplat_available
+
+    gaussians = random_scene(3, 0, dtype=torch.float32)
+    integer = Gaussians(gaussians.means.round().long(), gaussians.quats, gaussians.scales, gaussians.opacities, gaussians.sh)
+    for backend in ("cpu", "reference"):
+        with pytest.raises(ValueError, match="Gaussians of dtype .*torch.int64.*: give floating-point tensors"):
+            render(integer, camera_at_origin(16, 12), backend=backend)
+    if not gsplat_available():
+        with pytest.raises(ValueError, match="backend 'gsplat': gsplat is not installed"):
+            render(gaussians, camera_at_origin(16, 12), backend="gsplat")

@@ -4,6 +4,7 @@ transforms files. The job is `pipeline.evaluation`; this module parses, shows an
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -32,7 +33,9 @@ EXAMPLES = """
 
 
 def _cell(value: float | None, digits: int) -> str:
-    return "n/a" if value is None else f"{value:.{digits}f}"
+    """A score as the table shows it: n/a where metrics.json and metrics.csv hold no number (a
+    score that is not finite is written there as null and an empty cell)."""
+    return "n/a" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
 
 
 def _print_report(report: EvalReport, out: Path) -> None:

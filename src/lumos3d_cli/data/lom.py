@@ -65,10 +65,15 @@ def read_lom_scene(folder: Path, mode: str) -> LomScene:
         frames = json.loads((folder / "transforms_test.json").read_text())["frames"]
     except (OSError, json.JSONDecodeError, KeyError, TypeError) as error:
         raise InputError(f"{folder / 'transforms_test.json'}: cannot read its frames ({error})") from error
+    if not isinstance(frames, list) or not all(isinstance(frame, dict) for frame in frames):
+        raise InputError(f"{folder / 'transforms_test.json'}: \"frames\" must be a list of objects, each with a "
+                         "\"file_path\"")
     try:
         test_keys = [Path(frame["file_path"]).stem for frame in frames]
-    except (KeyError, TypeError) as error:
+    except KeyError as error:
         raise InputError(f"{folder / 'transforms_test.json'}: a frame without a file_path ({error})") from error
+    except TypeError:
+        raise InputError(f"{folder / 'transforms_test.json'}: a frame's file_path is not a path (a string)") from None
     if not test_keys:
         raise InputError(f"{folder / 'transforms_test.json'}: lists no test frames; eval scores the frames it lists")
     folded = [key.casefold() for key in test_keys]
@@ -109,6 +114,8 @@ def find_lom_scenes(root: Path | str, mode: str, names: str | Sequence[str] | No
     """Scenes under `root` (or `root` itself when it is one): all (`names` None), or those named
     (one name, or several)."""
     root = Path(root)
+    if root.name in ("", ".."):  # `eval .`: the scene is named after the folder, not ""
+        root = root.resolve()
     require_folder(root, "that holds the LOM scenes, or one scene")
     names = [names] if isinstance(names, str) else names
     if names is not None and len(names) == 0:

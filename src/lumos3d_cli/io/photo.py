@@ -151,7 +151,7 @@ def _warn_of_transparency(path: Path, alpha: np.ndarray | None) -> None:
         return
     hidden = float(np.mean(alpha < np.iinfo(alpha.dtype).max if alpha.dtype.kind == "u" else alpha < 1))
     if hidden > 0:
-        logger.warning("%s: %.1f %% of its pixels are transparent; alpha is ignored, so the colour under them is "
+        logger.warning("%s: %.1f %% of its pixels are transparent or partly so; alpha is ignored, so the colour under them is "
                        "restored too: flatten the image onto a background first to choose that colour", path, 100 * hidden)
 
 

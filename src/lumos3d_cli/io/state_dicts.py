@@ -45,6 +45,8 @@ def read_state_dict(path: Path | str) -> dict[str, torch.Tensor]:
     """A name -> tensor mapping from .safetensors or a torch file (a training checkpoint's
     "model" or "state_dict" entry is unwrapped). InputError for anything else."""
     path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder; give the weight file itself")
     if not path.is_file():
         raise InputError(f"{path}: weight file not found")
     if path.suffix.lower() == ".safetensors":

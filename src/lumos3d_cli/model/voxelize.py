@@ -26,6 +26,7 @@ from lumos3d_cli.model.symmetric_eigen import symmetric_eigen_3x3
 from lumos3d_cli.rotations import matrix_to_quaternion, quaternion_to_matrix
 
 _KEY_LIMIT = 1 << 62  # voxel keys must stay below this to fit int64 with room for the arithmetic
+_CELL_LIMIT = 2.0**61  # |cell index| below this: differences of two cells (`_cell_keys`) stay below 2^62
 
 
 @dataclass
@@ -49,9 +50,17 @@ class VoxelFusion:
 def voxel_cells(points: torch.Tensor, voxel_size: float | torch.Tensor) -> torch.Tensor:
     """[N, 3] -> [N, 3] int64 cell indices round(x / voxel_size) (ties to even, as torch.round);
     voxel_size a number or [N] per point."""
+    sizes = torch.as_tensor(voxel_size, dtype=torch.float64)
+    if not bool(torch.isfinite(sizes).all()) or not bool((sizes > 0).all()):
+        bad = sizes[~(torch.isfinite(sizes) & (sizes > 0))].view(-1)[0]
+        raise ValueError(f"voxel size {float(bad):g}: must be positive and finite")
     if isinstance(voxel_size, torch.Tensor) and voxel_size.dim() == 1:
         voxel_size = voxel_size[:, None]
-    return torch.round(points / voxel_size).long()
+    cells = torch.round(points.detach() / voxel_size)
+    if cells.numel() and float(cells.abs().max()) >= _CELL_LIMIT:  # .long() would wrap and merge far points
+        raise ValueError(f"points {float((points.abs()).max()):g} from the origin lie beyond 2^61 voxels of the voxel "
+                         "size: the size is too small for the scene's extent")
+    return cells.long()
 
 
 def _cell_keys(cells: torch.Tensor) -> torch.Tensor:

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from lumos3d_cli.data.degradations import MODES
-from lumos3d_cli.data.lom import find_lom_scenes
+from lumos3d_cli.data.lom import LomScene, find_lom_scenes
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.eval.contact_sheet import contact_sheet
 from lumos3d_cli.io.file_digest import file_sha256
@@ -30,6 +30,7 @@ from lumos3d_cli.pipeline.scene_geometry import check_geometry_source
 
 BASELINES = ("gamma", "none")
 METRIC_KEYS = ("psnr", "psnr_gt_mean", "ssim", "sharpness", "lpips", "seconds")
+MEAN_ROW = "mean"  # the scene column of the rows that average the scenes
 
 
 @dataclass
@@ -55,7 +56,7 @@ def _rows(results: list[SceneEvaluation], methods: list[str]) -> list[dict]:
             rows.append({"scene": result.scene, "method": "gamma", **mean_metrics(result.baseline), "seconds": None})
     for method in methods:
         per_scene = [row for row in rows if row["method"] == method]
-        rows.append({"scene": "mean", "method": method, **mean_metrics(per_scene, METRIC_KEYS)})
+        rows.append({"scene": MEAN_ROW, "method": method, **mean_metrics(per_scene, METRIC_KEYS)})
     return rows
 
 
@@ -90,6 +91,8 @@ def evaluate_lom(
         raise InputError(f"{max_views}: use at least 1", parameter="max_views")
     limit = settings.max_views if max_views is None else max_views
     found = find_lom_scenes(root, mode, scenes)
+    for scene in found:
+        _check_scene_fits_the_report(scene, protocol, limit)
     weights = resolve_checkpoint(checkpoint, mode)
     meter = QualityMeter.create(lpips_weights)
     photos = [read_lom_photos(scene) for scene in found]  # a bad photo in the last scene is refused before the first's work
@@ -98,7 +101,8 @@ def evaluate_lom(
         on_start(len(found))
     results = []
     for scene, scene_photos in zip(found, photos):
-        results.append(evaluate_lom_scene(scene, model, settings, protocol, limit, meter, geometry, scene_photos))
+        results.append(evaluate_lom_scene(scene, model, settings, protocol, limit, meter, geometry, scene_photos,
+                                          with_baseline=baseline == "gamma"))
         if on_scene is not None:
             on_scene(scene.name)
     methods = ["lumos3d"] + (["gamma"] if baseline == "gamma" else [])
@@ -113,8 +117,8 @@ def evaluate_lom(
         "depth_sweep": settings.depth_sweep is not None,
         "max_views": limit, "checkpoint": {"name": weights.name, "sha256": file_sha256(weights)},
         "lpips": meter.lpips_note, "rows": rows,
-        "frames": {r.scene: {"test": r.test_frames, "views_used": r.views_used, "lumos3d": r.ours, "gamma": r.baseline}
-                   for r in results},
+        "frames": {r.scene: {"test": r.test_frames, "views_used": r.views_used, "lumos3d": r.ours,
+                             **({"gamma": r.baseline} if "gamma" in methods else {})} for r in results},
         "cameras": {r.scene: r.pose.as_dict() for r in results if r.pose is not None},
         "geometry_sources": {r.scene: r.geometry for r in results},
         "gaussians": {r.scene: r.gaussians for r in results},
@@ -123,14 +127,28 @@ def evaluate_lom(
     return EvalReport(document, rows, results, methods)
 
 
+def _check_scene_fits_the_report(scene: LomScene, protocol: str, max_views: int) -> None:
+    """InputError before any work for a scene the report cannot hold: one named like the mean
+    rows, or one whose test frames alone fill `max_views` under the holdout protocol (they go
+    through the network but are left out of the scene, which then has no view to be built from)."""
+    if scene.name == MEAN_ROW:
+        raise InputError(f"{scene.root}: a scene named {MEAN_ROW!r} cannot be told from the report's mean rows; "
+                         "rename its folder")
+    if protocol == "holdout" and len(scene.frames) > max_views and len(scene.test) >= max_views:
+        raise InputError(f"{max_views}: under the holdout protocol {scene.name}'s {len(scene.test)} test frame(s) go "
+                         "through the network but are left out of the scene, leaving no view to build it from; raise it "
+                         f"above {len(scene.test)}", parameter="max_views")
+
+
 def eval_contact_sheet(result: SceneEvaluation, mode: str, with_baseline: bool) -> np.ndarray:
     """One row per test frame: input | ours | baseline | ground truth, RGB uint8."""
     rows = []
     for index, frame in enumerate(result.test_frames):
-        ours, base = result.ours[index], result.baseline[index]
+        ours = result.ours[index]
         row = [(result.inputs[index], f"{result.scene} {frame} input ({mode})"),
                (result.renders[index], f"lumos3d  {ours['psnr']:.2f} dB  {ours['ssim']:.3f}")]
         if with_baseline:
+            base = result.baseline[index]
             row.append((result.baseline_images[index], f"gamma  {base['psnr']:.2f} dB  {base['ssim']:.3f}"))
         row.append((result.references[index], "ground truth (high)"))
         rows.append(row)

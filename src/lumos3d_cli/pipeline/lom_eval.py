@@ -53,7 +53,7 @@ class SceneEvaluation:
     seconds: float
     inputs: torch.Tensor
     renders: list[torch.Tensor]
-    baseline_images: torch.Tensor
+    baseline_images: torch.Tensor | None
     references: torch.Tensor
     pose: PoseAccuracy | None = None
     geometry: dict = field(default_factory=dict)
@@ -104,11 +104,12 @@ def read_lom_photos(scene: LomScene) -> LomPhotos:
 
 def evaluate_lom_scene(
     scene: LomScene, model: Lumos3D, preset: RestorePreset, protocol: str, max_views: int, meter: QualityMeter,
-    geometry: str = "auto", photos: LomPhotos | None = None,
+    geometry: str = "auto", photos: LomPhotos | None = None, with_baseline: bool = True,
 ) -> SceneEvaluation:
     """One scene under `protocol` with cameras from `geometry` (see pipeline.scene_stages.build_scene);
     every frame of the scene takes part in the registration, `max_views` of them (always the test
-    frames) go through the network. `photos`: the scene's, already read (`read_lom_photos`)."""
+    frames) go through the network. `photos`: the scene's, already read (`read_lom_photos`).
+    Without `with_baseline` the gamma curve is neither computed nor scored (empty `baseline`)."""
     if protocol not in PROTOCOLS:
         raise InputError(f"{protocol!r}: use one of {', '.join(PROTOCOLS)}", parameter="protocol")
     started = time.perf_counter()
@@ -126,12 +127,13 @@ def evaluate_lom_scene(
                             fill=preset.fill_unobserved)
     renders = rendered.images
     inputs = images[test_positions]
-    baseline_images = auto_gamma(inputs)
+    baseline_images = auto_gamma(inputs) if with_baseline else None
     used = [frames[i] for i in built.selected] if built.geometry.source == "network" else list(cameras.names)
     pose = _pose_accuracy(scene, used, cameras[[cameras.names.index(f) for f in used]].extrinsics.double())
     return SceneEvaluation(
         scene.name, protocol, len(built.selected), list(scene.test), meter.measure(renders, references),
-        meter.measure(baseline_images, references), time.perf_counter() - started, inputs, renders, baseline_images,
+        meter.measure(baseline_images, references) if with_baseline else [], time.perf_counter() - started, inputs,
+        renders, baseline_images,
         references, pose, built.geometry.summary(), {"kept": len(built.gaussians), "budget": built.budget},
         rendered.summary(),
     )

@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass, field
 
 import torch
 
-from lumos3d_cli.checks import require_finite
+from lumos3d_cli.checks import require_finite, require_unit_range
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.refine.adam import FUSED_DEVICES, FusedAdam
@@ -138,6 +138,8 @@ def refine_gaussians(
     gaussians = gaussians.detach()
     gaussians.require_finite("refinement input")
     require_finite("refinement targets", targets)
+    if targets.numel():  # 0..255 targets were fitted as they were, silently
+        require_unit_range("refinement targets", targets)
     usable = _usable_views(cameras)
     images, working = working_views(targets[usable].to(gaussians.means.device), cameras[usable].to(device="cpu"),
                                     settings.max_side)

@@ -36,8 +36,11 @@ def require_drawable(means: torch.Tensor, cameras: Cameras, where: str | None = 
             ahead.append(positive)
             kept += len(positive)
     ahead = torch.cat(ahead)
-    where_it_lies = f"{float(ahead.median()):.3g} units in front of the cameras" if len(ahead) else "behind every camera"
     prefix = f"{where}: " if where else ""
-    raise InputError(f"{prefix}no camera sees the scene: it lies {where_it_lies}, outside the renderer's range of "
-                     f"{NEAR_PLANE:g} to {FAR_PLANE:g} units; give the scene and its cameras in units that put it about "
-                     "0.1 to 1e8 units away (metres, say)", parameter=parameter)
+    if not len(ahead):  # a question of orientation (or of cameras inside the scene), not of units
+        raise InputError(f"{prefix}no camera sees the scene: it lies behind every camera (or at its centre); check that "
+                         "the cameras face the scene (world-to-camera, OpenCV axes: +z forward; docs/formats.md)",
+                         parameter=parameter)
+    raise InputError(f"{prefix}no camera sees the scene: it lies {float(ahead.median()):.3g} units in front of the "
+                     f"cameras, outside the renderer's range of {NEAR_PLANE:g} to {FAR_PLANE:g} units; give the scene and "
+                     "its cameras in units that put it about 0.1 to 1e8 units away (metres, say)", parameter=parameter)

@@ -8,6 +8,7 @@ EPS2D = 0.3  # added to the diagonal of every projected 2D covariance (about a t
 NEAR_PLANE = 0.01
 FAR_PLANE = 1e10
 GAUSSIAN_EXTEND = 3.33  # largest radius in standard deviations
+MAX_RADIUS = 2.0**30  # (lumos3d's) a stored pixel radius is capped here: int32 radii (a std of 1e8 px overflowed)
 MIN_COMPENSATION = 0.005  # floor of the antialiasing opacity compensation
 FOV_MARGIN = 0.3  # the EWA Jacobian is evaluated at most this fraction of tan(fov) outside the image
 MAX_IMAGE_SIDE = 16384  # (lumos3d's) a larger frame's buffers alone take gigabytes; 100000 px a side was a MemoryError

@@ -67,8 +67,15 @@ def _inpaint(colour: np.ndarray, unobserved: np.ndarray) -> np.ndarray:
         weight = cv2.resize(weight, small_size, interpolation=cv2.INTER_AREA)
         colour = summed / np.maximum(weight, 1e-6)[..., None]
     mask = (weight < 0.5).astype(np.uint8)
+    # OpenCV's Navier-Stokes inpainting reads memory it never wrote on a one-row image (NaN or
+    # different values run to run; a 3x2000 view shrinks to 1x512): thin images are inpainted
+    # with their edge rows or columns repeated to three.
+    pad_y, pad_x = int(mask.shape[0] < 3), int(mask.shape[1] < 3)
+    colour = cv2.copyMakeBorder(colour, pad_y, pad_y, pad_x, pad_x, cv2.BORDER_REPLICATE)
+    mask = cv2.copyMakeBorder(mask, pad_y, pad_y, pad_x, pad_x, cv2.BORDER_REPLICATE)
     filled = np.stack([cv2.inpaint(np.ascontiguousarray(colour[..., c]), mask, INPAINT_RADIUS, cv2.INPAINT_NS)
                        for c in range(3)], axis=-1)
+    filled = filled[pad_y:filled.shape[0] - pad_y, pad_x:filled.shape[1] - pad_x]
     if scale < 1:
         filled = cv2.resize(filled, (width, height), interpolation=cv2.INTER_LINEAR)
     return np.where(unobserved[..., None], filled, full_colour)

@@ -12,6 +12,7 @@ from lumos3d_cli.render.constants import (
     FOV_MARGIN,
     GAUSSIAN_EXTEND,
     MAX_ALPHA,
+    MAX_RADIUS,
     MIN_COMPENSATION,
     SH_C1,
     SH_C2,
@@ -130,8 +131,7 @@ def project_reference(means, quats, scales, opacities, sh, viewmat, intrinsics, 
             in_depth_range & (det > 0) & (opacity >= ALPHA_THRESHOLD) & ~((rx <= 0) & (ry <= 0))
             & (u + rx > 0) & (u - rx < width) & (v + ry > 0) & (v - ry < height)
         )
-        # at most 2^30 pixels, as the kernel stores them (a Gaussian of std 1e8 overflowed int32 and was culled)
-        radii = torch.where(valid[:, None], torch.stack([rx, ry], -1).clamp_max(2.0**30),
+        radii = torch.where(valid[:, None], torch.stack([rx, ry], -1).clamp_max(MAX_RADIUS),
                             torch.zeros_like(means2d)).to(torch.int32)
 
     rotation, translation = viewmat[:, :3].to(means.dtype), viewmat[:, 3].to(means.dtype)

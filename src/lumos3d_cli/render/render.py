@@ -118,6 +118,9 @@ def render(
     degree = gaussians.sh_degree if sh_degree is None else sh_degree
     width, height = _check_inputs(gaussians, cameras, degree)
     settings = RasterSettings(width, height, min(degree, MAX_SH_DEGREE), near, far, eps2d, antialiased)
+    if not all(tensor.dtype.is_floating_point for tensor in gaussians.tensors().values()):
+        kinds = sorted({str(tensor.dtype) for tensor in gaussians.tensors().values()})
+        raise ValueError(f"Gaussians of dtype {', '.join(kinds)}: give floating-point tensors")
     if gaussians.means.dtype in (torch.float16, torch.bfloat16):
         # the kernels blend in float32 or float64: half-precision Gaussians (e.g. from an autocast
         # training step) render in float32, and their gradients flow back through the cast
@@ -140,6 +143,9 @@ def render(
         else:
             backend = "cpu"
     if backend == "gsplat":
+        if not gsplat_available():  # was a bare ModuleNotFoundError
+            raise ValueError("backend 'gsplat': gsplat is not installed (docs/performance.md, GPU); use backend 'auto' "
+                             "or 'cpu'")
         return RenderOutput(*render_with_gsplat(gaussians, cameras, settings, background, weights))
     if backend not in ("cpu", "reference"):
         raise ValueError(f"unknown backend {backend!r}")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from lumos3d_cli.render.constants import EPS2D, FAR_PLANE, NEAR_PLANE
@@ -26,5 +27,5 @@ class RasterSettings:
             raise ValueError(f"image size {self.width}x{self.height}: width and height must be at least 1")
         if not 0 < self.near < self.far:
             raise ValueError(f"clipping planes near={self.near}, far={self.far}: need 0 < near < far")
-        if self.eps2d < 0:
-            raise ValueError(f"eps2d={self.eps2d} must be >= 0")
+        if not 0 <= self.eps2d < math.inf:  # NaN rendered black, Inf NaN images in the reference
+            raise ValueError(f"eps2d={self.eps2d} must be finite and >= 0")

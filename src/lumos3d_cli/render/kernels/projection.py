@@ -43,6 +43,7 @@ from lumos3d_cli.render.constants import (
     ALPHA_THRESHOLD,
     FOV_MARGIN,
     GAUSSIAN_EXTEND,
+    MAX_RADIUS,
     MIN_COMPENSATION,
 )
 from lumos3d_cli.render.kernels.sh import sh_basis, sh_basis_gradient
@@ -262,8 +263,10 @@ def _project_one(i, gaussians, camera, settings, outputs, work):
         return
     # Beyond `extend` standard deviations alpha = opacity * exp(-sigma) < ALPHA_THRESHOLD.
     extend = min(GAUSSIAN_EXTEND, math.sqrt(2.0 * math.log(opacity / ALPHA_THRESHOLD)))
-    rx = math.ceil(extend * math.sqrt(a0 + eps2d))
-    ry = math.ceil(extend * math.sqrt(c0 + eps2d))
+    # np.ceil keeps a float (numba's math.ceil returns an int64, which wraps past 9.2e18 px and
+    # culled the largest Gaussians); the cap applies when the radius is stored, as in the reference.
+    rx = np.ceil(extend * math.sqrt(a0 + eps2d))
+    ry = np.ceil(extend * math.sqrt(c0 + eps2d))
     if rx <= 0.0 and ry <= 0.0:
         return
     u = fx * x / z + cx
@@ -277,8 +280,8 @@ def _project_one(i, gaussians, camera, settings, outputs, work):
     conics[i, 2] = conic_c
     depths[i] = z
     opacities_eff[i] = opacity
-    radii[i, 0] = int(min(rx, 2.0**30))
-    radii[i, 1] = int(min(ry, 2.0**30))
+    radii[i, 0] = int(min(rx, MAX_RADIUS))
+    radii[i, 1] = int(min(ry, MAX_RADIUS))
     ux, uy, uz, _ = view_direction(means, i, campos)
     sh_basis(sh_degree, ux, uy, uz, basis)
     for ch in range(3):
