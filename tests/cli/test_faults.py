@@ -433,3 +433,22 @@ def test_a_subset_of_views_always_holds_a_photo_with_content(tmp_path, buu, rand
                      "--geometry", "network", "--max-views", 2, "--refine-steps", 0, "--json")
     assert result.code == 0, result.err
     assert "b.JPG" in json.loads(result.out)["network_views"]
+
+
+def test_a_signal_that_lands_as_the_handlers_come_off_exits_as_interrupted(monkeypatch, capsys):
+    """torchrun's SIGTERM to the ranks could land after the command returned, while the CLI's
+    handlers were being removed: the Interrupted it raised escaped `main` as a raw traceback."""
+    import contextlib
+    import signal
+
+    from lumos3d_cli.cli import app
+    from lumos3d_cli.errors import Interrupted
+
+    @contextlib.contextmanager
+    def late_signal():
+        yield lambda: None
+        raise Interrupted(signal.SIGTERM)
+
+    monkeypatch.setattr(app, "signals_raise_interrupted", late_signal)
+    assert app.main(["info", "--help"]) == 128 + signal.SIGTERM
+    assert "SIGTERM" in capsys.readouterr().err

@@ -253,3 +253,20 @@ def test_a_new_run_beside_the_current_folder_given_as_dot(tmp_path, monkeypatch)
     (tmp_path / "run" / "sub").mkdir()
     monkeypatch.chdir(tmp_path / "run" / "sub")
     assert numbered_folder(Path("..")) == tmp_path / "run-2"  # was "sub/..-2"
+
+
+def test_a_collective_that_failed_because_another_rank_stopped_is_said_so():
+    """When one rank stopped on bad data (or was killed), the others reported gloo's "Connection
+    reset by peer" as an internal error to report."""
+    import torch
+
+    from lumos3d_cli.errors import RunError
+    from lumos3d_cli.train.distributed import DistributedContext, peer_stopped
+
+    two = DistributedContext(1, 2, 1, torch.device("cpu"))
+    failed = RuntimeError("[../third_party/gloo/gloo/transport/tcp/pair.cc:537] Read error [127.0.0.1]:1234: "
+                          "Connection reset by peer")
+    stopped = peer_stopped(failed, two)
+    assert isinstance(stopped, RunError) and "rank 1: another process of this distributed run stopped" in str(stopped)
+    assert peer_stopped(RuntimeError("shapes do not match"), two) is None  # a real fault stays one
+    assert peer_stopped(failed, DistributedContext(0, 1, 0, torch.device("cpu"))) is None

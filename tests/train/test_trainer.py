@@ -44,6 +44,18 @@ def test_resumed_run_reproduces_the_uninterrupted_losses(tiny_config, monkeypatc
     assert [json.loads(line)["step"] for line in log.read_text().splitlines()] == list(range(6))
 
 
+def test_a_resume_with_another_number_of_processes_is_warned_of(tiny_config, monkeypatch, caplog):
+    """A run of 2 processes resumed as 1 (or the reverse) went on silently, its effective batch
+    halved and samples drawn again, and "final" recorded world_size 1."""
+    config = tiny_config(name="world", optim__steps=3)
+    saved_by_two = Trainer._provenance
+    monkeypatch.setattr(Trainer, "_provenance", lambda self, step: {**saved_by_two(self, step), "world_size": 2})
+    _trainer(config).run(stop_after=1)
+    monkeypatch.undo()
+    _trainer(config).run(resume=True)
+    assert "resuming a run of 2 process(es) with 1: each step now draws fewer samples" in caplog.text
+
+
 def test_resume_drops_the_log_lines_of_redone_work(tiny_config):
     config = tiny_config(name="logs", validate_every=2, validation_samples=1)
     run = Path(str(config).replace(".yaml", ""))
@@ -78,6 +90,10 @@ def test_non_finite_steps_are_skipped_then_abort(tiny_config, monkeypatch):
     assert trainer.nonfinite_total == 4
     assert any(not torch.equal(before[k], v) for k, v in trainer.model.state_dict().items())  # good steps applied
     assert all(torch.isfinite(v).all() for v in trainer.model.state_dict().values())
+    # strict JSON: the skipped step's loss is null (it was a bare NaN, which strict parsers refuse)
+    log = (trainer.output / "metrics.jsonl").read_text().splitlines()
+    lines = [json.loads(line, parse_constant=lambda name: pytest.fail(f"{name} in metrics.jsonl")) for line in log]
+    assert lines[1]["skipped"] and lines[1]["total"] is None and not lines[0]["skipped"]
 
 
 def test_a_step_outside_run_counts_a_non_finite_loss(tiny_config, monkeypatch):
@@ -166,6 +182,31 @@ def test_two_process_ddp_keeps_ranks_identical(tiny_config, tmp_path):
     assert all(torch.equal(rank0[k], rank1[k]) for k in rank0)
     initial = torch.load(tmp_path / "initial.pt", weights_only=True)
     assert any(not torch.equal(initial[k], rank0[k]) for k in rank0)
+
+
+@pytest.mark.parametrize("stage", ["brackets", "appearance"])
+def test_two_process_ddp_keeps_ranks_identical_in_the_head_only_stages(tiny_config, tmp_path, request, stage):
+    """The bracket-only stage (the shipped operator-head configs) and the multi-view appearance loss
+    call the model's own methods, never the DistributedDataParallel wrapper's forward: each rank
+    trained a model of its own (14 of 14 head tensors apart after 3 steps) and rank 0's was saved."""
+    changes = {"stage": "student", "appearance": "operator", "trainable": ["illumination_head"], "optim__steps": 3,
+               "optim__warmup_steps": 0, "optim__lr": 1e-3}
+    if stage == "brackets":
+        changes.update(multiview=False, brackets={"root": str(request.getfixturevalue("brackets")), "batch_size": 1})
+    else:
+        changes.update(multiview_loss="appearance")
+    config = tiny_config(name=f"ddp-{stage}", **changes)
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    command = [_torchrun(), "--nproc_per_node", "2", "--master_port", str(29521 + len(stage)), str(WORKER), str(config),
+               str(tmp_path)]
+    completed = subprocess.run(command, capture_output=True, text=True, env=env, timeout=600)
+    assert completed.returncode == 0, completed.stderr[-3000:]
+    rank0 = torch.load(tmp_path / "rank0.pt", weights_only=True)
+    rank1 = torch.load(tmp_path / "rank1.pt", weights_only=True)
+    initial = torch.load(tmp_path / "initial.pt", weights_only=True)
+    moved = [k for k in rank0 if not torch.equal(initial[k], rank0[k])]
+    assert moved and all(k.startswith("illumination_head.") for k in moved)
+    assert [k for k in rank0 if not torch.equal(rank0[k], rank1[k])] == []
 
 
 def test_torchrun_command_line(tiny_config, tmp_path):

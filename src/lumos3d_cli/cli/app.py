@@ -137,14 +137,14 @@ def main(argv: list[str] | None = None) -> int:
     flags = [a for a in args if a in _GLOBAL_FLAGS]
     args = flags + [a for a in args if a not in _GLOBAL_FLAGS]
     debug = "--debug" in flags
-    with signals_raise_interrupted() as claim_signals:
-        try:
+    try:
+        with signals_raise_interrupted() as claim_signals:
             return _run(args, debug, claim_signals)
-        except Interrupted as stop:
-            if debug:
-                traceback.print_exc()
-            stderr_console().print(Text(stop.message(), style="bold yellow"))
-            return stop.exit_code
+    except Interrupted as stop:  # also one that lands as the handlers come off (torchrun's SIGTERM to the ranks)
+        if debug:
+            traceback.print_exc()
+        stderr_console().print(Text(stop.message(), style="bold yellow"))
+        return stop.exit_code
 
 
 def _run(args: list[str], debug: bool, claim_signals: Callable[[], None]) -> int:

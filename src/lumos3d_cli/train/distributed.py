@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import torch
 import torch.distributed as dist
 
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import InputError, RunError
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,26 @@ def all_reduce_mean(value: torch.Tensor, context: DistributedContext) -> torch.T
     return reduced / context.world_size
 
 
+def average_gradients(parameters: list[torch.nn.Parameter], context: DistributedContext) -> None:
+    """Average the gradients of `parameters` over ranks in place (a missing gradient counts as
+    zeros, so every rank reduces the same tensors). For a step whose loss never went through the
+    DistributedDataParallel wrapper's forward (its reducer then shares nothing): each rank would
+    otherwise train a model of its own."""
+    if not context.enabled:
+        return
+    for parameter in parameters:
+        if parameter.grad is None:
+            parameter.grad = torch.zeros_like(parameter)
+    gradients = [parameter.grad for parameter in parameters]
+    flat = torch.cat([gradient.reshape(-1) for gradient in gradients]) if gradients else torch.zeros(0)
+    dist.all_reduce(flat, op=dist.ReduceOp.SUM)
+    flat /= context.world_size
+    offset = 0
+    for gradient in gradients:
+        gradient.copy_(flat[offset: offset + gradient.numel()].view_as(gradient))
+        offset += gradient.numel()
+
+
 def any_rank(flag: bool, context: DistributedContext) -> bool:
     """True when `flag` is true on any rank (so every rank takes the same branch)."""
     if not context.enabled:
@@ -70,3 +90,17 @@ def any_rank(flag: bool, context: DistributedContext) -> bool:
     value = torch.tensor([1.0 if flag else 0.0], device=context.device)
     dist.all_reduce(value, op=dist.ReduceOp.MAX)
     return bool(value.item() > 0)
+
+
+def peer_stopped(error: BaseException, context: DistributedContext) -> RunError | None:
+    """The RunError to report instead of `error` when it is a collective that failed because another
+    process of the run ended (it stopped on bad data, or was killed): that process's own message
+    says why, and "internal error ... report it" from the survivors said nothing true. None for
+    anything else."""
+    if not context.enabled or not isinstance(error, RuntimeError):
+        return None
+    text = str(error).lower()
+    if not (isinstance(error, dist.DistError) or "gloo" in text or "nccl" in text):
+        return None
+    return RunError(f"rank {context.rank}: another process of this distributed run stopped (its own message says why), "
+                    "so this one stops too; a --resume continues from the last checkpoint")

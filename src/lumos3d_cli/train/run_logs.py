@@ -9,6 +9,7 @@ from pathlib import Path
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import write_bytes_atomic
+from lumos3d_cli.io.json_text import finite_document
 
 
 class RunLogs:
@@ -29,8 +30,9 @@ class RunLogs:
         """One metrics.jsonl line (and TensorBoard scalars) for a step."""
         line = {"step": step, "lr": learning_rate, "skipped": skipped, "seconds": round(seconds, 4),
                 "nonfinite_total": nonfinite_total, **terms}
+        # a skipped step's non-finite loss is null (strict JSON; "skipped" says why), as in every file we write
         with open(self.output / "metrics.jsonl", "a") as handle:
-            handle.write(json.dumps(line) + "\n")
+            handle.write(json.dumps(finite_document(line), allow_nan=False) + "\n")
         if self._tensorboard is not None:
             for name, value in terms.items():
                 self._tensorboard.add_scalar(f"loss/{name}", value, step)

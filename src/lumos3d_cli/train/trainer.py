@@ -35,13 +35,14 @@ from lumos3d_cli.model.lumos3d import Lumos3D, build_model
 from lumos3d_cli.train.bracket_samples import BracketSamples, check_bracket_model
 from lumos3d_cli.train.checkpointing import (
     CONFIG_FILE,
+    MODEL_FILE,
     TrainingState,
     load_training_checkpoint,
     resume_candidates,
     save_training_checkpoint,
 )
 from lumos3d_cli.train.config import TrainConfig, config_to_yaml, warn_of_idle_settings
-from lumos3d_cli.train.distributed import DistributedContext, all_reduce_mean, any_rank
+from lumos3d_cli.train.distributed import DistributedContext, all_reduce_mean, any_rank, average_gradients, peer_stopped
 from lumos3d_cli.io.output_lock import folder_lock
 from lumos3d_cli.train.run_files import RunFiles
 from lumos3d_cli.train.run_folder import (
@@ -149,6 +150,10 @@ class Trainer:
             DistributedDataParallel(self.model, device_ids=[self.device.index] if self.device.type == "cuda" else None)
             if context.enabled else self.model
         )
+        # The bracket-only and appearance-only stages call the model's own methods, not the
+        # DistributedDataParallel wrapper's forward, so its reducer shares nothing: their gradients
+        # are averaged by hand (`average_gradients`).
+        self._loss_goes_through_the_wrapper = config.multiview and config.multiview_loss != "appearance"
         self._stop_requested = False
         self._stop_signal: int | None = None
         self.nonfinite_in_a_row = 0  # steps skipped in a row for a non-finite loss or gradient
@@ -308,6 +313,8 @@ class Trainer:
             finite = False
         if finite:
             terms["total"].backward()
+            if not self._loss_goes_through_the_wrapper:
+                average_gradients([p for p in self.model.parameters() if p.requires_grad], self.context)
             norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), self.config.optim.grad_clip)
             finite = not any_rank(not bool(torch.isfinite(norm)), self.context)
         learning_rate = self.optimizer.param_groups[-1]["lr"]
@@ -355,6 +362,16 @@ class Trainer:
             torch.distributed.barrier()
         return folder
 
+    def _note_a_changed_world_size(self, folder: Path) -> None:
+        """Warn when the run resumes with another number of processes than its checkpoint's: each
+        step then draws another number of samples, and the sample ids go on from a different
+        place (some drawn again, some never), so the losses no longer reproduce."""
+        saved = read_provenance(folder / MODEL_FILE).get("world_size")
+        if self.context.is_main and isinstance(saved, int) and saved != self.context.world_size:
+            logger.warning("resuming a run of %d process(es) with %d: each step now draws %s samples, and the samples "
+                           "drawn no longer follow the uninterrupted run's", saved, self.context.world_size,
+                           "more" if self.context.world_size > saved else "fewer")
+
     def resume(self) -> int:
         """Load the newest intact checkpoint of this output folder (the one `latest` names; a
         damaged or missing one is skipped with a warning for the next older); returns the step to
@@ -382,6 +399,7 @@ class Trainer:
                 continue
             if problems:
                 logger.info("resuming from %s instead, the newest intact checkpoint", folder)
+            self._note_a_changed_world_size(folder)
             self.optimizer.load_state_dict(state.optimizer)
             self.scheduler.load_state_dict(state.scheduler)
             # the step it continues at takes this config's schedule (a resumed run may train
@@ -510,13 +528,16 @@ class Trainer:
                 if self.context.is_main:
                     check_run_folder(self.output, [], resume)
                 return self._run_locked(resume, max_steps, stop_after, config_file)
-        except BaseException:
+        except BaseException as error:
             # A fresh run of this process that ends before any work of it counts (bad data met in
             # its first step) leaves nothing: its run.json would refuse the rerun, and there is
             # nothing to resume. Only a run this process started: a refusal at the lock or at the
             # second check means the files are another run's.
             if self._started_fresh and not self._kept_work:
                 remove_unfinished_run(self.output, created)
+            stopped = peer_stopped(error, self.context)
+            if stopped is not None:
+                raise stopped from error
             raise
 
     def _run_locked(self, resume: bool, max_steps: int | None, stop_after: int | None,

@@ -17,6 +17,7 @@ from lumos3d_cli.eval.metrics import psnr
 from lumos3d_cli.eval.pose_accuracy import relative_pose_errors, summarise_pose_errors
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.image_write import write_image
+from lumos3d_cli.io.json_text import finite_document
 from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DOutput
 from lumos3d_cli.render.render import render
 
@@ -76,7 +77,7 @@ def validate(
         line["cameras"] = summarise_pose_errors(torch.cat(rotation_errors), torch.cat(translation_errors)).as_dict()
     line.update(extra or {})
     with open(output / "validation.jsonl", "a") as handle:
-        handle.write(json.dumps(line) + "\n")
+        handle.write(json.dumps(finite_document(line, "validation.jsonl"), allow_nan=False) + "\n")
     cameras = line.get("cameras")
     logger.info("validation at step %d: PSNR %.2f dB%s", step, line["psnr"],
                 f", cameras AUC@30 {cameras['auc_30']:.3f}, rotation error median {cameras['rotation_error_median']:.1f}°"
