@@ -367,6 +367,39 @@ def test_a_killed_commit_whose_process_id_was_reused_is_still_finished(tmp_path,
     assert (out / "scene.ply").read_text() == "third"
 
 
+def test_a_killed_commit_with_a_video_whose_process_id_was_reused_is_finished_before_a_run_into_its_folder(
+        tmp_path, monkeypatch):
+    """With the killed run's process id alive (here: this process, as in a container where every
+    run is process 1), its marker in the video's folder was judged by the id alone: a run into that
+    folder did not finish the commit first, its video was later moved aside by the recovery and
+    replaced by the killed run's, its manifest overwritten, and the killed run's temporaries there
+    stayed for good."""
+    out, videos = tmp_path / "out", tmp_path / "videos"
+    _restore_like(out, ["1.png"], video=videos / "orbit.mp4", text="first")
+    assert _kill_mid_commit(out, monkeypatch, after=7, video=videos / "orbit.mp4")  # old video aside, new not in
+    started = atomic._start_time(os.getpid())
+    monkeypatch.setattr(atomic, "_start_time", lambda pid: str(int(started) + 1))  # the id's process started later
+    monkeypatch.setattr(atomic, "_cleaned", set())
+    assert atomic.folders_of_pending_commits(videos) == [out.resolve()]
+    _restore_like(tmp_path / "out2", ["1.png"], video=videos / "orbit.mp4", text="B")  # a later run into the video's folder
+    assert (videos / "orbit.mp4").read_text() == "B" and Manifest.read(videos).owns(videos / "orbit.mp4")
+    assert hidden_entries(videos) == [] and not atomic.holds_unfinished_commit(out)
+    assert (out / "scene.ply").read_text() == "killed"  # the killed run's commit, finished first
+    _restore_like(out, ["1.png"], text="third")
+    assert (videos / "orbit.mp4").read_text() == "B"
+
+
+def test_a_stale_file_inside_a_folder_of_outputs_is_judged_by_the_output_folders_manifest(tmp_path):
+    """out/views/1.png is listed in out's manifest ("views/1.png"), not in a manifest of views/: the
+    recovery's check took lumos3d's own unchanged file for the user's."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"])
+    assert atomic._still_written_by_lumos3d((out / "views" / "1.png").resolve(), out.resolve())
+    assert atomic._still_written_by_lumos3d((out / "views").resolve(), out.resolve())
+    (out / "views" / "1.png").write_text("edited")
+    assert not atomic._still_written_by_lumos3d((out / "views" / "1.png").resolve(), out.resolve())
+
+
 def test_a_copied_folder_never_replays_the_journal_it_carries(tmp_path, monkeypatch):
     out = tmp_path / "out"
     _restore_like(out, ["1.png"], text="first")
@@ -519,7 +552,10 @@ def test_readers_of_a_folder_a_killed_commit_left_half_done_are_warned(tmp_path,
     assert _kill_mid_commit(out, monkeypatch)
     monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)
     monkeypatch.setattr(atomic, "_warned_mid_commit", set())
-    atomic.warn_if_mid_commit(out / "views" / "1.png")  # a folder of outputs inside it: the same set
+    (out / "frames").mkdir()  # another run's complete outputs inside it (render -o out/frames)
+    atomic.warn_if_mid_commit(out / "frames" / "00000.png")
+    assert "was killed while it moved its outputs" not in caplog.text
+    atomic.warn_if_mid_commit(out / "views" / "1.png")  # a folder of outputs of its own: the same set
     assert f"{out}: a run writing here was killed while it moved its outputs into place" in caplog.text
 
 

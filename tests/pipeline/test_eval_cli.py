@@ -71,6 +71,14 @@ def test_eval_bad_inputs(run_cli, lom_copy, tmp_path, random_checkpoint):
                      "--out", out, "--geometry", "network")
     expect_input_error(result, "--max-views 3: under the holdout protocol buu's 3 test frame(s)", "raise it above 3")
     assert "fuse" not in result.err
+    only_tests = lom_copy.parent.parent / "only-tests" / "buu"  # every frame a test frame
+    shutil.copytree(lom_copy, only_tests)
+    for photo in [*(only_tests / "low").iterdir(), *(only_tests / "high").iterdir(), *(only_tests / "over_exp").iterdir()]:
+        if photo.stem not in ("1", "13", "19"):
+            photo.unlink()
+    result = run_cli("eval", only_tests.parent, "--protocol", "holdout", "--checkpoint", random_checkpoint, "--out", out)
+    expect_input_error(result, "the holdout protocol needs views besides the test frames")
+    assert "eval (holdout)" not in result.err  # before the model loads
     shutil.copytree(lom_copy, lom_copy.parent / "mean")  # its rows could not be told from the mean rows
     expect_input_error(run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", out),
                        "mean: a scene named 'mean' cannot be told from the report's mean rows")

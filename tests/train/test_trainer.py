@@ -209,6 +209,22 @@ def test_two_process_ddp_keeps_ranks_identical_in_the_head_only_stages(tiny_conf
     assert [k for k in rank0 if not torch.equal(rank0[k], rank1[k])] == []
 
 
+def test_gradients_averaged_by_hand_leave_parameters_no_rank_used_without_one(tmp_path):
+    """average_gradients gave every trainable parameter a gradient, zeros where the loss never
+    reached it: AdamW's weight decay then shrank the unused heads on several processes, never on
+    one. A parameter some rank used gets the mean over the ranks (zeros from the others)."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    command = [_torchrun(), "--nproc_per_node", "2", "--master_port", "29531",
+               str(Path(__file__).with_name("gradient_worker.py")), str(tmp_path)]
+    completed = subprocess.run(command, capture_output=True, text=True, env=env, timeout=600)
+    assert completed.returncode == 0, completed.stderr[-3000:]
+    ranks = [torch.load(tmp_path / f"rank{rank}.pt", weights_only=True) for rank in (0, 1)]
+    for rank in ranks:
+        torch.testing.assert_close(rank["used"], (ranks[0]["own"]["used"] + ranks[1]["own"]["used"]) / 2)
+        torch.testing.assert_close(rank["partly"], ranks[0]["own"]["partly"] / 2)
+        assert rank["unused"] is None
+
+
 def test_torchrun_command_line(tiny_config, tmp_path):
     config = tiny_config(name="cli-ddp", optim__steps=2)
     env = {**os.environ, "OMP_NUM_THREADS": "1"}

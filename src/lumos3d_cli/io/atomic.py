@@ -9,7 +9,10 @@ temporaries of a run still going on (same host, live process) or of another host
 
 A leftover staging folder that holds a commit journal (io/output_set.py) was killed while it
 moved its outputs into place: its remaining moves are finished first (roll forward), so the
-folder holds the complete new set, then it is removed.
+folder holds the complete new set, then it is removed. A move that would replace a file made
+since the kill, or move away an old output edited since, is left out: those are the user's.
+The journal names its writer's start time and boot as well as its process id, which a live
+process may have taken since (after a reboot; in a container every run may be process 1).
 """
 
 from __future__ import annotations
@@ -64,15 +67,22 @@ def _process_exists(pid: int) -> bool:
 
 
 def owner_tag() -> str:
-    """"<pid>-<host>" of this process, as temporary names carry it."""
-    return f"{os.getpid()}-{_HOST}"
+    """"<pid>-<host>-<start time>" of this process (start time 0 where it cannot be told): what a
+    work folder's name carries to tell a killed run's from a live one's, also when the process id
+    has been reused (in a container every run may be process 1)."""
+    return f"{os.getpid()}-{_HOST}-{_start_time(os.getpid()) or 0}"
 
 
 def owner_has_ended(tag: str) -> bool:
-    """Whether the process of an `owner_tag`, one on this host, has ended (False for another
-    host's, which cannot be told from here)."""
-    pid, _, host = tag.partition("-")
-    return host == _HOST and pid.isdigit() and not _process_exists(int(pid))
+    """Whether the process of an `owner_tag`, one on this host, has ended: its id is free, or taken
+    by a process that started at another time. False for another host's, which cannot be told."""
+    pid, host, started = (tag.split("-") + ["", "", ""])[:3]
+    if host != _HOST or not pid.isdigit():
+        return False
+    if not _process_exists(int(pid)):
+        return True
+    now = _start_time(int(pid))
+    return started not in ("", "0") and now is not None and now != started
 
 
 def _is_leftover(name: str) -> bool:
@@ -161,13 +171,20 @@ def _journal_writer_ended(staging: Path) -> bool:
 
 
 def _is_killed_commit(entry: Path) -> bool:
-    """A staging folder of this host holding the journal of a commit whose writer has ended:
-    by its name (`_is_leftover`), or by its journal when its process id has been reused."""
+    """A temporary of this host's whose writer has ended: by its name (`_is_leftover`), or, for a
+    staging folder holding a commit journal and for a marker naming one, by the journal's writer
+    record when the process id has been reused by a live process."""
     if _is_leftover(entry.name):
         return True
     match = _OWNER.search(entry.name)
-    return (entry.name.startswith(".") and match is not None and match["host"] == _HOST
-            and (entry / COMMIT_JOURNAL).is_file() and _journal_writer_ended(entry))
+    if not (entry.name.startswith(".") and match is not None and match["host"] == _HOST):
+        return False
+    if (entry / COMMIT_JOURNAL).is_file():
+        return _journal_writer_ended(entry)
+    if entry.name.startswith(".commit.") and entry.is_file():
+        journal = _marker_journal(entry)
+        return journal is not None and _journal_writer_ended(journal.parent)
+    return False
 
 
 def _is_inside(path: Path, folder: Path) -> bool:
@@ -207,19 +224,26 @@ def mark_pending_commit(folder: Path, staging: Path) -> Path:
     return Path(name)
 
 
+def _marker_journal(marker: Path) -> Path | None:
+    """The commit journal a marker (`mark_pending_commit`) names, while it exists; None for an
+    unreadable marker (nothing it protects) or one whose journal is gone."""
+    try:
+        journal = Path(json.loads(marker.read_text())["journal"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return journal if journal.name == COMMIT_JOURNAL and journal.is_file() else None
+
+
 def _pending_journals(entries: list[Path]) -> dict[str, Path]:
     """{process id (as written in temporary names): its commit journal} of the killed runs whose
     commit, begun in another folder, is unfinished: their markers (`mark_pending_commit`) among
     `entries` name a journal that still exists."""
     journals = {}
     for entry in entries:
-        if entry.name.startswith(".commit.") and _is_leftover(entry.name):
-            try:
-                journal = Path(json.loads(entry.read_text())["journal"])
-                if journal.name == COMMIT_JOURNAL and journal.is_file():
-                    journals[_OWNER.search(entry.name)["pid"]] = journal
-            except (OSError, ValueError, KeyError, TypeError):  # unreadable: nothing it protects
-                continue
+        if entry.name.startswith(".commit.") and _is_killed_commit(entry):
+            journal = _marker_journal(entry)
+            if journal is not None:
+                journals[_OWNER.search(entry.name)["pid"]] = journal
     return journals
 
 
@@ -258,7 +282,10 @@ def warn_if_mid_commit(path: Path | str) -> None:
     finishes the commit. Reading commands write nothing there, so they only say so."""
     path = Path(path).absolute()
     folder = path if path.is_dir() else path.parent
-    for candidate in (folder, folder.parent):
+    candidates = [folder]
+    if any(name.startswith(f"{folder.name}/") for name in Manifest.read(folder.parent).files):
+        candidates.append(folder.parent)  # a folder of outputs of the folder above (restored/, colmap/)
+    for candidate in candidates:
         if candidate not in _warned_mid_commit and holds_unfinished_commit(candidate):
             _warned_mid_commit.add(candidate)
             logger.warning("%s: a run writing here was killed while it moved its outputs into place, so the files may "
@@ -276,6 +303,7 @@ def finish_commit(staging: Path) -> bool:
     moves = _journal_moves(staging)
     if moves is None:
         return False
+    output_folder = staging.absolute().parent.resolve()
     for source, destination, done_when in moves:
         done = destination.exists() if done_when == "destination-exists" else not (source.exists() or source.is_symlink())
         if done:
@@ -285,7 +313,7 @@ def finish_commit(staging: Path) -> bool:
             continue
         # The folder may have changed since the kill: an old output the user has edited (or
         # replaced) since is theirs and stays; a new output does not go where a file now is.
-        if done_when == "destination-exists" and not _still_written_by_lumos3d(source):
+        if done_when == "destination-exists" and not _still_written_by_lumos3d(source, output_folder):
             logger.warning("%s: kept: changed since lumos3d wrote it, so it is yours now (a killed run's commit was "
                            "to replace it)", source)
             continue
@@ -299,27 +327,50 @@ def finish_commit(staging: Path) -> bool:
     return True
 
 
-def _still_written_by_lumos3d(path: Path) -> bool:
-    """Whether `path` (a file, or a folder of outputs such as restored/) is what its folder's
-    manifest says lumos3d wrote there, every file of a folder included."""
-    if path.is_dir() and not path.is_symlink():
-        manifest = Manifest.read(path.parent)
-        prefix = f"{path.name}/"
-        listed = {name for name in manifest.files if name.startswith(prefix)}
-        present = {manifest.relative(file) for file in path.rglob("*") if not file.is_dir() or file.is_symlink()}
-        return present <= listed and all(manifest.owns(path.parent / name) for name in present)
-    return Manifest.read(path.parent).owns(path)
+def _still_written_by_lumos3d(path: Path, output_folder: Path) -> bool:
+    """Whether `path` (a file, or a folder of outputs such as restored/) is what lumos3d wrote there,
+    every file of a folder included. Judged by the nearest manifest that lists it: its own folder's
+    (a file of the output folder, a video elsewhere or in a subfolder of its own), else one of the
+    folders above it up to the output folder's, which lists its folders of outputs' files
+    ("restored/1.png")."""
+    folders = [path.parent]
+    if _is_inside(path.parent, output_folder):
+        folders += [folder for folder in path.parent.parents if _is_inside(folder, output_folder)]
+    for folder in folders:
+        manifest = Manifest.read(folder)
+        name = manifest.relative(path)
+        if path.is_dir() and not path.is_symlink():
+            listed = {listed for listed in manifest.files if listed.startswith(f"{name}/")}
+            if listed:
+                present = {manifest.relative(file) for file in path.rglob("*") if not file.is_dir() or file.is_symlink()}
+                return present <= listed and all(manifest.owns(folder / item) for item in present)
+        elif name in manifest.files:
+            return manifest.owns(path)
+    return False
 
 
-def _remove_dead_owners_temporaries(folder: Path, owner: str) -> None:
-    """Remove the temporaries of the killed process `owner` in `folder` (another folder its
-    finished commit touched: the marker, the old video moved aside), without its lock: only the
-    dead process's own files, which no live run reads."""
-    for entry in _entries(folder):
-        match = _OWNER.search(entry.name)
-        if match is not None and match["pid"] == owner and _is_leftover(entry.name):
-            remove_path(entry)
-            logger.info("removed %s, left behind by an earlier run that was killed", entry)
+def _remove_commit_temporaries(moves: list[tuple[Path, Path, str]], journal: Path, folder: Path) -> None:
+    """Remove, in the other folders a finished commit touched (a video's), what the killed run left
+    there for it: the old files it moved aside, its staged manifest, its marker naming `journal`.
+    Named one by one from the journal, without those folders' locks: only the dead run's own
+    files, which no live run reads (a process of the same id may be a live run now)."""
+    for move in moves:
+        for path in move[:2]:
+            if not _is_inside(path, folder) and _OWNER.search(path.name) and (path.exists() or path.is_symlink()):
+                remove_path(path)
+                logger.info("removed %s, left behind by an earlier run that was killed", path)
+    for other in {path.parent for move in moves for path in move[:2] if not _is_inside(path, folder)}:
+        for entry in _entries(other):
+            if entry.name.startswith(".commit.") and _OWNER.search(entry.name) and _marker_names(entry, journal):
+                remove_path(entry)
+                logger.info("removed %s, left behind by an earlier run that was killed", entry)
+
+
+def _marker_names(marker: Path, journal: Path) -> bool:
+    try:
+        return Path(json.loads(marker.read_text())["journal"]) == journal
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
 
 
 def remove_leftovers(folder: Path | str, again: bool = False) -> list[Path]:
@@ -354,13 +405,12 @@ def remove_leftovers(folder: Path | str, again: bool = False) -> list[Path]:
             pending.add(owner)  # its temporaries beside it may still be the commit's
             continue
         logger.warning("finished moving the outputs of an earlier run into %s: it was killed while it did", folder)
-        others = {path.parent for move in (_journal_moves(entry) or []) for path in move[:2]
-                  if not _is_inside(path, folder.resolve())}
+        moves = _journal_moves(entry) or []
+        journal = (entry / COMMIT_JOURNAL).resolve()
         (entry / COMMIT_JOURNAL).unlink()
         remove_path(entry)
         removed.append(entry)
-        for other in others:  # its marker and the old video moved aside there: garbage now
-            _remove_dead_owners_temporaries(other, owner)
+        _remove_commit_temporaries(moves, journal, folder.resolve())  # its marker and old video elsewhere: garbage now
     for entry in entries:
         if entry in removed or not (entry.exists() or entry.is_symlink()):
             continue

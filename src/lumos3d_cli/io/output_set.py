@@ -28,6 +28,7 @@ import contextlib
 import errno
 import logging
 import os
+import secrets
 import shutil
 import signal
 import tempfile
@@ -209,8 +210,9 @@ class OutputSet:
             self._check_ownership()
 
     def check_paths(self) -> None:
-        """The checks that read no file: the outputs can be created, use no name lumos3d keeps for
-        itself, and stay clear of the inputs."""
+        """The checks that read no output: the outputs can be created, use no name lumos3d keeps
+        for itself (a file of the user's under the manifest's name is read to tell), and stay clear
+        of the inputs."""
         for folder in self._folders_written():
             check_output_path(folder, self.parameter if folder == self.folder else None, folder=True)
             for name in RESERVED_NAMES:
@@ -407,7 +409,7 @@ class OutputSet:
             if _is_within(path.parent, self.folder.resolve()):
                 destination = trash / str(len(moves))
             else:  # another folder (maybe another file system): beside itself, as a temporary of ours
-                destination = path.parent / f"{temporary_prefix(path.name)}replaced_{len(moves)}.tmp"
+                destination = path.parent / f"{temporary_prefix(path.name)}replaced_{len(moves)}_{_unique()}.tmp"
                 leftovers.append(destination)
             moves.append((path, destination, "destination-exists"))
 
@@ -450,7 +452,7 @@ class OutputSet:
                 if _is_within(folder, self.folder.resolve()):
                     staged_manifest = root / f".manifest.{len(moves)}"
                 else:  # another folder (a video's, maybe on another file system): staged beside its manifest
-                    staged_manifest = folder / f"{temporary_prefix(MANIFEST_NAME)}manifest_{len(moves)}.tmp"
+                    staged_manifest = folder / f"{temporary_prefix(MANIFEST_NAME)}manifest_{len(moves)}_{_unique()}.tmp"
                     staged_elsewhere.append(staged_manifest)
                 staged_manifest.write_text(manifest.document())
                 moves.append((staged_manifest, folder / MANIFEST_NAME, "source-gone"))
@@ -494,6 +496,12 @@ class OutputSet:
                 for path in staged_elsewhere:
                     path.unlink(missing_ok=True)
             raise
+
+
+def _unique() -> str:
+    """A random tag for a temporary name beside a file elsewhere: a killed run's and a later run's
+    with the same process id (in a container, each run is process 1) must not collide."""
+    return secrets.token_hex(4)
 
 
 def _undo(done: list[tuple[Path, Path]]) -> None:

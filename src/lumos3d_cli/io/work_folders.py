@@ -8,8 +8,9 @@ context manager of another thread, and the folder (8-14 MB of images) stayed in 
 `remove_work_folders` removes those still in use; the script calls it last.
 
 A process killed outright (SIGKILL, power loss) removes nothing: its folder's name carries its
-process id and host (`lumos3d-sfm-<pid>-<host>.XXXX`), and the next work folder made with the
-same prefix removes those whose process has ended on this host.
+process id, host and start time (`lumos3d-sfm-<pid>-<host>-<start>.XXXX`), and the next work
+folder made with the same prefix removes those whose process has ended on this host. (Two
+machines sharing one /tmp under one host name cannot be told apart.)
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ _lock = threading.Lock()
 
 def _remove_killed_runs_folders(prefix: str) -> None:
     """Remove the work folders of `prefix` left by processes of this host that have ended."""
-    owner = re.compile(rf"^{re.escape(prefix)}(\d+-[0-9a-f]{{8}})\.")
+    owner = re.compile(rf"^{re.escape(prefix)}(\d+-[0-9a-f]{{8}}-\d+)\.")
     try:
         entries = list(Path(tempfile.gettempdir()).iterdir())
     except OSError:

@@ -134,6 +134,8 @@ def _check_scene_fits_the_report(scene: LomScene, protocol: str, max_views: int)
     if scene.name == MEAN_ROW:
         raise InputError(f"{scene.root}: a scene named {MEAN_ROW!r} cannot be told from the report's mean rows; "
                          "rename its folder")
+    if protocol == "holdout" and len(scene.test) >= len(scene.frames):
+        raise InputError(f"{scene.root}: the holdout protocol needs views besides the test frames")
     if protocol == "holdout" and len(scene.frames) > max_views and len(scene.test) >= max_views:
         raise InputError(f"{max_views}: under the holdout protocol {scene.name}'s {len(scene.test)} test frame(s) go "
                          "through the network but are left out of the scene, leaving no view to build it from; raise it "

@@ -63,18 +63,36 @@ def all_reduce_mean(value: torch.Tensor, context: DistributedContext) -> torch.T
     return reduced / context.world_size
 
 
-def average_gradients(parameters: list[torch.nn.Parameter], context: DistributedContext) -> None:
-    """Average the gradients of `parameters` over ranks in place (a missing gradient counts as
-    zeros, so every rank reduces the same tensors). For a step whose loss never went through the
-    DistributedDataParallel wrapper's forward (its reducer then shares nothing): each rank would
-    otherwise train a model of its own."""
+def average_gradients(parameters: list[torch.nn.Parameter], context: DistributedContext,
+                      bucket_elements: int = 1 << 24) -> None:
+    """Average the gradients of `parameters` over ranks in place, for a step whose loss never went
+    through the DistributedDataParallel wrapper's forward (its reducer then shares nothing, and each
+    rank would train a model of its own). A parameter with a gradient on some rank gets the mean
+    over all ranks (a rank without one counts zeros); one with a gradient on no rank keeps none, so
+    the optimizer leaves it alone (a zero gradient would let AdamW's weight decay shrink it on
+    several processes but not on one). Reduced in buckets of at most `bucket_elements` values, so
+    the copy costs at most one bucket beside the gradients."""
     if not context.enabled:
         return
-    for parameter in parameters:
+    has_gradient = torch.tensor([parameter.grad is not None for parameter in parameters], dtype=torch.float32,
+                                device=context.device)
+    dist.all_reduce(has_gradient, op=dist.ReduceOp.MAX)
+    used = [parameter for parameter, flag in zip(parameters, has_gradient.tolist()) if flag > 0]
+    for parameter in used:
         if parameter.grad is None:
             parameter.grad = torch.zeros_like(parameter)
-    gradients = [parameter.grad for parameter in parameters]
-    flat = torch.cat([gradient.reshape(-1) for gradient in gradients]) if gradients else torch.zeros(0)
+    bucket: list[torch.Tensor] = []
+    filled = 0
+    for index, parameter in enumerate(used):
+        bucket.append(parameter.grad)
+        filled += parameter.grad.numel()
+        if filled >= bucket_elements or index == len(used) - 1:
+            _average_bucket(bucket, context)
+            bucket, filled = [], 0
+
+
+def _average_bucket(gradients: list[torch.Tensor], context: DistributedContext) -> None:
+    flat = torch.cat([gradient.reshape(-1) for gradient in gradients])
     dist.all_reduce(flat, op=dist.ReduceOp.SUM)
     flat /= context.world_size
     offset = 0
@@ -102,5 +120,6 @@ def peer_stopped(error: BaseException, context: DistributedContext) -> RunError 
     text = str(error).lower()
     if not (isinstance(error, dist.DistError) or "gloo" in text or "nccl" in text):
         return None
+    first_line = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
     return RunError(f"rank {context.rank}: another process of this distributed run stopped (its own message says why), "
-                    "so this one stops too; a --resume continues from the last checkpoint")
+                    f"so this one stops too; a --resume continues from the last checkpoint (here: {first_line})")

@@ -366,8 +366,10 @@ class Trainer:
         """Warn when the run resumes with another number of processes than its checkpoint's: each
         step then draws another number of samples, and the sample ids go on from a different
         place (some drawn again, some never), so the losses no longer reproduce."""
+        if not self.context.is_main:
+            return
         saved = read_provenance(folder / MODEL_FILE).get("world_size")
-        if self.context.is_main and isinstance(saved, int) and saved != self.context.world_size:
+        if isinstance(saved, int) and saved != self.context.world_size:
             logger.warning("resuming a run of %d process(es) with %d: each step now draws %s samples, and the samples "
                            "drawn no longer follow the uninterrupted run's", saved, self.context.world_size,
                            "more" if self.context.world_size > saved else "fewer")
