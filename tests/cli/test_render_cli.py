@@ -156,8 +156,31 @@ def test_an_orbit_ignores_a_file_beside_the_scene_that_holds_no_cameras(run_cli,
     (path.parent / "cameras.json").write_text('{"cameras": []}')
     result = run_cli("render", path, "--orbit", 2, "-o", tmp_path / "frames", "--width", 64, "--json")
     assert result.code == 0, result.err
-    assert "cameras.json" in result.err and "orbiting around the scene's bounds instead" in " ".join(result.err.split())
+    assert "cameras.json" in result.err and "passed over for the orbit" in " ".join(result.err.split())
     assert json.loads(result.out)["cameras"] == "orbit around the scene bounds"
+
+
+def test_an_orbit_passes_over_a_broken_camera_file_for_the_next_one(run_cli, tmp_path):
+    """A broken transforms.json beside the scene made the orbit go round the scene's bounds,
+    although a valid cameras.json lay beside it too."""
+    path, gaussians = _scene(tmp_path)
+    write_transforms_json(path.parent / "cameras.json", orbit_from_gaussians(gaussians, 3, 48, 32))
+    (path.parent / "transforms.json").write_text('{"frames": {"not": "a list"}}')
+    result = run_cli("render", path, "--orbit", 2, "-o", tmp_path / "frames", "--width", 64, "--json")
+    assert result.code == 0, result.err
+    assert "transforms.json" in result.err and "passed over for the orbit" in " ".join(result.err.split())
+    assert json.loads(result.out)["cameras"] == f"orbit around the cameras in {path.parent / 'cameras.json'}"
+
+
+def test_cameras_with_a_field_of_view_no_lens_has_are_warned_of(run_cli, tmp_path):
+    """A focal length of 1e30 px rendered black frames, exit 0, without a word."""
+    path, gaussians = _scene(tmp_path)
+    cameras = orbit_from_gaussians(gaussians, 2, 48, 32)
+    cameras.intrinsics[0, 0, 0] = cameras.intrinsics[0, 1, 1] = 1e30
+    write_transforms_json(tmp_path / "cameras.json", cameras)
+    result = run_cli("render", path, "--poses", tmp_path / "cameras.json", "-o", tmp_path / "views")
+    assert result.code == 0, result.err
+    assert "1 camera(s) with a field of view no lens has" in " ".join(result.err.split())
 
 
 def test_an_orbit_around_one_gaussian_sees_it(run_cli, tmp_path):

@@ -306,7 +306,11 @@ def test_transforms_json_values_of_the_wrong_kind_are_named(tmp_path):
     for change, message in (({"cx": None}, "has cx None, which is not a number"), ({"k1": "abc"}, "has k1 'abc'"),
                             ({"frames": [[1, 2]]}, "frame 0 is list"), ({"frames": {"a": 1}}, "no 'frames' list"),
                             ({"camera_model": "OPENCV_FISHEYE"}, "camera_model 'OPENCV_FISHEYE' is not a perspective"),
-                            ({"camera_model": "EQUIRECTANGULAR"}, "is not a perspective camera")):
+                            ({"camera_model": "EQUIRECTANGULAR"}, "is not a perspective camera"),
+                            ({"w": True}, "has w True, which is not a number"),  # was a frame 1 pixel wide
+                            ({"frames": [{"file_path": "a.png", "transform_matrix": [[1, 0, 0, 0], [0, 1, 0, 0],
+                                                                                      [0, 0, 1, 0], [0, 0, 0, 0]]}]},
+                             r"last row \[0.0, 0.0, 0.0, 0.0\], but a camera pose's is \[0, 0, 0, 1\]")):
         path.write_text(json.dumps({**document, **change}))
         with pytest.raises(InputError, match=message):
             read_transforms_json(path)

@@ -62,15 +62,29 @@ def find_camera_source(path: Path | str) -> Path | None:
         if path.name in ("cameras.txt", "images.txt", "cameras.bin", "images.bin"):
             return path.parent if is_colmap_model(path.parent) else None
         return None
+    sources = camera_sources(path)
+    return sources[0] if sources else None
+
+
+def camera_sources(path: Path | str) -> list[Path]:
+    """Every camera file or folder that `path` names or holds, in `find_camera_source`'s order
+    (a reader that may fall back to the next one when the first cannot be read)."""
+    path = Path(path)
+    if path.is_file():
+        found = find_camera_source(path)
+        return [] if found is None else [found]
     if not path.is_dir():
-        return None
+        return []
     if is_colmap_model(path):
-        return path
+        return [path]
+    sources = []
     for candidate in (path / "sparse" / "0", path / "colmap", path / "transforms.json", path / "cameras.json"):
         found = find_camera_source(candidate) if candidate.exists() else None
         if found is not None:
-            return found
-    return path if transforms_splits(path) else None
+            sources.append(found)
+    if transforms_splits(path):
+        sources.append(path)
+    return sources
 
 
 def read_cameras(path: Path | str, warn_on_distortion: bool = True) -> Cameras:

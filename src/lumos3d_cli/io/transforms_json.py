@@ -50,6 +50,8 @@ def _image_size(path: Path, index: int, frame: dict, merged: dict) -> tuple[int,
 def _number(path: Path, index: int, merged: dict, key: str) -> float:
     """merged[key] as a float; InputError naming the file, the frame and the key otherwise."""
     try:
+        if isinstance(merged[key], bool):  # float(True) is 1.0: "w": true was a frame 1 pixel wide
+            raise TypeError
         return float(merged[key])
     except (TypeError, ValueError):
         raise InputError(f"{path}: frame {index} has {key} {merged[key]!r}, which is not a number; correct the file") from None
@@ -99,6 +101,9 @@ def read_transforms_json(path: Path | str, warn_on_distortion: bool = True) -> C
             matrix = torch.cat([matrix, torch.tensor([[0.0, 0.0, 0.0, 1.0]], dtype=torch.float64)])
         if matrix.shape != (4, 4):
             raise InputError(f"{path}: frame {index} 'transform_matrix' is {tuple(matrix.shape)}, expected 4x4")
+        if not torch.allclose(matrix[3], torch.tensor([0.0, 0.0, 0.0, 1.0], dtype=torch.float64), atol=1e-6):
+            raise InputError(f"{path}: frame {index} 'transform_matrix' has the last row {matrix[3].tolist()}, but a "
+                             "camera pose's is [0, 0, 0, 1]; correct the file")
         width, height = _image_size(path, index, frame, merged)
         if "fl_x" in merged:
             focal_x = _number(path, index, merged, "fl_x")

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from lumos3d_cli.errors import InputError, listed
-from lumos3d_cli.io.camera_files import find_camera_source, read_cameras
+from lumos3d_cli.geometry.field_of_view import MEASURED_FOV_DEGREES, implausible_views
+from lumos3d_cli.io.camera_files import camera_sources, find_camera_source, read_cameras
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
 from lumos3d_cli.io.image_write import write_image
@@ -52,6 +53,12 @@ def camera_file_cameras(poses: Path, width: int | None = None, height: int | Non
     with one side given each keeping its aspect ratio), and where they came from. It needs no
     scene: `render` reads it before the scene."""
     cameras, source = read_cameras(poses), str(find_camera_source(poses))
+    odd = implausible_views(cameras.intrinsics, cameras.sizes)
+    if odd:  # at a focal length of 1e13 px the frames came out black without a word
+        logger.warning("%s: %d camera(s) with a field of view no lens has (%s; lenses see %g to %g degrees): their "
+                       "frames may not show the scene", source, len(odd),
+                       listed([f"{cameras.names[view] or view}: {degrees:.3g} degrees" for view, degrees in odd.items()], 3),
+                       *MEASURED_FOV_DEGREES)
     if width is not None or height is not None:  # each camera keeps its own aspect ratio (photos may differ)
         cameras = cameras.rescaled_to([output_size(size, width, height) for size in cameras.sizes])
     too_large = [f"{name or index} ({w}x{h})" for index, (name, (w, h)) in enumerate(zip(cameras.names, cameras.sizes))
@@ -73,15 +80,14 @@ def render_cameras(
         raise InputError("give exactly one of poses (a camera file) or orbit (a frame count)", parameter="poses")
     if poses is not None:
         return camera_file_cameras(poses, width, height)
-    nearby = find_camera_source(scene.parent)
-    if nearby is not None:
+    for nearby in camera_sources(scene.parent):  # the first that can be read (a broken one is passed over)
         try:
             scene_cameras = read_cameras(nearby)
         except InputError as error:  # a file the user did not name: not a reason to refuse the orbit
-            logger.warning("%s; orbiting around the scene's bounds instead of those cameras", error)
-        else:
-            size = output_size(scene_cameras.sizes[0], width, height)
-            return orbit_from_cameras(scene_cameras, orbit, *size, gaussians), f"orbit around the cameras in {nearby}"
+            logger.warning("%s; passed over for the orbit", error)
+            continue
+        size = output_size(scene_cameras.sizes[0], width, height)
+        return orbit_from_cameras(scene_cameras, orbit, *size, gaussians), f"orbit around the cameras in {nearby}"
     if len(gaussians) == 0:
         raise InputError(f"{scene}: the scene is empty and has no cameras beside it; give poses", parameter="scene")
     size = output_size((DEFAULT_ORBIT_SIZE,) * 2, width, height)
