@@ -243,3 +243,6 @@ def test_the_output_folder_is_held_before_structure_from_motion_starts(run_cli, 
     monkeypatch.setattr(early_registration, "start_early_registration", observed)
     expect_input_error(run_cli("restore", photos, "-o", out / "scene.ply"), "stopped here by the test")
     assert held == [True] and not out.exists()  # held then, and the folder it made is gone again
+    # a video the tool cannot write is refused before structure-from-motion starts (4-7 s into it)
+    expect_input_error(run_cli("restore", photos, "-o", out / "scene.ply", "--video", tmp_path / "orbit.webm"), "webm")
+    assert held == [True] and not out.exists()

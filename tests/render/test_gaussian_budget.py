@@ -94,3 +94,21 @@ def test_all_transparent():
     gaussians.opacities[:] = 0.0
     kept, report = fit_budget(gaussians, camera_at_origin(16, 12), max_gaussians=3)
     assert len(kept) == 0 and report.dropped_unseen == 10
+
+
+def test_a_view_smaller_than_the_grid_counts_its_weights_in_grid_pixels():
+    """Weights are pixels of each view: a 64x48 photo under the network's 224x168 grid of pixel
+    Gaussians shows each at a twelfth of a pixel, so all fell under the 0.5 px threshold and 57 %
+    of every view went uncovered. Counted in the grid's pixels, they stay; views at least as
+    large as the grid count as before."""
+    from lumos3d_cli.render.contribution import rendered_weights
+
+    gaussians = random_scene(300, 4, degree=0, dtype=torch.float32, spread=0.5)
+    gaussians.scales[:] = 0.004
+    small = camera_at_origin(32, 24)
+    plain = rendered_weights(gaussians, small)
+    torch.testing.assert_close(rendered_weights(gaussians, small, at_least_pixels=4 * 32 * 24), 4 * plain)
+    torch.testing.assert_close(rendered_weights(gaussians, small, at_least_pixels=16 * 12), plain)
+    kept_plain, _ = fit_budget(gaussians, small)
+    kept_grid, _ = fit_budget(gaussians, small, grid_pixels=16 * 32 * 24)
+    assert len(kept_grid) > len(kept_plain)

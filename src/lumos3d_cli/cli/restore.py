@@ -93,16 +93,16 @@ def restore_command(
     with outputs.reserved():
         try:
             with library_imports():
+                from lumos3d_cli.io.video import video_kind
                 from lumos3d_cli.pipeline.early_registration import start_early_registration
                 from lumos3d_cli.pipeline.presets import get_restore_preset
 
+                if video is not None:  # refused before structure-from-motion starts, not seconds into it
+                    video_kind(video)
                 early = start_early_registration(paths, get_restore_preset(preset), geometry, poses)
-                from lumos3d_cli.io.video import video_kind
                 from lumos3d_cli.pipeline.orbit_video import DEFAULT_ORBIT_FRAMES
                 from lumos3d_cli.pipeline.restore import restore
                 from lumos3d_cli.pipeline.restore_outputs import write_restored_scene
-            if video is not None:
-                video_kind(video)
             with progress_bar() as bars:
                 scene = restore(
                     paths, mode=mode, checkpoint=checkpoint, preset=preset, geometry=geometry, poses=poses,

@@ -13,6 +13,7 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.field_of_view import FALLBACK_FOV_DEGREES, plausible_intrinsics
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.appearance.exposure_key import bundled_key_model
+from lumos3d_cli.model.appearance.operator import AppearanceOperator
 from lumos3d_cli.model.appearance.exposure_prior import exposure_prior_stops, prior_strength
 from lumos3d_cli.model.appearance.photo_restoration import frames_without_content
 from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DPrediction
@@ -75,6 +76,21 @@ def network_image_size(model: Lumos3D, preset: RestorePreset) -> int:
     return preset.network_image_size(model.architecture.image_size, model.architecture.patch_size)
 
 
+def _appearance_without(model: Lumos3D, images: torch.Tensor, empty: Sequence[int]) -> AppearanceOperator:
+    """images [1, V, 3, h, w] (network size) -> the restoration operator predicted from the views not
+    in `empty` (all black or saturated photos: one white photo among four darkened the others by a
+    quarter, 4 dB, as the illumination head read it as part of the scene), for all V views; the
+    empty views get no local correction (their restoration stays black or white)."""
+    keep = [view for view in range(images.shape[1]) if view not in set(empty)]
+    operator = model.predict_appearance(images[:, keep])
+    local = operator.local_log2_gain
+    if local is not None:
+        full = local.new_zeros(local.shape[0], images.shape[1], *local.shape[2:])
+        full[:, keep] = local
+        local = full
+    return replace(operator, local_log2_gain=local)
+
+
 def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mode: str = "low-light",
                 empty_views: Sequence[int] | None = None, stretch: torch.Tensor | None = None) -> NetworkPass:
     """images [V, 3, H, W] at the photos' size -> the network's predictions for them; a view
@@ -98,6 +114,11 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mod
             black, saturated = frames_without_content(images)
         else:
             black, saturated = list(empty_views), []
+        empty = sorted({*black, *saturated})
+        if 0 < len(empty) < images.shape[0]:
+            with torch.no_grad():
+                appearance = _appearance_without(model, prepared.images[None].to(device), empty)
+            prediction = replace(prediction, appearance=appearance)
         stops = exposure_prior_stops(prediction.appearance, prepared.images[None].to(device),
                                      prior_strength(mode, preset.exposure_prior),
                                      key_model=bundled_key_model() if preset.exposure_key == "content" else None,

@@ -282,9 +282,10 @@ def check_photo_contents(batch: ImageBatch, patch_size: int, mode: str) -> None:
     _warn_of_a_mode_the_photos_contradict(batch, mode)
     for kind, indices in (("black", black), ("saturated", saturated)):
         if indices:
-            logger.warning("%s %s entirely %s: nothing to restore there (its pixels stay %s and the scene's exposure is "
-                           "metered without it)", ", ".join(names[i] for i in indices),
-                           "is" if len(indices) == 1 else "are", kind, "black" if kind == "black" else "white")
+            logger.warning("%s %s entirely %s: nothing to restore there (%s stay %s, and the scene's restoration is "
+                           "predicted and metered without %s)", ", ".join(names[i] for i in indices),
+                           "is" if len(indices) == 1 else "are", kind, "its pixels" if len(indices) == 1 else "their pixels",
+                           "black" if kind == "black" else "white", "it" if len(indices) == 1 else "them")
 
 
 def restore(

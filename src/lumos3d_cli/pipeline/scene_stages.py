@@ -236,7 +236,7 @@ def budget(job: SceneJob) -> SceneJob:
     SH bands above the preset's degree go."""
     preset = job.preset
     gaussians, report = fit_budget(job.gaussians, job.geometry.cameras, preset.max_gaussians,
-                                   resolution=preset.budget_resolution)
+                                   resolution=preset.budget_resolution, grid_pixels=0 if job.grid_size is None else job.grid_size[0] * job.grid_size[1])
     if report.kept == 0 and report.dropped_unseen > 0:  # every view would be black
         where, parameter = (None, None) if job.poses is None else (str(job.poses), "poses")
         require_drawable(job.gaussians.means, job.geometry.cameras, where, parameter=parameter)  # extreme units
