@@ -35,13 +35,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
+import lumos3d_cli  # noqa: F401  (first: it sets OMP_WAIT_POLICY=PASSIVE, as the CLI runs, before torch loads)
 import numpy as np
 import torch
 import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cli_runs import REPO, run_lumos3d, run_lumos3d_json  # noqa: E402
-from report import machine_description, markdown_table, write_section  # noqa: E402
+from report import SHARED_DATA, machine_description, markdown_table, write_section  # noqa: E402
 
 from lumos3d_cli.data.degradations import degrade  # noqa: E402
 from lumos3d_cli.eval.metrics import auto_gamma, psnr, sharpness, ssim  # noqa: E402
@@ -55,7 +56,7 @@ from lumos3d_cli.train.config import load_config  # noqa: E402
 from lumos3d_cli.train.validation import render_views  # noqa: E402
 
 MODEL_CARD = REPO / "docs" / "model-card.md"
-STRECHA = REPO.parent / "shared" / "data" / "gt_cameras"
+STRECHA = SHARED_DATA / "gt_cameras"
 LONG_SIDE = 512
 VIEWS = 8  # per scene, evenly spaced: the network's input and the views scored
 NETWORK_SIZE = (224, 168)

@@ -25,11 +25,12 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import lumos3d_cli  # noqa: F401  (first: it sets OMP_WAIT_POLICY=PASSIVE, as the CLI runs, before torch loads)
 import torch
 import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import markdown_table, table_section, write_section  # noqa: E402
+from report import SHARED_DATA, markdown_table, table_section, write_section  # noqa: E402
 
 from lumos3d_cli.data.brackets import VALIDATION_BRACKETS, bracket_pairs, read_srgb  # noqa: E402
 from lumos3d_cli.data.lom import read_lom_scene  # noqa: E402
@@ -40,7 +41,7 @@ from lumos3d_cli.model.appearance.operator import AppearanceOperator  # noqa: E4
 
 REPO = Path(__file__).resolve().parents[1]
 MODEL_CARD = REPO / "docs" / "model-card.md"
-SHARED = REPO.parent / "shared" / "data"
+SHARED = SHARED_DATA
 FIT_SIZE = 128
 FIT_STEPS = 200
 LEARNING_RATE = 0.05

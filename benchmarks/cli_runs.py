@@ -10,8 +10,10 @@ import sys
 import time
 from pathlib import Path
 
+from report import SHARED_DATA
+
 REPO = Path(__file__).resolve().parents[1]
-SHARED = Path(os.environ.get("LUMOS3D_SHARED_DATA", REPO.parent / "shared" / "data"))
+SHARED = SHARED_DATA
 LOM = SHARED / "lom"
 LUMOS3D = str(Path(sys.executable).with_name("lumos3d"))
 

@@ -22,11 +22,12 @@ import sys
 import time
 from pathlib import Path
 
+import lumos3d_cli  # noqa: F401  (first: it sets OMP_WAIT_POLICY=PASSIVE, as the CLI runs, before torch loads)
 import torch
 import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import markdown_table, table_section, write_section  # noqa: E402
+from report import SHARED_DATA, markdown_table, table_section, write_section  # noqa: E402
 
 from lumos3d_cli.data.lom import read_lom_scene  # noqa: E402
 from lumos3d_cli.eval.appearance_stats import appearance_stats  # noqa: E402
@@ -42,7 +43,7 @@ from lumos3d_cli.pipeline.scene_stages import operator_restoration  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 MODEL_CARD = REPO / "docs" / "model-card.md"
-SHARED = Path(os.environ.get("LUMOS3D_SHARED_DATA", REPO.parent / "shared" / "data"))
+SHARED = SHARED_DATA
 SCENES = ("buu", "shrub")
 MODES = ("low-light", "over-exposure")
 GRIDS = (1.0, 2.0)

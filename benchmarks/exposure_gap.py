@@ -22,10 +22,11 @@ import logging
 import sys
 from pathlib import Path
 
+import lumos3d_cli  # noqa: F401  (first: it sets OMP_WAIT_POLICY=PASSIVE, as the CLI runs, before torch loads)
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import markdown_table, table_section, write_section  # noqa: E402
+from report import SHARED_DATA, markdown_table, table_section, write_section  # noqa: E402
 
 from lumos3d_cli.data.brackets import bracket_pairs, read_srgb  # noqa: E402
 from lumos3d_cli.data.lom import read_lom_scene  # noqa: E402
@@ -39,7 +40,7 @@ from lumos3d_cli.model.preprocess import prepare_images  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 MODEL_CARD = REPO / "docs" / "model-card.md"
-SHARED = REPO.parent / "shared" / "data"
+SHARED = SHARED_DATA
 COLUMNS = ("as restored", "one scale per scene", "one scale per view", "at GT mean grey")
 
 logger = logging.getLogger("exposure_gap")

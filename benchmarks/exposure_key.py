@@ -23,10 +23,11 @@ import argparse
 import sys
 from pathlib import Path
 
+import lumos3d_cli  # noqa: F401  (first: it sets OMP_WAIT_POLICY=PASSIVE, as the CLI runs, before torch loads)
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import markdown_table, table_section, write_section  # noqa: E402
+from report import SHARED_DATA, markdown_table, table_section, write_section  # noqa: E402
 
 from lumos3d_cli.data.brackets import VALIDATION_BRACKETS, pair_frames, read_bracket_index  # noqa: E402
 from lumos3d_cli.data.lom import read_lom_scene  # noqa: E402
@@ -35,7 +36,7 @@ from lumos3d_cli.model.appearance.exposure_key import BUNDLED_KEY_MODEL, KEY_FEA
 from lumos3d_cli.train.exposure_key_fit import fit_exposure_key, reference_sample  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data"
+DATA = SHARED_DATA
 MODEL_CARD = REPO / "docs" / "model-card.md"
 SECTION = "exposure-key"
 RIDGES = (1.0, 10.0, 100.0)

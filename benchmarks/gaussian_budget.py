@@ -29,10 +29,11 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import lumos3d_cli  # noqa: F401  (first: it sets OMP_WAIT_POLICY=PASSIVE, as the CLI runs, before torch loads)
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import machine_description, markdown_table, write_section  # noqa: E402
+from report import SHARED_DATA, machine_description, markdown_table, write_section  # noqa: E402
 
 from lumos3d_cli.data.lom import read_lom_scene  # noqa: E402
 from lumos3d_cli.eval.metrics import psnr  # noqa: E402
@@ -55,8 +56,8 @@ from lumos3d_cli.render.contribution import rendered_weights  # noqa: E402
 from lumos3d_cli.render.gaussian_budget import DEFAULT_MIN_WEIGHT, select_budget  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-SCENES = ROOT.parent / "shared" / "data" / "scenes"
-LOM = ROOT.parent / "shared" / "data" / "lom"
+SCENES = SHARED_DATA / "scenes"
+LOM = SHARED_DATA / "lom"
 # Every normal-light scene whose photos share one size (british_museum's do not).
 TUNING_SCENES = ("riverview", "llff_fern", "tnt_garden", "kitchen", "statue", "video_llff_horns", "room",
                  "video_dtu_scan_106", "video_fox", "video_fillerbuster_ramen", "video_vrnerf_kitchen")

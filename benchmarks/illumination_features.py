@@ -21,10 +21,11 @@ import sys
 import time
 from pathlib import Path
 
+import lumos3d_cli  # noqa: F401  (first: it sets OMP_WAIT_POLICY=PASSIVE, as the CLI runs, before torch loads)
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import markdown_table, table_section, write_section  # noqa: E402
+from report import SHARED_DATA, markdown_table, table_section, write_section  # noqa: E402
 
 from lumos3d_cli.data.brackets import bracket_pairs, read_srgb  # noqa: E402
 from lumos3d_cli.eval.metrics import auto_gamma, psnr, ssim  # noqa: E402
@@ -34,7 +35,7 @@ from lumos3d_cli.model.appearance.illumination_head import IlluminationHead  # n
 
 REPO = Path(__file__).resolve().parents[1]
 MODEL_CARD = REPO / "docs" / "model-card.md"
-BRACKETS = REPO.parent / "shared" / "data" / "brackets"
+BRACKETS = SHARED_DATA / "brackets"
 BATCH = 8
 LEARNING_RATE = 1e-3
 

@@ -22,6 +22,7 @@ import sys
 import time
 from pathlib import Path
 
+import lumos3d_cli  # noqa: F401  (first: it sets OMP_WAIT_POLICY=PASSIVE, as the CLI runs, before torch loads)
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 

@@ -7,7 +7,7 @@ PSNR at the reference's mean grey, sharpness, seconds and Gaussians per scene, a
 four holdout rows the presets are chosen on). Writes two tables into docs/performance.md and a
 plot (time against holdout PSNR, one line per preset) into docs/images/preset-trade.png.
 
-    .venv/bin/python benchmarks/presets.py                  # the full grid: 15 configurations
+    .venv/bin/python benchmarks/presets.py                  # the full grid: each preset at each of its step counts
     .venv/bin/python benchmarks/presets.py --steps 0 50 --no-doc
 """
 

@@ -13,16 +13,17 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
+import statistics
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+import lumos3d_cli  # noqa: F401  (first: it sets OMP_WAIT_POLICY=PASSIVE, as the CLI runs, before torch loads)
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import machine_description, markdown_table, peak_rss_mib, write_section  # noqa: E402
+from report import machine_description, markdown_table, peak_rss_mib, run_child, write_section  # noqa: E402
 
 from lumos3d_cli.io.cameras import Cameras, make_intrinsics  # noqa: E402
 from lumos3d_cli.io.gaussians import Gaussians  # noqa: E402
@@ -54,7 +55,9 @@ def _forward_backward(gaussians: Gaussians, cameras: Cameras, backend: str):
 
 
 def _median(values: list[float]) -> float:
-    return sorted(values)[len(values) // 2]
+    # the mean of the middle two for an even count: the upper one favoured ours against the
+    # twin's two runs (always its slower one)
+    return statistics.median(values)
 
 
 def measure(count: int, size: int, backend: str, repeats: int) -> dict:
@@ -90,8 +93,7 @@ def measure(count: int, size: int, backend: str, repeats: int) -> dict:
 
 def _child(arguments: list[str], environment: dict | None = None) -> dict:
     command = [sys.executable, __file__, *arguments]
-    result = subprocess.run(command, capture_output=True, text=True, env=environment, check=True)
-    return json.loads(result.stdout.strip().splitlines()[-1])
+    return json.loads(run_child(command, environment).strip().splitlines()[-1])
 
 
 def compile_times() -> dict:

@@ -10,9 +10,12 @@ Scores: PSNR of the renders at the photos' resolution against those targets (the
 when ../shared/data/lom/buu is present, against buu's normal-light photos of the same views
 (`high/`, downsized to the demo's size): the fitted views, and the held-out view.
 
-Each step count is its own run from the forward pass (what `--refine-steps N` gives), with early
-stop off; the last row runs the largest count with the default early stop. The 0-step run
-times the setup (working views, the SH degree choice); s/step is the rest over the steps.
+Each step count is its own run from the forward pass, with early stop off; the last row runs the
+largest count with the default early stop. The 0-step run times the setup (working views, the SH
+degree choice); s/step is the rest over the steps. The refinement is `refine.RefineSettings`'
+defaults at `--max-side`: a study of the optimiser and its step cost, not what a preset's
+`--refine-steps N` gives (the presets fit at their own side, with their learning-rate decay,
+densification and filled views; `benchmarks/presets.py` measures those).
 
     .venv/bin/python benchmarks/refinement.py                      # steps 0 25 50 100 200
     .venv/bin/python benchmarks/refinement.py --steps 0 10 --max-side 128
@@ -31,11 +34,12 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+import lumos3d_cli  # noqa: F401  (first: it sets OMP_WAIT_POLICY=PASSIVE, as the CLI runs, before torch loads)
 import torch
 import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import machine_description, markdown_table  # noqa: E402
+from report import SHARED_DATA, machine_description, markdown_table  # noqa: E402
 
 from lumos3d_cli.eval.metrics import psnr  # noqa: E402
 from lumos3d_cli.io.gaussians import SH_C0, sh_coefficient_count  # noqa: E402
@@ -56,7 +60,7 @@ from lumos3d_cli.render.render import render  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEMO = ROOT / "examples" / "lowlight-buu"
-BUU_HIGH = ROOT.parent / "shared" / "data" / "lom" / "buu" / "high"
+BUU_HIGH = SHARED_DATA / "lom" / "buu" / "high"
 
 
 def restored_views(model: Lumos3D, photos: torch.Tensor, preset) -> torch.Tensor:

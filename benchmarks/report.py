@@ -9,13 +9,17 @@ import platform
 import re
 import resource
 import statistics
+import subprocess
 import time
 from collections.abc import Callable
 from pathlib import Path
 
+import lumos3d_cli  # noqa: F401  (first: it sets OMP_WAIT_POLICY=PASSIVE, as the CLI runs, before torch loads)
 import torch
 
 PERFORMANCE_DOC = Path(__file__).resolve().parents[1] / "docs" / "performance.md"
+# The shared data, where the tests find it too (README: LUMOS3D_SHARED_DATA), by default beside the repository.
+SHARED_DATA = Path(os.environ.get("LUMOS3D_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
 
 _HEADER = """# Performance
 
@@ -23,6 +27,15 @@ Measured by the scripts in `benchmarks/`; each script rewrites its own section b
 are against a reference measured in the same run. Times are medians of repeated runs after
 warm-up.
 """
+
+
+def run_child(command: list[str], environment: dict | None = None) -> str:
+    """stdout of a measuring child process; on failure, exit naming the command with the end of
+    its stderr (a CalledProcessError said only "returned non-zero exit status 1")."""
+    result = subprocess.run(command, capture_output=True, text=True, env=environment)
+    if result.returncode != 0:
+        raise SystemExit(f"{' '.join(command)} failed (exit {result.returncode}):\n{result.stderr[-3000:]}")
+    return result.stdout
 
 
 def machine_description() -> str:

@@ -18,6 +18,7 @@ import os
 import sys
 from pathlib import Path
 
+import lumos3d_cli  # noqa: F401  (first: it sets OMP_WAIT_POLICY=PASSIVE, as the CLI runs, before torch loads)
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -9,20 +9,21 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
+import statistics
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+import lumos3d_cli  # noqa: F401  (first: it sets OMP_WAIT_POLICY=PASSIVE, as the CLI runs, before torch loads)
 import torch
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import machine_description, markdown_table, peak_rss_mib, write_section  # noqa: E402
+from report import SHARED_DATA, machine_description, markdown_table, peak_rss_mib, run_child, write_section  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
-SCENES = REPO.parent / "shared" / "data" / "scenes"
+SCENES = SHARED_DATA / "scenes"
 
 
 def _config(folder: Path, stage: str, views: int, width: int, height: int, device: str, teacher: str | None) -> Path:
@@ -52,7 +53,7 @@ def measure(config: Path, steps: int) -> dict:
         if settings.device == "cuda":
             torch.cuda.synchronize()
         times.append(time.perf_counter() - start)
-    steady = sorted(times[2:])[len(times[2:]) // 2]
+    steady = statistics.median(times[2:])
     gpu_peak = torch.cuda.max_memory_allocated() / 2**20 if settings.device == "cuda" else None
     return {"seconds_per_step": steady, "peak_rss_mib": peak_rss_mib(), "gpu_peak_mib": gpu_peak,
             "parameters": sum(p.numel() for p in trainer.model.parameters())}
@@ -81,9 +82,8 @@ def main() -> None:
             for views, width, height in shapes:
                 for stage in ("teacher", "student"):
                     config = _config(folder, stage, views, width, height, device, str(teacher) if stage == "student" else None)
-                    result = subprocess.run([sys.executable, __file__, "--measure", str(config), str(steps)],
-                                            capture_output=True, text=True, check=True)
-                    values = json.loads(result.stdout.strip().splitlines()[-1])
+                    output = run_child([sys.executable, __file__, "--measure", str(config), str(steps)])
+                    values = json.loads(output.strip().splitlines()[-1])
                     rows.append([device, stage, views, f"{width}×{height}", f"{values['seconds_per_step']:.2f}",
                                  f"{1 / values['seconds_per_step']:.2f}", f"{values['peak_rss_mib']:.0f}",
                                  "—" if values["gpu_peak_mib"] is None else f"{values['gpu_peak_mib']:.0f}"])

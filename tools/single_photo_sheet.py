@@ -21,7 +21,8 @@ from lumos3d_cli.io.images import load_images
 from lumos3d_cli.model.bundled_models import resolve_checkpoint
 from lumos3d_cli.pipeline.model_loading import load_restoration_model
 from lumos3d_cli.pipeline.network_pass import even_subset
-from lumos3d_cli.pipeline.presets import DEFAULT_RESTORE_PRESET, get_restore_preset
+from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET
+from lumos3d_cli.pipeline.presets import get_restore_preset
 from lumos3d_cli.pipeline.restore import restore_scene
 
 

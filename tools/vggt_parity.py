@@ -20,11 +20,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import tempfile
 import types
 from pathlib import Path
 
+import lumos3d_cli  # noqa: F401  (first: it sets OMP_WAIT_POLICY=PASSIVE, as the CLI runs, before torch loads)
 import torch
 from torch import nn
 
@@ -146,7 +148,11 @@ def run(reference_path: Path, architecture_name: str, views: int, height: int, w
     }
     for index, (a, b) in enumerate(zip(actual.pose_enc_list, expected["pose_enc_list"], strict=True)):
         errors[f"pose_enc_iteration_{index}"] = relative_error(a, b)
-    worst = max(errors["pose_enc"]["relative_to_max"], errors["depth"]["max_elementwise_relative"])
+    checked = [errors["pose_enc"]["relative_to_max"], errors["depth"]["max_elementwise_relative"],
+               errors["depth_conf"]["relative_to_max"],
+               *(errors[name]["relative_to_max"] for name in errors if name.startswith("pose_enc_iteration_"))]
+    # NaN anywhere fails (max(1e-6, nan) is 1e-6: a NaN depth passed)
+    worst = math.inf if any(not math.isfinite(value) for value in checked) else max(checked)
     return {
         "architecture": architecture_name,
         "input": [1, views, 3, height, width],

@@ -91,11 +91,15 @@ def screenshot(url: str, size: tuple[int, int], wait: float, chromium: str) -> n
     needs a minute or more to fade in and sort a few hundred thousand splats), or after `wait` s."""
     debug_port = _free_port()
     profile = tempfile.mkdtemp(prefix="lumos3d-chromium-")
-    process = subprocess.Popen(
-        [chromium, *_CHROMIUM_FLAGS, f"--user-data-dir={profile}", f"--remote-debugging-port={debug_port}",
-         f"--window-size={size[0]},{size[1]}", "about:blank"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )
+    try:
+        process = subprocess.Popen(
+            [chromium, *_CHROMIUM_FLAGS, f"--user-data-dir={profile}", f"--remote-debugging-port={debug_port}",
+             f"--window-size={size[0]},{size[1]}", "about:blank"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        )
+    except OSError:  # no such browser: its profile folder goes with the run
+        shutil.rmtree(profile, ignore_errors=True)
+        raise
     try:
         tools = DevTools(_page_socket_url(debug_port))
         try:

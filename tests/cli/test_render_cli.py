@@ -170,6 +170,29 @@ def test_an_orbit_passes_over_a_broken_camera_file_for_the_next_one(run_cli, tmp
     assert result.code == 0, result.err
     assert "transforms.json" in result.err and "passed over for the orbit" in " ".join(result.err.split())
     assert json.loads(result.out)["cameras"] == f"orbit around the cameras in {path.parent / 'cameras.json'}"
+    (path.parent / "cameras.json").write_text("{")  # none readable: said once, after the files passed over
+    result = run_cli("render", path, "--orbit", 2, "-o", tmp_path / "frames", "--width", 64, "--json")
+    assert result.code == 0, result.err
+    assert "no camera file beside it can be read; orbiting around the scene's bounds instead" in " ".join(result.err.split())
+
+
+def test_a_camera_folder_that_cannot_be_read_is_passed_over_not_an_internal_error(tmp_path, monkeypatch):
+    """Looking at every candidate met a colmap/ without read permission after a good sparse/0:
+    `render --poses S` and `--orbit` ended in an internal PermissionError (as a user, not root)."""
+    from lumos3d_cli.io import camera_files
+
+    scene = tmp_path / "S"
+    (scene / "colmap").mkdir(parents=True)
+    write_transforms_json(scene / "transforms.json", orbit_from_gaussians(random_scene(20, 0), 2, 48, 32))
+    real = camera_files.find_camera_source
+
+    def unreadable(candidate):
+        if candidate.name == "colmap":
+            raise PermissionError(13, "Permission denied", str(candidate))
+        return real(candidate)
+
+    monkeypatch.setattr(camera_files, "find_camera_source", unreadable)
+    assert list(camera_files.camera_sources(scene)) == [scene / "transforms.json"]
 
 
 def test_cameras_with_a_field_of_view_no_lens_has_are_warned_of(run_cli, tmp_path):

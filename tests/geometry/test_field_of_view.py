@@ -69,6 +69,9 @@ def test_views_no_lens_has_are_named_with_their_own_sizes():
     # a portrait photo measures along its height: 60 degrees for the landscape one, 90 for it
     assert implausible_views(torch.stack([_intrinsics(250 * 3 ** 0.5, 250 * 3 ** 0.5, (500, 375)),
                                           _intrinsics(250, 250, (375, 500))]), [(500, 375), (375, 500)]) == {}
+    # either side: a focal length of 1e30 px down alone (across 400) rendered black frames unwarned
+    found = implausible_views(_intrinsics(400.0, 1e30, (500, 375))[None], [(500, 375)])
+    assert list(found) == [0] and found[0] < 1e-20
 
 
 def test_a_stretched_photo_is_judged_square_at_its_own_size():

@@ -39,14 +39,18 @@ MEASURED_FOV_DEGREES = (1.0, PLAUSIBLE_FOV_DEGREES[1])
 
 def implausible_views(intrinsics: torch.Tensor, sizes: list[tuple[int, int]]) -> dict[int, float]:
     """intrinsics [V, 3, 3] of images of `sizes` (width, height, one per view) -> {view: field of
-    view of its longer side in degrees} for the views outside MEASURED_FOV_DEGREES (or not finite):
-    cameras that structure-from-motion or a camera file gave, which no lens has."""
+    view in degrees, across or down, whichever is outside MEASURED_FOV_DEGREES (or not finite)}:
+    cameras that structure-from-motion or a camera file gave, which no lens has (a focal length
+    of 1e30 px down alone rendered black frames)."""
     low, high = MEASURED_FOV_DEGREES
     found = {}
-    for view, size in enumerate(sizes):
-        degrees = float(longer_side_fov(intrinsics[view: view + 1].double(), size)[0])
-        if not (math.isfinite(degrees) and low <= degrees <= high):
-            found[view] = degrees
+    for view, (width, height) in enumerate(sizes):
+        focal = intrinsics[view].double()
+        for side, length in ((width, focal[0, 0]), (height, focal[1, 1])):
+            degrees = float(torch.rad2deg(2 * torch.atan(side / 2 / length.clamp_min(1e-12))))
+            if not (math.isfinite(degrees) and low <= degrees <= high):
+                found[view] = degrees
+                break
     return found
 
 

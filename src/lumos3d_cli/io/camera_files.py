@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+from collections.abc import Iterator
 from pathlib import Path
 
 import torch
@@ -11,6 +13,8 @@ from lumos3d_cli.io.atomic import warn_if_mid_commit
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.colmap import is_colmap_model, read_colmap_model
 from lumos3d_cli.io.transforms_json import read_transforms_json
+
+logger = logging.getLogger(__name__)
 
 _HINT = ("pass a transforms.json, a COLMAP model folder (text or binary), a folder of LOM-style "
          "transforms_{train,val,test}.json or a scene folder holding one of those")
@@ -62,29 +66,34 @@ def find_camera_source(path: Path | str) -> Path | None:
         if path.name in ("cameras.txt", "images.txt", "cameras.bin", "images.bin"):
             return path.parent if is_colmap_model(path.parent) else None
         return None
-    sources = camera_sources(path)
-    return sources[0] if sources else None
+    return next(camera_sources(path), None)
 
 
-def camera_sources(path: Path | str) -> list[Path]:
-    """Every camera file or folder that `path` names or holds, in `find_camera_source`'s order
-    (a reader that may fall back to the next one when the first cannot be read)."""
+def camera_sources(path: Path | str) -> Iterator[Path]:
+    """Every camera file or folder that `path` names or holds, in `find_camera_source`'s order,
+    one at a time (a reader may fall back to the next when one cannot be read; the first costs no
+    look at the others). A candidate that cannot be looked at (no permission) counts as absent."""
     path = Path(path)
     if path.is_file():
         found = find_camera_source(path)
-        return [] if found is None else [found]
-    if not path.is_dir():
-        return []
-    if is_colmap_model(path):
-        return [path]
-    sources = []
-    for candidate in (path / "sparse" / "0", path / "colmap", path / "transforms.json", path / "cameras.json"):
-        found = find_camera_source(candidate) if candidate.exists() else None
         if found is not None:
-            sources.append(found)
+            yield found
+        return
+    if not path.is_dir():
+        return
+    if is_colmap_model(path):
+        yield path
+        return
+    for candidate in (path / "sparse" / "0", path / "colmap", path / "transforms.json", path / "cameras.json"):
+        try:
+            found = find_camera_source(candidate) if candidate.exists() else None
+        except OSError as error:  # a folder without read permission: as if it were not there
+            logger.warning("%s: cannot be read (%s); not looked at for cameras", candidate, error.strerror)
+            continue
+        if found is not None:
+            yield found
     if transforms_splits(path):
-        sources.append(path)
-    return sources
+        yield path
 
 
 def read_cameras(path: Path | str, warn_on_distortion: bool = True) -> Cameras:

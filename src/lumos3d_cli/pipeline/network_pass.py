@@ -13,8 +13,8 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.field_of_view import FALLBACK_FOV_DEGREES, plausible_intrinsics
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.appearance.exposure_key import bundled_key_model
-from lumos3d_cli.model.appearance.operator import AppearanceOperator
 from lumos3d_cli.model.appearance.exposure_prior import exposure_prior_stops, prior_strength
+from lumos3d_cli.model.appearance.operator import AppearanceOperator
 from lumos3d_cli.model.appearance.photo_restoration import frames_without_content
 from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DPrediction
 from lumos3d_cli.model.preprocess import PreparedImages, prepare_images
@@ -119,6 +119,8 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mod
             with torch.no_grad():
                 appearance = _appearance_without(model, prepared.images[None].to(device), empty)
             prediction = replace(prediction, appearance=appearance)
+            prediction.require_finite(f"{source} gives NaN/Inf on these photos: damaged or diverged weights; use "
+                                      "another checkpoint")
         stops = exposure_prior_stops(prediction.appearance, prepared.images[None].to(device),
                                      prior_strength(mode, preset.exposure_prior),
                                      key_model=bundled_key_model() if preset.exposure_key == "content" else None,

@@ -80,16 +80,21 @@ def render_cameras(
         raise InputError("give exactly one of poses (a camera file) or orbit (a frame count)", parameter="poses")
     if poses is not None:
         return camera_file_cameras(poses, width, height)
+    passed_over = 0
     for nearby in camera_sources(scene.parent):  # the first that can be read (a broken one is passed over)
         try:
             scene_cameras = read_cameras(nearby)
         except InputError as error:  # a file the user did not name: not a reason to refuse the orbit
             logger.warning("%s; passed over for the orbit", error)
+            passed_over += 1
             continue
         size = output_size(scene_cameras.sizes[0], width, height)
         return orbit_from_cameras(scene_cameras, orbit, *size, gaussians), f"orbit around the cameras in {nearby}"
+    readable = "no camera file beside it can be read" if passed_over else "it has no cameras beside it"
     if len(gaussians) == 0:
-        raise InputError(f"{scene}: the scene is empty and has no cameras beside it; give poses", parameter="scene")
+        raise InputError(f"{scene}: the scene is empty and {readable}; give poses", parameter="scene")
+    if passed_over:
+        logger.warning("%s: %s; orbiting around the scene's bounds instead", scene, readable)
     size = output_size((DEFAULT_ORBIT_SIZE,) * 2, width, height)
     return orbit_from_gaussians(gaussians, orbit, *size), "orbit around the scene bounds"
 

@@ -235,8 +235,9 @@ def budget(job: SceneJob) -> SceneJob:
     the scene is rendered at (held-out ones included: only their poses, never their photos); the
     SH bands above the preset's degree go."""
     preset = job.preset
+    grid_pixels = 0 if job.grid_size is None else job.grid_size[0] * job.grid_size[1]
     gaussians, report = fit_budget(job.gaussians, job.geometry.cameras, preset.max_gaussians,
-                                   resolution=preset.budget_resolution, grid_pixels=0 if job.grid_size is None else job.grid_size[0] * job.grid_size[1])
+                                   resolution=preset.budget_resolution, grid_pixels=grid_pixels)
     if report.kept == 0 and report.dropped_unseen > 0:  # every view would be black
         where, parameter = (None, None) if job.poses is None else (str(job.poses), "poses")
         require_drawable(job.gaussians.means, job.geometry.cameras, where, parameter=parameter)  # extreme units
