@@ -345,8 +345,30 @@ def test_finishing_a_killed_commit_keeps_what_the_user_made_or_edited_since(tmp_
     assert (out / "summary.json").read_text() == "first edited"
     assert (out / "views" / "1.png").read_text() == "killed" and not (out / "views" / "2.png").exists()
     assert "kept: made after a run was killed" in caplog.text and "kept: changed since lumos3d wrote it" in caplog.text
-    with pytest.raises(InputError, match="was changed since lumos3d wrote it"):  # theirs now: a next run refuses
+    # the manifest says so: the user's two files are not lumos3d's (it listed the killed run's digests for them)
+    manifest = Manifest.read(out)
+    assert sorted(manifest.files) == ["views/1.png"] and manifest.owns(out / "views" / "1.png")
+    assert caplog.text.count("summary.json: kept") == 1  # one message for the edited file, not a second, false one
+    with pytest.raises(InputError, match="scene.ply: exists and was not written by lumos3d"):  # theirs: a next run refuses
         _restore_like(out, ["1.png"], text="third")
+
+
+def test_an_old_folder_of_outputs_the_user_added_to_is_kept_whole_and_stays_lumos3ds(tmp_path, monkeypatch):
+    """After a kill, the user put a file into the old views/: the recovery kept the old folder
+    (right) but moved in the killed run's manifest, which listed the new views' digests, so the
+    untouched old views counted as the user's and the manifest named files that were not there."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png", "2.png"], text="first")
+    assert _kill_mid_commit(out, monkeypatch, after=1)  # before views/ moves
+    (out / "views" / "mine.txt").write_text("the user's")
+    monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)
+    monkeypatch.setattr(atomic, "_cleaned", set())
+    atomic.remove_leftovers(out)
+    manifest = Manifest.read(out)
+    assert sorted(p.name for p in (out / "views").iterdir()) == ["1.png", "2.png", "mine.txt"]
+    assert {name for name in manifest.files if name.startswith("views/")} == {"views/1.png", "views/2.png"}
+    assert manifest.owns(out / "views" / "1.png") and manifest.owns(out / "views" / "2.png")
+    assert all((out / name).is_file() for name in manifest.files)
 
 
 def test_a_killed_commit_whose_process_id_was_reused_is_still_finished(tmp_path, monkeypatch):

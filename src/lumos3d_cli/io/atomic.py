@@ -27,6 +27,7 @@ import socket
 import tempfile
 import zlib
 from collections.abc import Iterator
+from dataclasses import asdict
 from pathlib import Path
 
 from lumos3d_cli.errors import InputError
@@ -304,6 +305,7 @@ def finish_commit(staging: Path) -> bool:
     if moves is None:
         return False
     output_folder = staging.absolute().parent.resolve()
+    kept: list[Path] = []  # paths where the user's file stays instead of the commit's
     for source, destination, done_when in moves:
         done = destination.exists() if done_when == "destination-exists" else not (source.exists() or source.is_symlink())
         if done:
@@ -316,15 +318,44 @@ def finish_commit(staging: Path) -> bool:
         if done_when == "destination-exists" and not _still_written_by_lumos3d(source, output_folder):
             logger.warning("%s: kept: changed since lumos3d wrote it, so it is yours now (a killed run's commit was "
                            "to replace it)", source)
+            kept.append(source)
             continue
-        if (done_when == "source-gone" and destination.name != MANIFEST_NAME
-                and (destination.exists() or destination.is_symlink())):
-            logger.warning("%s: kept: made after a run was killed while writing it; that run's new %s was "
-                           "dropped", destination, destination.name)
+        if destination.name == MANIFEST_NAME:
+            _drop_kept_from_manifest(source, destination.parent, kept)
+        elif done_when == "source-gone" and (destination.exists() or destination.is_symlink()):
+            if destination not in kept:
+                logger.warning("%s: kept: made after a run was killed while writing it; that run's new %s was "
+                               "dropped", destination, destination.name)
+                kept.append(destination)
             continue
         destination.parent.mkdir(parents=True, exist_ok=True)
         os.replace(source, destination)
     return True
+
+
+def _drop_kept_from_manifest(staged: Path, folder: Path, kept: list[Path]) -> None:
+    """Rewrite the killed commit's staged manifest of `folder` before it goes into place: a path in
+    `kept` holds the user's file (or an old output folder the user added to) instead of the
+    commit's, so the commit's entries for it go; the old manifest's entries for files there that
+    still hold what lumos3d wrote stay (an old restored/ kept whole keeps its views lumos3d's)."""
+    names = [Manifest(folder).relative(path) for path in kept if _is_inside(path, folder)]
+    if not names:
+        return
+    try:
+        document = json.loads(staged.read_text())
+        files = document["files"]
+    except (OSError, ValueError, KeyError, TypeError):  # not ours to mend: moved in as it is
+        return
+    previous = Manifest.read(folder)
+
+    def under(entry: str, name: str) -> bool:
+        return entry == name or entry.startswith(f"{name}/")
+
+    document["files"] = {entry: value for entry, value in files.items() if not any(under(entry, n) for n in names)}
+    for entry, written in previous.files.items():
+        if any(under(entry, n) for n in names) and previous.owns(folder / entry):
+            document["files"][entry] = asdict(written)
+    staged.write_text(json.dumps({**document, "files": dict(sorted(document["files"].items()))}, indent=1) + "\n")
 
 
 def _still_written_by_lumos3d(path: Path, output_folder: Path) -> bool:
