@@ -59,6 +59,24 @@ def test_leftovers_of_ended_processes_are_removed_live_ones_and_user_files_kept(
     assert remove_leftovers(tmp_path) == []
 
 
+def test_temporaries_of_a_killed_run_whose_process_id_is_taken_are_leftovers(tmp_path):
+    """In a container every run may have one process id: a staging folder killed before its
+    journal was judged by the id alone, alive for good, and never removed. The names carry the
+    writer's start time; an earlier release's names (without it) are judged as before."""
+    host, own = atomic._HOST, os.getpid()
+    started = atomic._start_time(own)
+    killed = tmp_path / f".staging.{own}-{host}-{int(started) - 1}.k2j3h4g5.tmp"  # this id, another start
+    killed.mkdir()
+    (killed / "1.png").write_text("killed run")
+    kept = [f".scene.{own}-{host}-{started}.abc123_x.tmp.ply",  # this process's own
+            f".scene.{own}-{host}.abc123_x.tmp.ply"]  # an earlier release's name: its id lives
+    for name in kept:
+        (tmp_path / name).write_text("keep")
+    assert atomic.temporary_prefix("scene") == f".scene.{own}-{host}-{started}."
+    assert remove_leftovers(tmp_path) == [killed]
+    assert _tree(tmp_path) == sorted(kept)
+
+
 def test_outputs_follow_the_umask(tmp_path):
     with atomic_path(tmp_path / "a.bin") as temporary:
         temporary.write_bytes(b"x")

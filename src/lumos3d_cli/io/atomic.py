@@ -37,8 +37,10 @@ from lumos3d_cli.io.output_paths import blocking_file
 logger = logging.getLogger(__name__)
 
 _HOST = f"{zlib.crc32(socket.gethostname().encode()):08x}"
-# What follows ".NAME." in a temporary name: "<pid>-<host>.<random>.tmp", then an optional suffix.
-_OWNER = re.compile(r"\.(?P<pid>\d+)-(?P<host>[0-9a-f]{8})\.[a-z0-9_]+\.tmp(\.[^.]*)?$")
+# What follows ".NAME." in a temporary name: "<pid>-<host>-<start>.<random>.tmp", then an optional
+# suffix (the start time, which tells a killed run from a live one of the same process id, is
+# missing from an earlier release's names).
+_OWNER = re.compile(r"\.(?P<pid>\d+)-(?P<host>[0-9a-f]{8})(?:-(?P<started>\d+))?\.[a-z0-9_]+\.tmp(\.[^.]*)?$")
 # Folders already cleaned by this process: listing a folder again for every file written into it
 # would cost O(files²) for a render of thousands of frames.
 _cleaned: set[Path] = set()
@@ -52,7 +54,7 @@ def current_umask() -> int:
 
 def temporary_prefix(name: str) -> str:
     """The start of this process's temporary names for an output called `name`."""
-    return f".{name}.{os.getpid()}-{_HOST}."
+    return f".{name}.{owner_tag()}."
 
 
 def _process_exists(pid: int) -> bool:
@@ -68,9 +70,9 @@ def _process_exists(pid: int) -> bool:
 
 
 def owner_tag() -> str:
-    """"<pid>-<host>-<start time>" of this process (start time 0 where it cannot be told): what a
-    work folder's name carries to tell a killed run's from a live one's, also when the process id
-    has been reused (in a container every run may be process 1)."""
+    """This process as temporary names and work folders carry it, "<pid>-<host>-<start time>" (0
+    where the start time cannot be told): enough to tell a killed run's from a live one's, also
+    when the process id has been reused (in a container every run may be process 1)."""
     return f"{os.getpid()}-{_HOST}-{_start_time(os.getpid()) or 0}"
 
 
@@ -78,21 +80,23 @@ def owner_has_ended(tag: str) -> bool:
     """Whether the process of an `owner_tag`, one on this host, has ended: its id is free, or taken
     by a process that started at another time. False for another host's, which cannot be told."""
     pid, host, started = (tag.split("-") + ["", "", ""])[:3]
-    if host != _HOST or not pid.isdigit():
+    return pid.isdigit() and _has_ended(int(pid), host, started)
+
+
+def _has_ended(pid: int, host: str, started: str | None) -> bool:
+    if host != _HOST:
         return False
-    if not _process_exists(int(pid)):
+    if not _process_exists(pid):
         return True
-    now = _start_time(int(pid))
-    return started not in ("", "0") and now is not None and now != started
+    now = _start_time(pid)
+    return started not in (None, "", "0") and now is not None and now != started
 
 
 def _is_leftover(name: str) -> bool:
-    """True for a temporary of ours whose writer, a process on this host, has ended."""
+    """True for a temporary of ours whose writer, a process on this host, has ended (its process
+    id free, or taken by a process that started at another time)."""
     match = _OWNER.search(name)
-    return (
-        name.startswith(".") and match is not None and match["host"] == _HOST
-        and not _process_exists(int(match["pid"]))
-    )
+    return name.startswith(".") and match is not None and _has_ended(int(match["pid"]), match["host"], match["started"])
 
 
 def remove_path(path: Path) -> None:
