@@ -1,10 +1,11 @@
 """Write outputs so that they appear whole or not at all: write under a temporary name, then rename.
 
-Temporary names are hidden and carry the writing process's id and a tag of its host,
-`.NAME.<pid>-<host>.XXXXXXXX.tmp[.suffix]`. A run that is killed outright (SIGKILL; a power loss
-too, as far as the file system kept the renames: nothing here syncs folders)
+Temporary names are hidden and carry the writing process's id, a tag of its host and its start
+time, `.NAME.<pid>-<host>-<start>.XXXXXXXX.tmp[.suffix]`. A run that is killed outright (SIGKILL;
+a power loss too, as far as the file system kept the renames: nothing here syncs folders)
 cannot clean up after itself; the next run writing into the same folder recognises such
-leftovers — their process no longer exists on this host — and removes them, while the
+leftovers — their process no longer exists on this host, or its id now belongs to a process
+that started at another time — and removes them, while the
 temporaries of a run still going on (same host, live process) or of another host are left alone.
 
 A leftover staging folder that holds a commit journal (io/output_set.py) was killed while it
