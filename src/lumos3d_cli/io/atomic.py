@@ -28,11 +28,10 @@ import socket
 import tempfile
 import zlib
 from collections.abc import Iterator
-from dataclasses import asdict
 from pathlib import Path
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.manifest import MANIFEST_NAME, Manifest
+from lumos3d_cli.io.manifest import MANIFEST_NAME, Manifest, WrittenFile
 from lumos3d_cli.io.output_paths import blocking_file
 
 logger = logging.getLogger(__name__)
@@ -230,14 +229,19 @@ def mark_pending_commit(folder: Path, staging: Path) -> Path:
     return Path(name)
 
 
-def _marker_journal(marker: Path) -> Path | None:
-    """The commit journal a marker (`mark_pending_commit`) names, while it exists; None for an
-    unreadable marker (nothing it protects) or one whose journal is gone."""
+def _marker_target(marker: Path) -> Path | None:
+    """The commit journal a marker (`mark_pending_commit`) names; None for an unreadable marker."""
     try:
-        journal = Path(json.loads(marker.read_text())["journal"])
+        return Path(json.loads(marker.read_text())["journal"])
     except (OSError, ValueError, KeyError, TypeError):
         return None
-    return journal if journal.name == COMMIT_JOURNAL and journal.is_file() else None
+
+
+def _marker_journal(marker: Path) -> Path | None:
+    """The commit journal a marker names, while it exists; None for an unreadable marker (nothing
+    it protects) or one whose journal is gone."""
+    journal = _marker_target(marker)
+    return journal if journal is not None and journal.name == COMMIT_JOURNAL and journal.is_file() else None
 
 
 def _pending_journals(entries: list[Path]) -> dict[str, Path]:
@@ -347,20 +351,18 @@ def _drop_kept_from_manifest(staged: Path, folder: Path, kept: list[Path]) -> No
     if not names:
         return
     try:
-        document = json.loads(staged.read_text())
-        files = document["files"]
+        files = {entry: WrittenFile(**value) for entry, value in json.loads(staged.read_text())["files"].items()}
     except (OSError, ValueError, KeyError, TypeError):  # not ours to mend: moved in as it is
         return
     previous = Manifest.read(folder)
 
-    def under(entry: str, name: str) -> bool:
-        return entry == name or entry.startswith(f"{name}/")
+    def under(entry: str) -> bool:
+        return any(entry == name or entry.startswith(f"{name}/") for name in names)
 
-    document["files"] = {entry: value for entry, value in files.items() if not any(under(entry, n) for n in names)}
-    for entry, written in previous.files.items():
-        if any(under(entry, n) for n in names) and previous.owns(folder / entry):
-            document["files"][entry] = asdict(written)
-    staged.write_text(json.dumps({**document, "files": dict(sorted(document["files"].items()))}, indent=1) + "\n")
+    mended = Manifest(folder, {entry: written for entry, written in files.items() if not under(entry)})
+    mended.files.update({entry: written for entry, written in previous.files.items()
+                         if under(entry) and previous.owns(folder / entry)})
+    staged.write_text(mended.document())
 
 
 def _still_written_by_lumos3d(path: Path, output_folder: Path) -> bool:
@@ -397,16 +399,9 @@ def _remove_commit_temporaries(moves: list[tuple[Path, Path, str]], journal: Pat
                 logger.info("removed %s, left behind by an earlier run that was killed", path)
     for other in {path.parent for move in moves for path in move[:2] if not _is_inside(path, folder)}:
         for entry in _entries(other):
-            if entry.name.startswith(".commit.") and _OWNER.search(entry.name) and _marker_names(entry, journal):
+            if entry.name.startswith(".commit.") and _OWNER.search(entry.name) and _marker_target(entry) == journal:
                 remove_path(entry)
                 logger.info("removed %s, left behind by an earlier run that was killed", entry)
-
-
-def _marker_names(marker: Path, journal: Path) -> bool:
-    try:
-        return Path(json.loads(marker.read_text())["journal"]) == journal
-    except (OSError, ValueError, KeyError, TypeError):
-        return False
 
 
 def remove_leftovers(folder: Path | str, again: bool = False) -> list[Path]:

@@ -105,10 +105,7 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mod
     device = next(model.parameters()).device
     with torch.no_grad():
         prediction = model.predict(prepared.images[None].to(device))
-    source = model.provenance.get("path", "the model's weights")
-    prediction.require_finite(f"{source} gives NaN/Inf on these photos: damaged or diverged weights; use another "
-                              "checkpoint")
-    exposure_stops = None
+    black, saturated = [], []
     if prediction.appearance is not None:
         if empty_views is None:  # on the working photos: the network's resized copies have more levels
             black, saturated = frames_without_content(images)
@@ -119,8 +116,11 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mod
             with torch.no_grad():
                 appearance = _appearance_without(model, prepared.images[None].to(device), empty)
             prediction = replace(prediction, appearance=appearance)
-            prediction.require_finite(f"{source} gives NaN/Inf on these photos: damaged or diverged weights; use "
-                                      "another checkpoint")
+    source = model.provenance.get("path", "the model's weights")
+    prediction.require_finite(f"{source} gives NaN/Inf on these photos: damaged or diverged weights; use another "
+                              "checkpoint")
+    exposure_stops = None
+    if prediction.appearance is not None:
         stops = exposure_prior_stops(prediction.appearance, prepared.images[None].to(device),
                                      prior_strength(mode, preset.exposure_prior),
                                      key_model=bundled_key_model() if preset.exposure_key == "content" else None,
