@@ -581,6 +581,20 @@ def test_readers_of_a_folder_a_killed_commit_left_half_done_are_warned(tmp_path,
     assert f"{out}: a run writing here was killed while it moved its outputs into place" in caplog.text
 
 
+def test_info_on_a_folder_a_killed_commit_left_half_done_warns(tmp_path, monkeypatch, caplog):
+    """`lumos3d info OUT/` summarised the killed run's new files beside the earlier run's as one set."""
+    from lumos3d_cli.cli.info import collect_summaries
+
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png", "2.png"], text="first")
+    assert _kill_mid_commit(out, monkeypatch)
+    monkeypatch.setattr(atomic, "_process_exists", lambda pid: False)
+    monkeypatch.setattr(atomic, "_warned_mid_commit", set())
+    with pytest.raises(InputError):  # the stand-in outputs are text, not scenes
+        collect_summaries(out)
+    assert f"{out}: a run writing here was killed while it moved its outputs into place" in caplog.text
+
+
 def test_a_manifest_naming_a_file_outside_its_folder_never_removes_it(tmp_path):
     out = tmp_path / "out"
     _restore_like(out, ["1.png"], text="first")

@@ -85,6 +85,7 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
     # The readers import torch, pycolmap, OpenCV and the image libraries (seconds): imported here
     # and in `_image_summary`, when the command runs, so that `--help` stays fast.
     with library_imports():
+        from lumos3d_cli.io.atomic import warn_if_mid_commit
         from lumos3d_cli.io.camera_files import find_camera_source
         from lumos3d_cli.io.colmap import is_colmap_model
         from lumos3d_cli.io.summaries import summarize_camera_file, summarize_gaussian_file
@@ -98,6 +99,7 @@ def collect_summaries(path: Path, deep: bool = False) -> list[dict]:
     if not (path.is_file() or path.is_dir()):
         raise InputError(f"{path}: is neither a file nor a folder (a device, pipe or socket); pass a .ply, checkpoint, "
                          "camera file, image or folder")
+    warn_if_mid_commit(path)  # a killed run's half-moved outputs would be summarised as one set
     if path.is_file():
         suffix = path.suffix.lower()
         if suffix == ".ply":
