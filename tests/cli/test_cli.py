@@ -211,6 +211,11 @@ def test_degrade_bad_values(run_cli, buu, tmp_path):
     copy.write_bytes(image.read_bytes())
     expect_input_error(run_cli("degrade", copy, "-o", copy.with_suffix(".png")), "-o ", "would sit beside 1.JPG")
     assert sorted(p.name for p in copy.parent.iterdir()) == ["1.JPG"]
+    link = tmp_path / "links" / "x.JPG"  # a link elsewhere: the twin would sit beside the photo it reaches
+    link.parent.mkdir()
+    link.symlink_to(copy)
+    expect_input_error(run_cli("degrade", link, "-o", copy.with_suffix(".png")), "-o ", "would sit beside 1.JPG")
+    assert sorted(p.name for p in copy.parent.iterdir()) == ["1.JPG"]
     for gain in ("0.5", "inf", "nan", "1e+100"):  # 1e100 overflowed into NaN, blamed on a staging file
         expect_input_error(run_cli("degrade", image, "-o", tmp_path / "o", "--colour-cast", gain), f"--colour-cast {gain}",
                            "must be from 1 (no cast) to 100")

@@ -66,3 +66,12 @@ def test_images_in_formats_lumos3d_does_not_read_are_named_when_skipped(tmp_path
         assert list_images(tmp_path) == [tmp_path / "IMG_1.jpg"]
     assert "skipped IMG_2.HEIC, IMG_3.gif, IMG_10.avif: a format lumos3d does not read" in caplog.text
     assert "notes.txt" not in caplog.text
+
+
+def test_a_file_name_that_is_not_utf8_is_refused_naming_the_file(folders):
+    """A Latin-1 `café.jpg` ended in an internal error from OpenImageIO, which takes names as text."""
+    name = os.fsdecode(b"caf\xe9.jpg")
+    (folders / "a" / name).write_bytes((folders / "a" / "1.jpg").read_bytes())
+    for given in (folders / "a", folders / "a" / name):
+        with pytest.raises(InputError, match=r"a/caf\\xe9\.jpg: the file name is not UTF-8 text.*rename the file"):
+            list_images(given)

@@ -111,6 +111,39 @@ def test_radiance_hdr(tmp_path):
     np.testing.assert_allclose(image.pixels, 2.5, rtol=1e-2)
 
 
+def test_a_photo_named_as_hdr_is_refused_not_encoded_twice(tmp_path):
+    """OpenImageIO decodes by content: a JPEG named .exr was read as linear light, its mean 0.29
+    where the photo's is 0.08."""
+    cv2.imwrite(str(tmp_path / "a.jpg"), np.full((8, 8, 3), 80, np.uint8))
+    (tmp_path / "a.exr").write_bytes((tmp_path / "a.jpg").read_bytes())
+    for read in (read_image, probe_image):
+        with pytest.raises(InputError, match=r"a\.exr: is a jpeg file, not OpenEXR; give it its own suffix"):
+            read(tmp_path / "a.exr")
+    _write_oiio(tmp_path / "b.exr", np.full((4, 4, 3), 0.5, np.float32), "float")
+    (tmp_path / "b.hdr").write_bytes((tmp_path / "b.exr").read_bytes())  # an EXR named .hdr decodes as what it is
+    np.testing.assert_allclose(read_image(tmp_path / "b.hdr").pixels, 0.5)
+
+
+def test_a_truncated_raw_is_refused_in_one_line(shared_data, tmp_path, capfd):
+    """LibRaw printed its own "Unexpected end of file" above the refusal."""
+    data = (shared_data / "raw" / "Blackmagic.dng").read_bytes()
+    (tmp_path / "cut.dng").write_bytes(data[: int(len(data) * 0.9)])
+    with pytest.raises(InputError, match=r"cut\.dng: cannot decode camera RAW: the file is damaged or truncated"):
+        read_image(tmp_path / "cut.dng")
+    assert capfd.readouterr().err == ""
+
+
+def test_float64_and_signed_tiffs_are_described_as_they_are_read(tmp_path):
+    """`info` called a float64 TIFF 8-bit sRGB while it is read as 32-bit linear; an int16 TIFF was
+    told to be saved "as 8- or 16-bit"."""
+    cv2.imwrite(str(tmp_path / "double.tif"), np.full((4, 4, 3), 0.25, np.float64))
+    header, image = probe_image(tmp_path / "double.tif"), read_image(tmp_path / "double.tif")
+    assert (header.bit_depth, header.encoding) == (image.bit_depth, image.encoding) == (32, "linear")
+    cv2.imwrite(str(tmp_path / "signed.tif"), np.full((4, 4, 3), 100, np.int16))
+    with pytest.raises(InputError, match=r"signed\.tif: unsupported sample type int16; save it as unsigned 8- or 16-bit"):
+        read_image(tmp_path / "signed.tif")
+
+
 def test_camera_raw_is_linear_and_white_balanced(shared_data):
     path = shared_data / "raw" / "Blackmagic.dng"
     image = read_image(path)
@@ -214,6 +247,11 @@ def test_no_images_and_unsupported_types(tmp_path):
     cv2.imwrite(str(tmp_path / "images" / "1.png"), np.zeros((4, 4, 3), np.uint8))
     with pytest.raises(InputError, match=r"folder holds no images .*; its subfolder images does: give that folder"):
         list_images(tmp_path)
+    (tmp_path / "low").mkdir()
+    cv2.imwrite(str(tmp_path / "low" / "1.png"), np.zeros((4, 4, 3), np.uint8))
+    with pytest.raises(InputError, match=r"; its subfolders images, low do: give one of them"):
+        list_images(tmp_path)
+    (tmp_path / "low" / "1.png").unlink()
     (tmp_path / "images" / "1.png").unlink()
     with pytest.raises(InputError, match="no such file or folder"):
         list_images(tmp_path / "missing")

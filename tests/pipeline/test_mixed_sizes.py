@@ -71,3 +71,11 @@ def test_metrics_of_views_of_different_sizes_are_those_of_each_view_alone():
     for row, expected, image, reference in zip(together, alone, images, references):
         assert row["psnr"] == pytest.approx(-10 * math.log10(float(((image - reference) ** 2).mean())), rel=1e-5)
         assert row["ssim"] == pytest.approx(expected["ssim"], rel=1e-9) and row["lpips"] is None
+
+
+def test_references_are_matched_by_stem_in_any_case(tmp_path):
+    """`restore --reference` found no `view1.jpg` for an input `View1.jpg`, where --poses and eval match in any case."""
+    pixels = np.random.default_rng(0).integers(0, 256, (6, 8, 3), dtype=np.uint8)
+    cv2.imwrite(str(tmp_path / "view1.png"), pixels)
+    (reference,) = load_references(tmp_path, ["View1.JPG"], [(8, 6)])
+    np.testing.assert_array_equal(reference.permute(1, 2, 0).numpy(), pixels[..., ::-1].astype(np.float32) / 255)

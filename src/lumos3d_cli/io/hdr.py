@@ -12,11 +12,22 @@ from lumos3d_cli.io.image_types import DecodedImage, ImageHeader
 from lumos3d_cli.io.photo import read_file_bytes, require_finite_samples
 
 
+_HDR_FORMATS = {"openexr": "OpenEXR", "hdr": "Radiance HDR"}
+_SUFFIX_FORMATS = {".exr": "openexr", ".hdr": "hdr"}
+
+
 def _open(path: Path) -> oiio.ImageInput:
     read_file_bytes(path)
     source = oiio.ImageInput.open(str(path))
     if source is None:
         raise InputError(f"{path}: cannot open ({oiio.geterror().strip()}); replace or remove the file")
+    # OpenImageIO picks its decoder by the content: a JPEG named .exr would be read as linear light
+    # and its sRGB values encoded a second time
+    found = source.format_name()
+    if found not in _HDR_FORMATS:
+        source.close()
+        raise InputError(f"{path}: is a {found} file, not {_HDR_FORMATS[_SUFFIX_FORMATS[path.suffix.lower()]]}; "
+                         "give it its own suffix (.jpg, .png, .tif)")
     return source
 
 

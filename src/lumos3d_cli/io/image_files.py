@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import os
 import re
 from collections.abc import Sequence
 from pathlib import Path
@@ -72,7 +73,9 @@ def list_images(inputs: Path | str | Sequence[Path | str]) -> list[Path]:
             if not found:
                 also = f"; {listed(unread)} cannot be read: convert them to JPEG or PNG" if unread else ""
                 holding = sorted((p.name for p in entries if p.is_dir() and _holds_images(p)), key=natural_sort_key)
-                inside = f"; its subfolder {listed(holding)} does: give that folder" if holding and not unread else ""
+                those = "its subfolder {} does: give that folder" if len(holding) == 1 else \
+                    "its subfolders {} do: give one of them"
+                inside = f"; {those.format(listed(holding))}" if holding and not unread else ""
                 raise InputError(f"{path}: folder holds no images ({', '.join(sorted(IMAGE_SUFFIXES))}){also}{inside}")
             if unread:
                 logger.warning("%s: skipped %s: a format lumos3d does not read; convert to JPEG or PNG to include them",
@@ -85,8 +88,21 @@ def list_images(inputs: Path | str | Sequence[Path | str]) -> list[Path]:
             raise InputError(f"{path}: is not a file (a pipe, a device or a socket); pass an image file or a folder")
         else:
             raise InputError(f"{path}: no such file or folder")
+    for path in paths:
+        _require_text_name(path)
     check_distinct(paths)
     return paths
+
+
+def _require_text_name(path: Path) -> None:
+    """InputError when `path` is no UTF-8 text (a Latin-1 `café.jpg` from an old archive): the
+    image libraries take file names as text and cannot open it."""
+    try:
+        str(path).encode("utf-8")
+    except UnicodeEncodeError:
+        shown = os.fsencode(path).decode("utf-8", "backslashreplace")
+        raise InputError(f"{shown}: the file name is not UTF-8 text, which the image libraries cannot open; "
+                         "rename the file") from None
 
 
 def _holds_images(folder: Path) -> bool:

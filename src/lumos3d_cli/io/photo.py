@@ -176,7 +176,7 @@ def read_photo(path: Path) -> DecodedImage:
     if rgb.dtype in (np.float32, np.float64):
         require_finite_samples(path, rgb)
         return DecodedImage(path, rgb.astype(np.float32), "linear", 32, "photo")
-    raise InputError(f"{path}: unsupported sample type {rgb.dtype}; save it as 8- or 16-bit")
+    raise InputError(f"{path}: unsupported sample type {rgb.dtype}; save it as unsigned 8- or 16-bit, or as float")
 
 
 def probe_photo(path: Path) -> ImageHeader:
@@ -190,8 +190,9 @@ def probe_photo(path: Path) -> ImageHeader:
         width, height = spec.width, spec.height
         if spec.get_int_attribute("Orientation", 1) in _TRANSPOSING_ORIENTATIONS:
             width, height = height, width
-        bits = {oiio.UINT8: 8, oiio.UINT16: 16, oiio.HALF: 16, oiio.FLOAT: 32}.get(spec.format.basetype, 8)
-        encoding = "linear" if spec.format.basetype in (oiio.HALF, oiio.FLOAT) else "srgb"
+        # float64 is decoded to float32 (read_photo): reported as what is read
+        bits = {oiio.UINT8: 8, oiio.UINT16: 16, oiio.HALF: 16, oiio.FLOAT: 32, oiio.DOUBLE: 32}.get(spec.format.basetype, 8)
+        encoding = "linear" if spec.format.basetype in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE) else "srgb"
         return ImageHeader(path, width, height, spec.nchannels, bits, "photo", encoding)
     finally:
         source.close()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -9,6 +10,7 @@ import rawpy
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.image_types import DecodedImage, ImageHeader
+from lumos3d_cli.io.native_messages import pass_on, with_native_messages
 from lumos3d_cli.io.photo import read_file_bytes
 
 
@@ -36,9 +38,11 @@ def _refusal(path: Path, action: str, error: rawpy.LibRawError) -> InputError:
 def _open(path: Path) -> rawpy.RawPy:
     read_file_bytes(path)
     try:
-        return rawpy.imread(str(path))
+        raw, printed = with_native_messages(partial(rawpy.imread, str(path)))
     except rawpy.LibRawError as error:
         raise _refusal(path, "read", error) from error
+    pass_on(printed)
+    return raw
 
 
 def read_raw(path: Path) -> DecodedImage:
@@ -48,16 +52,15 @@ def read_raw(path: Path) -> DecodedImage:
     no gamma, 16-bit output scaled so the sensor's white level is 1.0.
     """
     with _open(path) as raw:
+        decode = partial(raw.postprocess, gamma=(1, 1), no_auto_bright=True, output_bps=16, use_camera_wb=True,
+                         output_color=rawpy.ColorSpace.sRGB)
         try:
-            rgb16 = raw.postprocess(
-                gamma=(1, 1),
-                no_auto_bright=True,
-                output_bps=16,
-                use_camera_wb=True,
-                output_color=rawpy.ColorSpace.sRGB,
-            )
+            # LibRaw prints its own line of a damaged file ("Unexpected end of file") above the one
+            # line of the refusal: captured, and passed on only when it decodes nonetheless
+            rgb16, printed = with_native_messages(decode)
         except rawpy.LibRawError as error:
             raise _refusal(path, "decode", error) from error
+        pass_on(printed)
         left, top, width, height = _default_crop(raw.sizes)
     rgb16 = rgb16[top: top + height, left: left + width]
     return DecodedImage(path, rgb16.astype(np.float32) / 65535.0, "linear", 16, "raw")

@@ -31,7 +31,9 @@ def degrade_outputs(inputs: list[Path], output: Path, bit_depth: int, given: Seq
         if bit_depth != 8 and suffix != ".png":
             raise InputError(f"{output}: JPEG holds 8 bits only; use .png for 16-bit output", parameter="output")
         check_output_path(output, "output")
-        twin = next((path for path in inputs if path.parent.resolve() == output.parent.resolve()
+        # the input as named and, through a link, the file it reaches: its folder is where a twin would sit
+        twin = next((path for given_path in inputs for path in (given_path, given_path.resolve())
+                     if path.parent.resolve() == output.parent.resolve()
                      and path.stem.casefold() == output.stem.casefold() and path.resolve() != output.resolve()), None)
         if twin is not None:  # 1.jpg and 1.png: a folder no command reads again ("two photos named '1'")
             raise InputError(f"{output}: would sit beside {twin.name} under the same name, and the folder would hold two "

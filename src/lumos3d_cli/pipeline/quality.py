@@ -91,13 +91,14 @@ def load_references(folder: Path | str, names: list[str], sizes: Sequence[tuple[
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(f"{folder}: no such folder", parameter="reference")
-    available = {p.stem: p for p in list_images(folder)}
+    # stems in any case, as --poses and eval match them (list_images refuses two that differ in case alone)
+    available = {p.stem.casefold(): p for p in list_images(folder)}
     paths = []
     for name in names:
         stem = Path(name).stem
-        if stem not in available:
+        if stem.casefold() not in available:
             raise InputError(f"{folder}: no image named {stem}.* for input {name}", parameter="reference")
-        paths.append(available[stem])
+        paths.append(available[stem.casefold()])
     references = []
     for name, path, (width, height) in zip(names, paths, sizes):
         pixels = to_srgb(read_image(path))
