@@ -168,3 +168,23 @@ def test_the_ransac_floor_is_lowered_only_for_many_photos():
     many = _options(1, 4096, VERIFICATION_FLOOR_FROM_VIEWS, 1)[3]
     assert few.ransac.min_num_trials == default == 100
     assert many.ransac.min_num_trials == VERIFICATION_MIN_TRIALS < default
+
+
+def test_colmap_logging_is_put_back_when_runs_in_two_threads_overlap():
+    """Each run saved the process's level and put back what it found: B, entering while A had
+    turned logging off, put "off" back after A had restored it, for good."""
+    from lumos3d_cli.geometry.colmap_run import quiet_colmap
+
+    before = pycolmap.logging.minloglevel
+    pycolmap.logging.minloglevel = 1  # the user's
+    try:
+        first, second = quiet_colmap(), quiet_colmap()
+        first.__enter__()
+        second.__enter__()
+        assert pycolmap.logging.minloglevel == 3
+        first.__exit__(None, None, None)
+        assert pycolmap.logging.minloglevel == 3  # the other run still inside
+        second.__exit__(None, None, None)
+        assert pycolmap.logging.minloglevel == 1
+    finally:
+        pycolmap.logging.minloglevel = before

@@ -104,6 +104,20 @@ def test_a_seed_makes_it_deterministic(sparse_buu):
     assert other.loss_curve != first.loss_curve  # another view order
 
 
+@pytest.mark.parametrize("context", [torch.no_grad, torch.inference_mode])
+def test_a_callers_no_grad_or_inference_mode_does_not_stop_the_fit(sparse_buu, context):
+    """`with torch.no_grad(): lumos.restore(...)` ended in "element 0 of tensors does not require
+    grad" after the network pass; under inference_mode the inputs are inference tensors too."""
+    settings = RefineSettings(steps=3, max_side=64, patience=1000, seed=0)
+    plain = refine_gaussians(sparse_buu.gaussians, sparse_buu.cameras, sparse_buu.targets, settings)
+    with context():
+        gaussians = Gaussians(**{name: tensor.clone() for name, tensor in sparse_buu.gaussians.tensors().items()})
+        inside = refine_gaussians(gaussians, sparse_buu.cameras, sparse_buu.targets.clone(), settings)
+    assert inside.loss_curve == plain.loss_curve
+    for name, tensor in plain.gaussians.tensors().items():
+        assert torch.equal(tensor, getattr(inside.gaussians, name)), name
+
+
 def test_summary_is_json(sparse_buu):
     result = refine_gaussians(sparse_buu.gaussians, sparse_buu.cameras, sparse_buu.targets,
                               RefineSettings(steps=3, max_side=64))

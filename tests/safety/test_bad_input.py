@@ -188,6 +188,10 @@ def test_row12_empty_photos_are_judged_at_their_own_size_and_a_set_of_them_refus
     expect_input_error(run_cli(*restore_args(empty, tmp_path / "none" / "scene.ply", random_checkpoint)),
                        "every photo is entirely black or saturated; there is nothing to restore")
     assert not (tmp_path / "none").exists()
+    # one such photo alone: a scene of 21,000 Gaussians made up from a blank frame, exit 0
+    expect_input_error(run_cli(*restore_args(empty / "a.png", tmp_path / "none" / "scene.ply", random_checkpoint)),
+                       "a.png: the photo is entirely black or saturated; there is nothing to restore")
+    assert not (tmp_path / "none").exists()
 
 
 def test_row12_a_photo_too_large_to_render_is_refused_before_the_work(tmp_path, buu, random_checkpoint, run_cli):

@@ -49,8 +49,10 @@ RANSAC draws depend on which thread takes which pair) makes a run deterministic.
 from __future__ import annotations
 
 import os
+import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -151,6 +153,31 @@ def image_files(photo_sizes: Sequence[tuple[int, int]], shared_camera: bool
     return folders, pycolmap.CameraMode.PER_FOLDER
 
 
+_quiet_lock = threading.Lock()
+_quiet_runs = 0
+_level_before_quiet = 0
+
+
+@contextmanager
+def quiet_colmap() -> Iterator[None]:
+    """COLMAP's logging off (its progress and failures: the caller logs what they mean) while at
+    least one run is inside, then as it was: the level is the process's, and two runs in two
+    threads, each putting back what it found, left it off for good."""
+    global _quiet_runs, _level_before_quiet
+    with _quiet_lock:
+        if _quiet_runs == 0:
+            _level_before_quiet = pycolmap.logging.minloglevel
+            pycolmap.logging.minloglevel = 3
+        _quiet_runs += 1
+    try:
+        yield
+    finally:
+        with _quiet_lock:
+            _quiet_runs -= 1
+            if _quiet_runs == 0:
+                pycolmap.logging.minloglevel = _level_before_quiet
+
+
 def run_colmap(
     images: Sequence[np.ndarray],
     photo_sizes: Sequence[tuple[int, int]],
@@ -181,10 +208,8 @@ def run_colmap(
     matching = "exhaustive" if views <= exhaustive_limit else "sequential"
     stage_seconds = {}
     started = time.perf_counter()
-    previous_level = pycolmap.logging.minloglevel
-    pycolmap.logging.minloglevel = 3  # COLMAP's progress and failures: the caller logs what they mean
     try:
-        with work_folder("lumos3d-sfm-") as work:
+        with quiet_colmap(), work_folder("lumos3d-sfm-") as work:
             folder, database = work / "images", work / "database.db"
             folder.mkdir()
             for index, file in enumerate(files):
@@ -220,6 +245,4 @@ def run_colmap(
         if not token.is_cancelled:
             raise
         raise ColmapStopped("structure-from-motion was stopped") from error
-    finally:
-        pycolmap.logging.minloglevel = previous_level
     return ColmapRun(list(models.values()), matching, sfm_sizes, long_side, time.perf_counter() - started, stage_seconds)

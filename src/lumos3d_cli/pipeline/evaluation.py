@@ -24,7 +24,7 @@ from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET
 from lumos3d_cli.pipeline.eval_outputs import eval_outputs
 from lumos3d_cli.pipeline.lom_eval import PROTOCOLS, SceneEvaluation, evaluate_lom_scene, read_lom_photos
 from lumos3d_cli.pipeline.model_loading import load_restoration_model
-from lumos3d_cli.pipeline.presets import get_restore_preset
+from lumos3d_cli.pipeline.presets import check_max_views, get_restore_preset
 from lumos3d_cli.pipeline.quality import QualityMeter, mean_metrics
 from lumos3d_cli.pipeline.scene_geometry import check_geometry_source
 
@@ -87,8 +87,7 @@ def evaluate_lom(
     check_geometry_source(geometry)
     settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior, fill_unobserved,
                                   densify=densify, exposure_key=exposure_key, depth_sweep=depth_sweep)
-    if max_views is not None and max_views < 1:  # 0 once fell back to the preset's silently
-        raise InputError(f"{max_views}: use at least 1", parameter="max_views")
+    check_max_views(max_views)
     limit = settings.max_views if max_views is None else max_views
     found = find_lom_scenes(root, mode, scenes)
     for scene in found:

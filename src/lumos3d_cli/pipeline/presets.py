@@ -231,6 +231,19 @@ RESTORE_PRESETS = {
 }
 
 
+def _require_whole_number(value, parameter: str) -> None:
+    if value is not None and (isinstance(value, bool) or not isinstance(value, numbers.Integral)):
+        raise InputError(f"{value!r}: give a whole number", parameter=parameter)
+
+
+def check_max_views(max_views: int | None) -> None:
+    """InputError unless `max_views` (the views the network sees; None: the preset's) is a whole
+    number of at least 1 (0 once fell back to the preset's silently; 1.5 failed in torch)."""
+    _require_whole_number(max_views, "max_views")
+    if max_views is not None and max_views < 1:
+        raise InputError(f"{max_views}: use at least 1", parameter="max_views")
+
+
 def get_restore_preset(
     name: str, refine_steps: int | None = None, max_gaussians: int | None = None, gaussian_grid: float | None = None,
     exposure_prior: float | None = None, fill_unobserved: bool | None = None, denoise_photo: bool | None = None,
@@ -247,8 +260,7 @@ def get_restore_preset(
     except KeyError:
         raise InputError(f"{name!r}: use one of {', '.join(RESTORE_PRESETS)}", parameter="preset") from None
     for parameter, value in (("refine_steps", refine_steps), ("max_gaussians", max_gaussians)):
-        if value is not None and (isinstance(value, bool) or not isinstance(value, numbers.Integral)):
-            raise InputError(f"{value!r}: give a whole number", parameter=parameter)
+        _require_whole_number(value, parameter)
     if refine_steps is not None:
         if refine_steps < 0:
             raise InputError(f"{refine_steps}: use 0 (no refinement) or more steps", parameter="refine_steps")

@@ -31,7 +31,7 @@ from lumos3d_cli.model.lumos3d import GaussianCounts, Lumos3D
 from lumos3d_cli.pipeline.choices import DEFAULT_RESTORE_PRESET
 from lumos3d_cli.pipeline.early_registration import EarlyRegistration
 from lumos3d_cli.pipeline.model_loading import load_restoration_model
-from lumos3d_cli.pipeline.presets import RestorePreset, get_restore_preset
+from lumos3d_cli.pipeline.presets import RestorePreset, check_max_views, get_restore_preset
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
 from lumos3d_cli.pipeline.quality import QualityMeter, load_references, mean_metrics
 from lumos3d_cli.pipeline.restore_paths import check_lpips_weights
@@ -170,8 +170,9 @@ def restore_scene(
     # refinement step: its depth and colours are made up, and fused they laid black or white wedges
     # over the other views. Its view is the photo as it is.
     empty = set().union(*photos_without_content(batch))
-    if len(empty) == len(names) > 1:  # (one such photo's restoration is the photo itself, as a view of a set)
-        raise InputError(f"{listed([str(path) for path in batch.paths], 3)}: every photo is entirely black or saturated; "
+    if len(empty) == len(names):  # one such photo alone too: its scene would be made up from a blank frame
+        every = "every photo is" if len(names) > 1 else "the photo is"
+        raise InputError(f"{listed([str(path) for path in batch.paths], 3)}: {every} entirely black or saturated; "
                          "there is nothing to restore: give photos that recorded the scene")
     fuse_views = [index not in empty for index in range(len(names))] if empty and len(empty) < len(names) else None
     # one photo with content always among the network's views: a subset of empty ones builds nothing
@@ -317,8 +318,7 @@ neighbouring photos (`geometry.photo_consistency`). `early_registration`: the ph
     started = time.perf_counter()
     if mode not in MODES:
         raise InputError(f"{mode!r}: use one of {', '.join(MODES)}", parameter="mode")
-    if max_views is not None and max_views < 1:
-        raise InputError(f"{max_views}: use at least 1", parameter="max_views")
+    check_max_views(max_views)
     settings = get_restore_preset(preset, refine_steps, max_gaussians, gaussian_grid, exposure_prior, fill_unobserved,
                                   denoise_photo, densify, exposure_key, depth_sweep)
     check_geometry_source(geometry)

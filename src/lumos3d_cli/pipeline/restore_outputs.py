@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from lumos3d_cli.checks import require_finite
 from lumos3d_cli.eval.contact_sheet import contact_sheet
 from lumos3d_cli.io.colmap import write_colmap_model
 from lumos3d_cli.io.colour import srgb_to_linear
@@ -28,8 +29,8 @@ from lumos3d_cli.pipeline.restore_paths import VIEW_FORMATS, check_view_format, 
 from lumos3d_cli.pipeline.orbit_video import write_orbit_video
 
 def write_view(path: Path, image: torch.Tensor, output_format: str) -> None:
-    """image [3, H, W] sRGB -> an 8/16-bit PNG, or a linear half-float EXR."""
-    pixels = image.permute(1, 2, 0).numpy()
+    """image [3, H, W] sRGB (any float dtype, any device) -> an 8/16-bit PNG, or a linear half-float EXR."""
+    pixels = image.detach().float().permute(1, 2, 0).cpu().numpy()
     if output_format == "exr":
         write_exr(path, srgb_to_linear(np.clip(pixels, 0, 1)))
     else:
@@ -65,6 +66,8 @@ def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_fo
     if video is not None:
         video_kind(video)
     suffix = VIEW_FORMATS[output_format][0]
+    for name, image in zip(scene.names, scene.restored):  # a scene edited in Python: named here, not by a temporary file
+        require_finite(f"restored view {name}", image)
     started = time.perf_counter()
     outputs = restore_outputs(scene_path, [*scene.input_paths, *scene.read_from, *inputs], video)
     with outputs.staged() as staging, ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:

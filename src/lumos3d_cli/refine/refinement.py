@@ -112,6 +112,10 @@ def _decay_learning_rates(optimizer: FusedAdam | torch.optim.Adam, first_rates: 
         group["lr"] = first * factor
 
 
+# A caller's torch.no_grad() or inference_mode() (around a whole restore, as around a model call)
+# must not turn the fit's backward pass off
+@torch.inference_mode(False)
+@torch.enable_grad()
 def refine_gaussians(
     gaussians: Gaussians, cameras: Cameras, targets: torch.Tensor, settings: RefineSettings | None = None,
     on_step: StepCallback | None = None,
