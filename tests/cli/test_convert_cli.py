@@ -122,3 +122,18 @@ def test_a_bundled_model_named_by_its_name_is_protected_as_an_input(tmp_path, ru
     result = run_cli("convert", "low-light", "-o", str(bundled), "--dtype", "float16")
     expect_input_error(result, f"{bundled}: is an input")
     assert bundled.read_bytes() == before
+
+
+def test_links_that_lead_round_in_a_loop_are_named(tmp_path, run_cli):
+    """A looped .ply ended in an internal error (Path.resolve raises on a loop); a looped -o was
+    called a link to a file "which does not exist"."""
+    (tmp_path / "b.ply").symlink_to("a.ply")
+    (tmp_path / "a.ply").symlink_to("b.ply")
+    expect_input_error(run_cli("convert", tmp_path / "a.ply", "-o", tmp_path / "out.splat"),
+                       f"{tmp_path / 'a.ply'}: its symbolic links lead round in a loop, to no file")
+    write_ply(tmp_path / "scene.ply", random_gaussians(8, 0))
+    (tmp_path / "d.splat").symlink_to("c.splat")
+    (tmp_path / "c.splat").symlink_to("d.splat")
+    expect_input_error(run_cli("convert", tmp_path / "scene.ply", "-o", tmp_path / "c.splat"),
+                       "c.splat is a link to d.splat, whose links lead round in a loop")
+    assert listing(tmp_path) == ["a.ply", "b.ply", "c.splat", "d.splat", "scene.ply"]

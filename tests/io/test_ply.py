@@ -1,3 +1,5 @@
+import warnings
+
 import numpy as np
 import pytest
 import torch
@@ -161,6 +163,18 @@ def test_reads_files_from_other_writers(tmp_path):
     for name in ("ascii.ply", "big.ply"):
         fields, degree = read_ply_fields(tmp_path / name)
         np.testing.assert_array_equal(fields, expected.astype(np.float32))
+
+
+@pytest.mark.parametrize("text", [False, True])
+def test_a_float64_file_beyond_float32_is_refused_naming_the_property(tmp_path, text):
+    """numpy's overflow warning, then the finite 1e39 called "NaN or Inf" (info: exit 0)."""
+    scene = _plyfile_scene(ply_property_names(0), dtype="f8", text=text)
+    scene["vertex"].data["y"][1] = -1e39
+    scene.write(str(tmp_path / "far.ply"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(InputError, match=r"far\.ply: property y holds values up to 1e\+39, beyond the float32 range"):
+            read_ply_fields(tmp_path / "far.ply")
 
 
 def test_missing_normals_are_allowed(tmp_path):

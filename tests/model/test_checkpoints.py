@@ -3,6 +3,7 @@ import json
 import logging
 import pathlib
 import pickle
+import re
 import warnings
 
 import pytest
@@ -230,6 +231,57 @@ def test_files_that_are_no_checkpoint_are_refused(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(InputError, match="folder holds none of"):
         read_checkpoint(tmp_path / "empty")
+
+
+def test_tensors_no_network_parameter_can_take_are_refused_naming_them(tmp_path, source):
+    """Integer keys, bool/int/complex and sparse tensors loaded until torch failed deep inside (an
+    internal error) or, for complex, silently lost their imaginary part."""
+    state = _vggt_state(source)
+    first = "aggregator.camera_token"
+    torch.save({0: state[first], **state}, tmp_path / "int_key.pt")
+    with pytest.raises(InputError, match=r"int_key\.pt: is not a state dict: keys must be names \(text\), not 0"):
+        read_checkpoint(tmp_path / "int_key.pt", REDUCED)
+    for dtype in (torch.bool, torch.int32, torch.complex64):
+        path = tmp_path / f"{str(dtype).removeprefix('torch.')}.pt"
+        torch.save({**state, first: state[first].to(dtype)}, path)
+        for read in (read_checkpoint, summarize_checkpoint):
+            with pytest.raises(InputError, match=rf"tensor {first} holds {path.stem} values; the network's weights are floating"):
+                read(path, REDUCED)
+    weight = "aggregator.frame_blocks.0.attn.qkv.weight"
+    torch.save({**state, weight: state[weight].to_sparse()}, tmp_path / "sparse.pt")
+    with pytest.raises(InputError, match=rf"holds sparse tensors \({weight}\); save the weights as dense"):
+        read_checkpoint(tmp_path / "sparse.pt", REDUCED)
+
+
+def test_two_keys_naming_one_parameter_are_refused(tmp_path, source):
+    """AnySplat's `encoder.x` beside an unprefixed `x`: one copy won by key order, the load called strict."""
+    state = _anysplat_state(source)
+    state["aggregator.camera_token"] = torch.zeros_like(state["encoder.aggregator.camera_token"])
+    save_file(state, str(tmp_path / "twice.safetensors"))
+    for read in (read_checkpoint, summarize_checkpoint):
+        with pytest.raises(InputError, match=r"keys name one parameter twice: aggregator.camera_token and "
+                                             r"encoder.aggregator.camera_token \(both aggregator.camera_token\)"):
+            read(tmp_path / "twice.safetensors", REDUCED)
+
+
+@pytest.mark.parametrize(("field", "value", "message"), [
+    ("camera_iterations", 0, "camera_iterations must be at least 1"),  # an IndexError in the camera head
+    ("opacity_threshold", 1.5, "0 <= opacity_threshold < 1"),  # a scene of no Gaussians, exit 0
+    ("image_size", 22400, "image_size must be at most 2048"),
+    ("gaussian_scale_base", -0.001, "gaussian_scale_base, mlp_ratio and rope_frequency must be positive"),
+    ("rope_frequency", 0.0, "gaussian_scale_base, mlp_ratio and rope_frequency must be positive"),
+    ("gaussian_scale_max", float("inf"), "every number must be finite"),
+])
+def test_settings_in_a_checkpoints_header_are_range_checked(tmp_path, source, field, value, message):
+    path = save_checkpoint(source, tmp_path / "ours.safetensors")
+    with safe_open(str(path), framework="pt") as handle:
+        config = json.loads(handle.metadata()["lumos3d"])
+        tensors = {key: handle.get_tensor(key) for key in handle.keys()}
+    config["preset"][field] = value
+    save_file(tensors, str(path), metadata={"lumos3d": json.dumps(config)})
+    for read in (read_checkpoint, summarize_checkpoint):
+        with pytest.raises(InputError, match=rf"config is damaged .*{re.escape(message)}"):
+            read(path)
 
 
 def test_damaged_config_and_unknown_sh_layouts_are_refused(tmp_path, source):

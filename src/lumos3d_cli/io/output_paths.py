@@ -35,7 +35,11 @@ def check_output_path(path: Path | str | None, parameter: str | None, folder: bo
     path = Path(path)
     link = dangling_link(path)
     if link is not None:
-        raise InputError(f"{path}: {link} is a link to {os.readlink(link)}, which does not exist; create it or choose "
+        target = os.readlink(link)
+        if os.path.lexists(link.parent / target):  # there, but leading on through links back to itself
+            raise InputError(f"{path}: {link} is a link to {target}, whose links lead round in a loop; fix the links or "
+                             "choose another path", parameter=parameter)
+        raise InputError(f"{path}: {link} is a link to {target}, which does not exist; create it or choose "
                          "another path", parameter=parameter)
     blocker = blocking_file(path)
     if blocker is not None:

@@ -70,7 +70,10 @@ def _is_within(path: Path, folder: Path) -> bool:
 
 
 def _resolved(path: Path) -> Path:
-    return Path(path).expanduser().resolve(strict=False)
+    try:
+        return Path(path).expanduser().resolve(strict=False)
+    except (RuntimeError, OSError) as error:  # Python 3.11 raises RuntimeError for a loop of links, 3.13 OSError
+        raise InputError(f"{path}: its symbolic links lead round in a loop, to no file; fix or remove the link") from error
 
 
 def _resolved_all(paths: Sequence[Path]) -> list[Path]:

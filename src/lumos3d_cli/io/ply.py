@@ -194,6 +194,14 @@ def read_ply_fields(path: Path | str) -> tuple[np.ndarray, int]:
                 raise InputError(f"{path}: PLY data is truncated ({left} of {needed} bytes for {count} Gaussians)")
             records = np.frombuffer(handle.read(needed), dtype=dtype, count=count)
             columns = {name: records[name] for name, _ in properties}
+    largest = float(np.finfo(np.float32).max)
+    for name in wanted:  # a float64 file's value beyond float32 became Inf in the cast (numpy's warning, then "Inf")
+        values = columns.get(name)
+        if values is not None and values.dtype == np.float64:
+            beyond = np.isfinite(values) & (np.abs(values) > largest)
+            if beyond.any():
+                raise InputError(f"{path}: property {name} holds values up to {float(np.abs(values[beyond]).max()):.4g}, "
+                                 f"beyond the float32 range lumos3d computes in (±{largest:.4g})")
     zeros = np.zeros(count, dtype=np.float32)
     table = np.stack([columns[name] if name in columns else zeros for name in wanted], axis=1).astype(np.float32)
     return table, degree

@@ -85,4 +85,11 @@ def load_torch_state_dict(path: Path) -> dict[str, torch.Tensor]:
             loaded = loaded[wrapper]
     if not isinstance(loaded, dict) or not all(isinstance(v, torch.Tensor) for v in loaded.values()):
         raise InputError(f"{path}: is not a state dict (a mapping of names to tensors)")
+    named_otherwise = [repr(key) for key in loaded if not isinstance(key, str)]
+    if named_otherwise:
+        raise InputError(f"{path}: is not a state dict: keys must be names (text), not {listing(named_otherwise)}")
+    sparse = sorted(key for key, tensor in loaded.items() if tensor.layout != torch.strided)
+    if sparse:
+        raise InputError(f"{path}: holds sparse tensors ({listing(sparse)}); save the weights as dense tensors "
+                         "(.to_dense())")
     return loaded

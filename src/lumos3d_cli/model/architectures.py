@@ -9,6 +9,7 @@ store an architecture as JSON through `typed_config` (`to_dict` / `from_dict`), 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 from lumos3d_cli.errors import InputError
@@ -30,6 +31,9 @@ class PatchEmbedConfig:
 
 
 APPEARANCES = ("regression", "operator")
+MAX_IMAGE_SIZE = 2048  # the network's longer side: VGGT's is 518; beyond this a pass would not fit in memory
+_REAL_FIELDS = ("mlp_ratio", "rope_frequency", "layer_scale_init", "voxel_size", "opacity_threshold",
+                "gaussian_scale_base", "gaussian_scale_max", "gaussian_scale_min")
 
 
 @dataclass(frozen=True)
@@ -105,6 +109,14 @@ class Architecture:
             "local_correction_channels must be 0, 1 or 3": self.local_correction_channels in (0, 1, 3),
             "illumination_hidden and illumination_histogram_bins must be positive and non-negative":
                 self.illumination_hidden > 0 and self.illumination_histogram_bins >= 0,
+            # a checkpoint's header carries these: 0 camera iterations ended in an IndexError, an
+            # opacity threshold of 1.5 in a scene of no Gaussians, exit 0
+            "camera_iterations must be at least 1": self.camera_iterations >= 1,
+            f"image_size must be at most {MAX_IMAGE_SIZE}": self.image_size <= MAX_IMAGE_SIZE,
+            "0 <= opacity_threshold < 1": 0 <= self.opacity_threshold < 1,
+            "gaussian_scale_base, mlp_ratio and rope_frequency must be positive":
+                self.gaussian_scale_base > 0 and self.mlp_ratio > 0 and self.rope_frequency > 0,
+            "every number must be finite": all(math.isfinite(getattr(self, name)) for name in _REAL_FIELDS),
         }
         failed = [message for message, ok in checks.items() if not ok]
         if failed:

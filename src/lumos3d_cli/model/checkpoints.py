@@ -162,6 +162,12 @@ def _interpret(path: Path, shapes: dict[str, tuple[int, ...]], metadata: dict[st
     names = {key: _our_name(file_format, key) for key in shapes}
     ignored = sorted(key for key, name in names.items() if name is None)
     names = {key: name for key, name in names.items() if name is not None}
+    # AnySplat's `encoder.x` and an unprefixed `x` beside it name one parameter: one copy would
+    # win by key order, silently
+    twice = sorted(f"{' and '.join(sorted(k for k, n in names.items() if n == name))} (both {name})"
+                   for name, count in Counter(names.values()).items() if count > 1)
+    if twice:
+        raise InputError(f"{path}: keys name one parameter twice: {listing(twice)}; keep one of each")
     used = {name: shapes[key] for key, name in names.items()}
     if file_format == FORMAT_LUMOS3D:
         if architecture is not None:
@@ -207,6 +213,17 @@ def _require_fits(path: Path, architecture: Architecture, fresh_modules: list[st
                  shapes, str(path))
 
 
+def _require_real_floats(path: Path, raw: dict[str, torch.Tensor], layout: _Layout) -> None:
+    """InputError naming the first tensor the network takes that holds no real floating-point
+    values (bool, integer, complex): every parameter of the network is float32, and loading
+    such a tensor failed deep inside torch, or dropped a complex tensor's imaginary part."""
+    for key in layout.names:
+        tensor = raw[key]
+        if not tensor.is_floating_point():
+            raise InputError(f"{path}: tensor {key} holds {str(tensor.dtype).removeprefix('torch.')} values; the network's "
+                             "weights are floating point: the file is damaged or not a checkpoint of this network")
+
+
 def require_finite_weights(path: Path, tensors: dict[str, torch.Tensor]) -> None:
     """NonFiniteError naming the file and the first tensor holding NaN or Inf: such weights (a
     diverged or damaged save) would only surface later as a failure deep inside the network."""
@@ -223,6 +240,7 @@ def read_checkpoint(path: Path | str, architecture: Architecture | None = None) 
     metadata, raw = read_weights(path)
     require_finite_weights(path, raw)
     layout = _interpret(path, {k: tuple(v.shape) for k, v in raw.items()}, metadata, architecture)
+    _require_real_floats(path, raw, layout)
     tensors = {}
     for key, name in layout.names.items():
         tensor = raw[key]
@@ -256,6 +274,7 @@ def summarize_checkpoint(path: Path | str, architecture: Architecture | None = N
     metadata, raw = read_weights(path)
     require_finite_weights(path, raw)
     layout = _interpret(path, {key: tuple(tensor.shape) for key, tensor in raw.items()}, metadata, architecture)
+    _require_real_floats(path, raw, layout)
     used = {name: tuple(raw[key].shape) for key, name in layout.names.items()}
     modules = Counter(name.split(".")[0] for name in used)
     dtypes = Counter(str(raw[key].dtype).removeprefix("torch.") for key in layout.names)
