@@ -305,6 +305,7 @@ def test_transforms_json_values_of_the_wrong_kind_are_named(tmp_path):
     path = tmp_path / "transforms.json"
     for change, message in (({"cx": None}, "has cx None, which is not a number"), ({"k1": "abc"}, "has k1 'abc'"),
                             ({"frames": [[1, 2]]}, "frame 0 is list"), ({"frames": {"a": 1}}, "no 'frames' list"),
+                            ({"frames": []}, "its 'frames' list is empty; the file holds no camera"),
                             ({"camera_model": "OPENCV_FISHEYE"}, "camera_model 'OPENCV_FISHEYE' is not a perspective"),
                             ({"camera_model": "EQUIRECTANGULAR"}, "is not a perspective camera"),
                             ({"w": True}, "has w True, which is not a number"),  # was a frame 1 pixel wide

@@ -78,8 +78,10 @@ def read_transforms_json(path: Path | str, warn_on_distortion: bool = True) -> C
     except json.JSONDecodeError as error:
         raise InputError(f"{path}: invalid JSON ({error.msg} at line {error.lineno})") from error
     frames = document.get("frames") if isinstance(document, dict) else None
-    if not frames or not isinstance(frames, list):
+    if not isinstance(frames, list):
         raise InputError(f"{path}: no 'frames' list; not a transforms.json camera file")
+    if not frames:
+        raise InputError(f"{path}: its 'frames' list is empty; the file holds no camera")
     model = document.get("camera_model", "OPENCV")
     if str(model).upper() not in _PINHOLE_MODELS:  # a fisheye or panorama is no pinhole camera, distortion or not
         raise InputError(f"{path}: camera_model {model!r} is not a perspective camera; undistort the images to "
