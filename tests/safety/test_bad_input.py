@@ -223,14 +223,19 @@ def test_row12_dark_photos_in_the_over_exposure_mode_are_questioned(tmp_path, bu
 
 def test_row12_a_white_photo_stays_white_in_the_over_exposure_model(tmp_path, run_cli):
     """The bundled over-exposure operator darkens what it sees; an all-saturated photo records
-    nothing to darken, so its restoration is the photo itself, with no exposure gain."""
+    nothing to darken, so its restoration is the photo itself. Alone, it is refused: nothing to
+    restore (it wrote a scene made up from the blank frame)."""
     photos = tmp_path / "photos"
     photos.mkdir()
     write_image(photos / "white.png", np.ones((120, 160, 3), np.float32))
     output = tmp_path / "out" / "scene.ply"
-    result = run_cli("restore", photos, "-o", output, "--mode", "over-exposure", "--preset", "fast", "--json")
+    expect_input_error(run_cli("restore", photos, "-o", output, "--mode", "over-exposure", "--preset", "fast"),
+                       "white.png: the photo is entirely black or saturated; there is nothing to restore")
+    rng = np.random.default_rng(0)
+    for name in ("a.png", "b.png"):  # bright photos that recorded something
+        write_image(photos / name, (0.7 + 0.3 * rng.random((120, 160, 3))).astype(np.float32))
+    result = run_cli("restore", photos, "-o", output, "--mode", "over-exposure", "--preset", "fast")
     assert result.code == 0, result.err
-    assert json.loads(result.out)["exposure_prior"]["stops"] == 0.0
     restored = cv2.imread(str(output.parent / "restored" / "white.png"))
     assert restored.min() == 255
 

@@ -37,7 +37,7 @@ def parse_background(text: str) -> tuple[float, float, float]:
 def render_command(
     scene: Path = typer.Argument(..., help="Gaussian scene (.ply, INRIA 3DGS layout)."),
     output: Path = typer.Option(..., "--output", "-o", help="Folder for the rendered PNGs."),
-    poses: Path | None = typer.Option(None, "--poses", help="Cameras: transforms.json/cameras.json or a COLMAP text folder."),
+    poses: Path | None = typer.Option(None, "--poses", help="Cameras: transforms.json/cameras.json, a LOM folder of transforms_*.json, or a COLMAP model folder (text or binary)."),
     orbit: int | None = typer.Option(None, "--orbit", help="Render N frames on an orbit around the scene."),
     width: int | None = typer.Option(None, "--width", help="Output width (default: the cameras', or 512 for orbits without cameras)."),
     height: int | None = typer.Option(None, "--height", help="Output height."),

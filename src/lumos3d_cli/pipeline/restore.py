@@ -170,10 +170,7 @@ def restore_scene(
     # refinement step: its depth and colours are made up, and fused they laid black or white wedges
     # over the other views. Its view is the photo as it is.
     empty = set().union(*photos_without_content(batch))
-    if len(empty) == len(names):  # one such photo alone too: its scene would be made up from a blank frame
-        every = "every photo is" if len(names) > 1 else "the photo is"
-        raise InputError(f"{listed([str(path) for path in batch.paths], 3)}: {every} entirely black or saturated; "
-                         "there is nothing to restore: give photos that recorded the scene")
+    _require_some_content(batch, empty)
     fuse_views = [index not in empty for index in range(len(names))] if empty and len(empty) < len(names) else None
     # one photo with content always among the network's views: a subset of empty ones builds nothing
     required = [fuse_views.index(True)] if fuse_views is not None else []
@@ -265,6 +262,15 @@ def photos_without_content(batch: ImageBatch) -> tuple[list[int], list[int]]:
     return black, saturated
 
 
+def _require_some_content(batch: ImageBatch, empty: set[int]) -> None:
+    """InputError when every photo of `batch` is in `empty` (all black or all saturated): one such
+    photo alone too, whose scene would be made up from a blank frame."""
+    if len(empty) == len(batch.paths):
+        every = "every photo is" if len(batch.paths) > 1 else "the photo is"
+        raise InputError(f"{listed([str(path) for path in batch.paths], 3)}: {every} entirely black or saturated; "
+                         "there is nothing to restore: give photos that recorded the scene")
+
+
 def check_photo_contents(batch: ImageBatch, patch_size: int, mode: str) -> None:
     """InputError naming a photo too small to hold one network patch (`patch_size` pixels a side)
     or too large to render its view (MAX_IMAGE_SIDE);
@@ -279,6 +285,7 @@ def check_photo_contents(batch: ImageBatch, patch_size: int, mode: str) -> None:
             raise InputError(f"{path}: is {width}x{height} pixels; lumos3d renders views of at most {MAX_IMAGE_SIDE} "
                              "pixels a side: downscale it")
     black, saturated = photos_without_content(batch)
+    _require_some_content(batch, {*black, *saturated})  # before the warnings that would call them "left out"
     _warn_of_repeated_photos(batch, {*black, *saturated})
     _warn_of_a_mode_the_photos_contradict(batch, mode)
     for kind, indices in (("black", black), ("saturated", saturated)):
