@@ -5,7 +5,7 @@ import pytest
 import yaml
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.typed_config import apply_override, from_dict, to_dict
+from lumos3d_cli.typed_config import apply_override, apply_overrides, from_dict, to_dict
 
 
 @dataclass
@@ -62,3 +62,13 @@ def test_overrides():
         apply_override(values, "inner.rate", yaml.safe_load)
     with pytest.raises(InputError, match="'name' is not a section"):
         apply_override(values, "name.first=1", yaml.safe_load)
+
+
+def test_a_mapping_override_merges_and_a_key_is_set_once():
+    values = {"name": "x", "inner": {"rate": 1.0, "steps": 3}}
+    apply_overrides(values, ["inner={rate: 2.0}", "tags=[a]"], yaml.safe_load)
+    assert from_dict(Outer, values).inner == Inner(rate=2.0, steps=3)  # steps kept, not back to its default 10
+    with pytest.raises(InputError, match=r"override 'inner.steps=5': inner.steps is also set by 'inner=\{steps: 4\}'"):
+        apply_overrides(values, ["inner={steps: 4}", "inner.steps=5"], yaml.safe_load)
+    apply_overrides(values, ["inner.rate=3", "inner.steps=5"], yaml.safe_load)  # two keys of one section
+    assert from_dict(Outer, values).inner == Inner(rate=3.0, steps=5)

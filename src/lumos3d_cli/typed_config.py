@@ -124,8 +124,11 @@ def to_dict(instance) -> dict:
     return plain(instance)
 
 
-def apply_override(values: dict, assignment: str, parse) -> None:
-    """Set `a.b.c=value` in a nested dict; `parse` turns the text into a value (YAML rules)."""
+def apply_override(values: dict, assignment: str, parse) -> list[tuple[str, ...]]:
+    """Set `a.b.c=value` in a nested dict; `parse` turns the text into a value (YAML rules). A
+    mapping given for a section is merged into it key by key (replacing the section put every key
+    the value left out back to its default: `optim={lr: 1e-3}` undid optim.steps). Returns the
+    keys set, as paths."""
     if "=" not in assignment:
         raise InputError(f"override {assignment!r}: write it as key=value, e.g. optim.lr=1e-4")
     key, text = assignment.split("=", 1)
@@ -138,7 +141,40 @@ def apply_override(values: dict, assignment: str, parse) -> None:
         if not isinstance(child, dict):
             raise InputError(f"override {assignment!r}: '{part}' is not a section")
         node = child
-    node[parts[-1]] = parse(text)
+    value = parse(text)
+    _merge(node, parts[-1], value)
+    return [tuple(parts) + path for path in _leaf_paths(value)]
+
+
+def apply_overrides(values: dict, assignments: list[str], parse) -> None:
+    """`apply_override` of each assignment in turn; a key that two of them set (`optim.lr=1
+    optim.lr=2`, or `optim.lr=1 'optim={lr: 2}'`) is refused, as a key given twice in a file is."""
+    set_by: dict[tuple[str, ...], str] = {}
+    for assignment in assignments:
+        paths = apply_override(values, assignment, parse)
+        for path in paths:
+            for earlier_path, earlier in set_by.items():
+                common = min(len(path), len(earlier_path))
+                if path[:common] == earlier_path[:common]:
+                    raise InputError(f"override {assignment!r}: {'.'.join(path[:common])} is also set by {earlier!r}; "
+                                     "give each key once")
+        set_by.update(dict.fromkeys(paths, assignment))
+
+
+def _merge(node: dict, key: str, value: Any) -> None:
+    """node[key] = value, a mapping merged into a mapping already there, recursively."""
+    if isinstance(value, dict) and isinstance(node.get(key), dict):
+        for name, item in value.items():
+            _merge(node[key], name, item)
+    else:
+        node[key] = value
+
+
+def _leaf_paths(value: Any) -> list[tuple[str, ...]]:
+    """The key paths within `value` that `_merge` sets: its own place for anything but a mapping."""
+    if isinstance(value, dict):
+        return [(str(name),) + path for name, item in value.items() for path in _leaf_paths(item)]
+    return [()]
 
 
 def _join(prefix: str, name: str) -> str:

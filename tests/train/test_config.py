@@ -1,3 +1,4 @@
+import re
 from pathlib import Path
 
 import pytest
@@ -100,3 +101,44 @@ def test_settings_a_short_run_never_reaches_are_warned_of(tiny_config, caplog):
         warn_of_idle_settings(config)
     assert "optim.warmup_steps 100 is more than optim.steps 4: the learning rate never reaches optim.lr" in caplog.text
     assert "select: psnr, but validate_every 10 is more than optim.steps 4: no validation runs" in caplog.text
+
+
+def test_a_config_that_is_not_utf8_text_is_named(tmp_path):
+    """A binary file ended in an internal UnicodeDecodeError."""
+    (tmp_path / "bin.yaml").write_bytes(b"\xff\xfe\x00")
+    with pytest.raises(InputError, match=r"bin.yaml: not a UTF-8 text file \(byte 0xff at offset 0\); give a YAML config"):
+        load_config(tmp_path / "bin.yaml")
+
+
+def test_an_empty_config_is_named(tmp_path):
+    (tmp_path / "empty.yaml").write_text("")
+    with pytest.raises(InputError, match=r"^\S*empty.yaml: config is missing required key\(s\): stage, output$"):
+        load_config(tmp_path / "empty.yaml")
+    with pytest.raises(InputError, match=r"^\S*empty.yaml with its overrides: config is missing required key\(s\): output$"):
+        load_config(tmp_path / "empty.yaml", ["stage=teacher"])
+
+
+def test_yaml_merge_keys_work_and_explicit_keys_stay_unique(tmp_path):
+    """`<<: *base` was refused ("could not determine a constructor for the tag ...merge"), where
+    yaml.safe_load takes it."""
+    (tmp_path / "merge.yaml").write_text("stage: teacher\noutput: x\ndegrade:\n  mode: mixed\n"
+                                         "  low_light: &ranges {exposure: [0.05, 0.1], gamma: [1.5, 2.0]}\n"
+                                         "  over_exposure: {<<: *ranges, exposure: [2.0, 3.0]}\n")
+    ranges = load_config(tmp_path / "merge.yaml").degrade.over_exposure
+    assert (ranges.exposure, ranges.gamma) == ((2.0, 3.0), (1.5, 2.0))  # the explicit key wins over the merged one
+    (tmp_path / "twice.yaml").write_text("stage: teacher\noutput: x\ndata: {<<: {views: 6}, width: 56, width: 112}\n")
+    with pytest.raises(InputError, match=r"twice.yaml: invalid YAML at line 3, column \d+ \(key 'width' given twice"):
+        load_config(tmp_path / "twice.yaml")
+
+
+def test_a_mapping_override_merges_into_its_section_and_a_key_is_given_once(tmp_path):
+    """`optim.steps=3 'optim={lr: 0.001}'` trained 30,000 steps: the mapping replaced the section,
+    every other key back to its default; `optim.lr=1 optim.lr=2` took the last silently."""
+    (tmp_path / "run.yaml").write_text("stage: teacher\noutput: x\noptim: {steps: 6, warmup_steps: 2}\n")
+    config = load_config(tmp_path / "run.yaml", ["optim.steps=3", "optim={lr: 0.001}"])
+    assert (config.optim.steps, config.optim.warmup_steps, config.optim.lr) == (3, 2, 0.001)
+    for overrides, message in ((["optim.lr=1", "optim.lr=2"], "override 'optim.lr=2': optim.lr is also set by 'optim.lr=1'"),
+                               (["optim.lr=1", "optim={lr: 2}"], "optim.lr is also set by 'optim.lr=1'"),
+                               (["optim.lr=1", "optim=3"], "override 'optim=3': optim is also set by 'optim.lr=1'")):
+        with pytest.raises(InputError, match=re.escape(message) + "; give each key once"):
+            load_config(tmp_path / "run.yaml", overrides)

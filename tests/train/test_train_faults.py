@@ -2,6 +2,7 @@
 signal ends a run with a checkpoint and a non-zero exit; resuming says where it resumes; a damaged
 or missing checkpoint falls back to the newest intact one, naming what it skipped."""
 
+import errno
 import json
 import logging
 import re
@@ -64,7 +65,8 @@ def test_a_corrupt_training_state_falls_back_to_the_newest_intact_checkpoint(tin
     assert _unwrapped(f"skipping checkpoint step_00000004: {damaged}: cannot be read (RuntimeError:") in err
     assert _unwrapped("the checkpoint is damaged") in err and "internal error" not in result.err
     assert "resuming from step 2" in result.err
-    assert json.loads(result.out)["steps_done"] == 4
+    summary = json.loads(result.out)
+    assert summary["steps_done"] == 4 and summary["skipped_steps"] == 0
 
 
 def test_latest_naming_a_missing_step_folder(tiny_config):
@@ -270,3 +272,106 @@ def test_a_collective_that_failed_because_another_rank_stopped_is_said_so():
     assert isinstance(stopped, RunError) and "rank 1: another process of this distributed run stopped" in str(stopped)
     assert peer_stopped(RuntimeError("shapes do not match"), two) is None  # a real fault stays one
     assert peer_stopped(failed, DistributedContext(0, 1, 0, torch.device("cpu"))) is None
+
+
+def test_a_run_that_ends_diverged_fails_without_final_weights(tiny_config):
+    """optim.lr=1e30: steps 1-3 skipped, then "4 steps done", exit 0 and a final.safetensors of
+    the diverged weights (NaN cameras downstream)."""
+    config = tiny_config(name="ends-diverged", optim__steps=4, optim__warmup_steps=0, checkpoint_every=2)
+    result = run_lumos3d("train", config, "optim.lr=1e30", "--json")
+    assert result.code == 1 and "Traceback" not in result.err, result.err[-3000:]
+    assert result.err.strip().splitlines()[-1].startswith("error: training ended after 4 steps, but the last 3 steps "
+                                                          "were skipped for a non-finite loss or gradient")
+    assert _unwrapped("(3 skipped in all); training diverged, and no checkpoint of this run holds weights from before: "
+                      "start a new run (--new-run) with a lower optim.lr") in _unwrapped(result.err)
+    assert result.out == "" and not (_output(config) / "final.safetensors").exists()
+    assert not list(_output(config).glob("checkpoints/step_*"))
+
+
+def _full_disk_in_torch_save(obj, handle):
+    handle.write(b"PK\x03\x04")  # torch's writer raises its own error over the file's OSError
+    try:
+        raise OSError(errno.ENOSPC, "No space left on device")
+    except OSError:
+        raise RuntimeError("[enforce fail at inline_container.cc:672] . unexpected pos 704 vs 598") from None
+
+
+def _full_disk_in_safetensors(tensors, filename, metadata=None):
+    from safetensors import SafetensorError
+
+    Path(filename).write_bytes(b"\x00" * 8)
+    raise SafetensorError("Error while serializing: I/O error: No space left on device (os error 28)")
+
+
+@pytest.mark.parametrize("module, name, writer", [("torch", "save", _full_disk_in_torch_save),
+                                                  ("lumos3d_cli.io.weight_files", "save_file", _full_disk_in_safetensors)],
+                         ids=["training-state", "weights"])
+def test_a_full_disk_during_a_checkpoint_is_named_and_leaves_the_earlier_ones(tiny_config, monkeypatch, module, name,
+                                                                               writer):
+    """A full disk in the middle of a checkpoint ended the run as an internal error (torch's
+    RuntimeError, safetensors' SafetensorError)."""
+    import importlib
+
+    trainer = Trainer(load_config(tiny_config(name=f"full-{name}", optim__steps=3, checkpoint_every=1), []),
+                      setup_distributed("cpu"))
+    target = importlib.import_module(module)
+    real_writer = getattr(target, name)
+    saves = {"n": 0}
+
+    def full_at_the_second_save(*args, **kwargs):
+        saves["n"] += 1
+        return (writer if saves["n"] == 2 else real_writer)(*args, **kwargs)
+
+    monkeypatch.setattr(target, name, full_at_the_second_save)
+    checkpoints = trainer.output / "checkpoints"
+    with pytest.raises(InputError, match=rf"^{re.escape(str(checkpoints))}: no space left on the device while writing "
+                                         r"the checkpoint of step 2, which was not kept; make room or make the folder "
+                                         r"writable, then continue with --resume$"):
+        trainer.run()
+    assert sorted(p.name for p in checkpoints.iterdir()) == ["latest", "step_00000001"]  # nothing half-written
+    assert (checkpoints / "latest").read_text().strip() == "step_00000001"
+
+
+def test_a_failure_of_a_checkpoint_writer_that_is_no_full_disk_stays_an_error(tiny_config, monkeypatch):
+    import torch
+
+    trainer = Trainer(load_config(tiny_config(name="writer-bug", optim__steps=1, checkpoint_every=1), []),
+                      setup_distributed("cpu"))
+
+    def broken(obj, handle):
+        raise RuntimeError("a writer bug")
+
+    monkeypatch.setattr(torch, "save", broken)
+    with pytest.raises(RuntimeError, match="a writer bug"):
+        trainer.run()
+
+
+def test_a_torn_last_log_line_is_dropped_and_damage_elsewhere_is_named(tmp_path, caplog):
+    """A run killed while appending to metrics.jsonl left '{"step": 99, "lr": 0.0001, "ski', and
+    --resume ended in an internal JSONDecodeError."""
+    from lumos3d_cli.train.run_logs import RunLogs
+
+    logs = RunLogs(tmp_path, tensorboard=False)
+    for step in range(3):
+        logs.append_step(step, 1e-4, False, 0.1, 0, {"total": 1.0})
+    with open(tmp_path / "metrics.jsonl", "a") as handle:
+        handle.write('{"step": 99, "lr": 0.0001, "ski')
+    (tmp_path / "validation.jsonl").write_text('{"step": 2, "psnr": 20.0}\n{"step": 4, "ps')
+    with caplog.at_level(logging.WARNING, logger="lumos3d_cli"):
+        logs.truncate(2)
+        assert logs.validated_steps() == {2}
+    assert [json.loads(line)["step"] for line in (tmp_path / "metrics.jsonl").read_text().splitlines()] == [0, 1]
+    assert f"{tmp_path / 'metrics.jsonl'}: dropping its last line, which a stopped run left unfinished" in caplog.text
+    (tmp_path / "metrics.jsonl").write_text('{"step": 0}\n{"step": 1, "lr\n{"step": 2}\n')
+    with pytest.raises(InputError, match=rf"^{re.escape(str(tmp_path / 'metrics.jsonl'))}: line 2 is not a log entry"):
+        logs.truncate(2)
+
+
+def test_a_checkpoint_config_that_is_not_text_is_skipped_like_damaged_weights(tiny_config):
+    """A checkpoint's config.yaml that is not UTF-8 ended --resume in an internal UnicodeDecodeError;
+    the docs say a config that cannot be read skips its checkpoint."""
+    config = tiny_config(name="binary-config", optim__steps=4, checkpoint_every=2)
+    checkpoints = _trained(config)
+    (checkpoints / "step_00000004" / "config.yaml").write_bytes(b"\xff\xfe\x00")
+    resumed = Trainer(load_config(config, []), setup_distributed("cpu")).run(resume=True)
+    assert resumed.history[0].step == 2 and resumed.steps_done == 4

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from lumos3d_cli.errors import InputError, NonFiniteError, RunError
+from lumos3d_cli.errors import InputError, Interrupted, NonFiniteError, RunError
 from lumos3d_cli.model.checkpoints import read_checkpoint
 from lumos3d_cli.train.config import load_config
 from lumos3d_cli.train.distributed import setup_distributed
@@ -460,3 +460,104 @@ def test_a_photo_holding_nan_stops_training_as_bad_data(tiny_config, tmp_path, s
     with pytest.raises(InputError, match=r"statue/images/.*: .* NaN or Inf") as error:
         _trainer(config).run()
     assert not isinstance(error.value, NonFiniteError)
+
+
+def _nan_from(trainer, monkeypatch, bad_calls):
+    """Make the loss of the steps whose call number (from 1) is in `bad_calls` NaN; returns the
+    call counter."""
+    original = trainer.objective.forward
+    calls = {"n": 0}
+
+    def nan_total(*args, **kwargs):
+        terms = original(*args, **kwargs)
+        calls["n"] += 1
+        if calls["n"] in bad_calls:
+            terms["total"] = terms["total"] * float("nan")
+        return terms
+
+    monkeypatch.setattr(trainer.objective, "forward", nan_total)
+    return calls
+
+
+def test_a_forward_pass_that_cannot_place_its_gaussians_is_a_skipped_step(tiny_config, monkeypatch):
+    """A diverging run (optim.lr=0.05) predicted points 4e17 from the origin: the voxelizer's
+    ValueError ended it as an internal error, where a non-finite loss skips the step."""
+    import dataclasses
+
+    trainer = _trainer(tiny_config(name="far", optim__steps=3))
+    predict = trainer.model.predict
+    calls = {"n": 0}
+
+    def far_out_at_the_second_step(images):
+        prediction = predict(images)
+        calls["n"] += 1
+        if calls["n"] == 2:  # one pixel beyond any voxel index, the scene's scale (its median depth) as it was
+            far = torch.ones_like(prediction.depth)
+            far[..., 0, 0] = 1e20
+            prediction = dataclasses.replace(prediction, depth=prediction.depth * far)
+        return prediction
+
+    monkeypatch.setattr(trainer.model, "predict", far_out_at_the_second_step)
+    result = trainer.run()
+    assert [report.skipped for report in result.history] == [False, True, False]
+    assert result.skipped_steps == trainer.nonfinite_total == 1 and result.final_checkpoint.is_file()
+
+    def broken(images):
+        raise ValueError("a bug, not the weights")
+
+    monkeypatch.setattr(trainer.model, "predict", broken)
+    with pytest.raises(ValueError, match="a bug, not the weights"):  # any other ValueError is no skipped step
+        trainer.step(3)
+
+
+def test_checkpoints_stop_at_divergence_and_the_stop_names_one_to_start_from(tiny_config, tmp_path, monkeypatch):
+    """Retention kept three checkpoints, all of the diverged weights; the message advised a
+    --resume that replays the divergence and refuses another optim.lr."""
+    config = tiny_config(name="diverging", optim__steps=8, checkpoint_every=1, max_nonfinite_steps=3)
+    trainer = _trainer(config)
+    _nan_from(trainer, monkeypatch, range(4, 100))  # step 3 is the first non-finite one
+    with pytest.raises(RunError) as error:
+        trainer.run()
+    checkpoints = trainer.output / "checkpoints"
+    assert sorted(p.name for p in checkpoints.glob("step_*")) == ["step_00000001", "step_00000002", "step_00000003"]
+    assert (checkpoints / "latest").read_text().strip() == "step_00000003"
+    # step_00000003 holds the weights step 3 started from, which gave the first non-finite loss
+    good = checkpoints / "step_00000002"
+    assert str(error.value).startswith("training stopped at step 5: 3 steps in a row had a non-finite loss")
+    assert (f"{good} holds the weights from before: start a new run from them with a lower rate "
+            f"(model={good / 'model.safetensors'} optim.lr=... --new-run)") in str(error.value)
+    restart = _trainer(config, [f"model={good / 'model.safetensors'}", "optim.lr=1e-5", "optim.steps=1",
+                                f"output={tmp_path / 'restart'}"]).run()
+    assert restart.steps_done == 1 and restart.final_checkpoint.is_file()  # what the message says works
+
+
+def test_a_run_that_ends_on_skipped_steps_writes_no_weights_of_them(tiny_config, monkeypatch):
+    """A run whose last steps were skipped wrote final.safetensors from the weights that made them
+    non-finite and said "4 steps done"."""
+    trainer = _trainer(tiny_config(name="ends-skipped", optim__steps=4, checkpoint_every=2))
+    _nan_from(trainer, monkeypatch, {1, 4})
+    with pytest.raises(RunError, match=r"training ended after 4 steps, but the last step was skipped for a non-finite "
+                                       r"loss or gradient; no checkpoint or final weights were written of them \(2 "
+                                       r"skipped in all\); training diverged"):
+        trainer.run()
+    assert not (trainer.output / "final.safetensors").exists()
+    assert [p.name for p in (trainer.output / "checkpoints").glob("step_*")] == ["step_00000002"]
+
+
+def test_a_signal_after_a_skipped_step_saves_no_checkpoint_and_says_so(tiny_config, monkeypatch):
+    trainer = _trainer(tiny_config(name="stop-skipped", optim__steps=4, checkpoint_every=1))
+    calls = _nan_from(trainer, monkeypatch, {2})
+    step = trainer.step
+
+    def signalled_in_step_2(index):
+        report = step(index)
+        if calls["n"] == 2:
+            os.kill(os.getpid(), signal.SIGTERM)  # run()'s handler asks for a stop after this step
+        return report
+
+    monkeypatch.setattr(trainer, "step", signalled_in_step_2)
+    with pytest.raises(Interrupted, match=r"stopped after 2 steps without a checkpoint of them \(the last step was "
+                                          r"skipped .*\); --resume goes on from the run's newest checkpoint") as stop:
+        trainer.run()
+    assert stop.value.signum == signal.SIGTERM
+    assert (trainer.output / "checkpoints" / "latest").read_text().strip() == "step_00000001"

@@ -100,13 +100,14 @@ def train_command(
         "stopped_early": result.stopped_early, "stop_signal": _signal_name(result.stop_signal),
         "final_checkpoint": str(result.final_checkpoint) if result.final_checkpoint else None,
         "selected_checkpoint": str(result.selected_checkpoint) if result.selected_checkpoint else None,
-        "last_terms": last.terms if last else {}, "world_size": context.world_size,
+        "last_terms": last.terms if last else {}, "skipped_steps": result.skipped_steps, "world_size": context.world_size,
         "seconds_per_step": round(sum(r.seconds for r in result.history) / max(1, len(result.history)), 4),
     }
     if json_output:
         print_json(summary)
     else:
-        say(f"{settings.stage}: {result.steps_done} steps done; checkpoints in {settings.output}/checkpoints"
+        skipped = f" ({result.skipped_steps} skipped for a non-finite loss or gradient)" if result.skipped_steps else ""
+        say(f"{settings.stage}: {result.steps_done} steps done{skipped}; checkpoints in {settings.output}/checkpoints"
             + (f"; final weights {result.final_checkpoint}" if result.final_checkpoint else "")
             + (f"; selected by {settings.select}: {result.selected_checkpoint}" if result.selected_checkpoint else ""))
     _stop_if_interrupted(result)

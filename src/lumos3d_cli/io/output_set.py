@@ -60,7 +60,7 @@ logger = logging.getLogger(__name__)
 # Names lumos3d keeps for itself in an output folder: never an output, never the user's.
 RESERVED_NAMES = frozenset({MANIFEST_NAME, LOCK_NAME})
 # Errors of a full or unwritable disk: bad circumstances the user can fix, not internal errors.
-_DISK_ERRORS = {errno.ENOSPC: "no space left on the device", errno.EDQUOT: "the disk quota is exceeded",
+DISK_ERRORS = {errno.ENOSPC: "no space left on the device", errno.EDQUOT: "the disk quota is exceeded",
                 errno.EROFS: "the file system is read-only", errno.EACCES: "permission denied",
                 errno.EFBIG: "a file grew beyond the system's file size limit"}
 
@@ -369,7 +369,7 @@ class OutputSet:
                 self._check_ownership()
                 self._commit(staging)
             except OSError as error:
-                reason = _DISK_ERRORS.get(error.errno)
+                reason = DISK_ERRORS.get(error.errno)
                 if reason is None:
                     raise
                 raise InputError(f"{error.filename or self.folder}: {reason} while writing the outputs (nothing was "
@@ -478,7 +478,7 @@ class OutputSet:
                 except OSError as error:
                     _undo(done)
                     done.clear()
-                    reason = _DISK_ERRORS.get(error.errno) or error.strerror or type(error).__name__
+                    reason = DISK_ERRORS.get(error.errno) or error.strerror or type(error).__name__
                     raise InputError(f"{error.filename}: cannot be replaced ({reason}); nothing was changed: fix its "
                                      "permissions or choose another output") from error
                 committed = True

@@ -47,6 +47,11 @@ class VoxelFusion:
         return self.points.shape[0]
 
 
+class PointsBeyondVoxelGrid(ValueError):
+    """Points so far out for their voxel size that no int64 cell index holds them: a scene of
+    extreme extent, or the geometry of a diverged model (training skips such a step)."""
+
+
 def voxel_cells(points: torch.Tensor, voxel_size: float | torch.Tensor) -> torch.Tensor:
     """[N, 3] -> [N, 3] int64 cell indices round(x / voxel_size) (ties to even, as torch.round);
     voxel_size a number or [N] per point."""
@@ -58,8 +63,8 @@ def voxel_cells(points: torch.Tensor, voxel_size: float | torch.Tensor) -> torch
         voxel_size = voxel_size[:, None]
     cells = torch.round(points.detach() / voxel_size)
     if cells.numel() and float(cells.abs().max()) >= _CELL_LIMIT:  # .long() would wrap and merge far points
-        raise ValueError(f"points {float((points.abs()).max()):g} from the origin lie beyond 2^61 voxels of the voxel "
-                         "size: the size is too small for the scene's extent")
+        raise PointsBeyondVoxelGrid(f"points {float(points.detach().abs().max()):g} from the origin lie beyond 2^61 "
+                                    "voxels of the voxel size: the size is too small for the scene's extent")
     return cells.long()
 
 

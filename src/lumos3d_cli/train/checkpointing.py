@@ -5,18 +5,22 @@ Retention and resuming see only the checkpoints of one run (train/run_folder.py)
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import re
 import shutil
 import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import torch
+from safetensors import SafetensorError
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import current_umask, remove_leftovers, temporary_prefix, write_bytes_atomic
+from lumos3d_cli.io.output_set import DISK_ERRORS
 from lumos3d_cli.model.checkpoints import read_checkpoint, save_checkpoint
 from lumos3d_cli.model.lumos3d import Lumos3D
 
@@ -52,14 +56,29 @@ def save_training_checkpoint(
 ) -> Path:
     """Write checkpoints/step_<step>/ atomically (a folder of that step of the same run is replaced
     whole), point `latest` at it, keep the newest `keep` of the run `run_id`'s checkpoints."""
-    parent = output / "checkpoints"
     final = checkpoint_folder(output, step)
+    earlier = final.parent.is_dir() and bool(_step_folders(final.parent, run_id))
+    then = ("continue with --resume" if earlier
+            else "start again with --new-run (no checkpoint of this run was written whole)")
+    with disk_errors_named(final.parent, f"the checkpoint of step {step}", then):
+        _write_checkpoint(final, model, state, config_yaml, provenance, run_id)
+    for old in _step_folders(final.parent, run_id)[keep:]:
+        shutil.rmtree(old, ignore_errors=True)
+    return final
+
+
+def _write_checkpoint(final: Path, model: Lumos3D, state: TrainingState, config_yaml: str, provenance: dict,
+                      run_id: str | None) -> None:
+    """The checkpoint folder `final`, staged and renamed, and `latest` naming it."""
+    parent = final.parent
     parent.mkdir(parents=True, exist_ok=True)
     remove_leftovers(parent)
     staging = Path(tempfile.mkdtemp(prefix=temporary_prefix(final.name), suffix=".tmp", dir=parent))
     try:
         save_checkpoint(model, staging / MODEL_FILE, provenance)
-        torch.save(state.__dict__, staging / STATE_FILE)
+        # through a Python file: torch's own file writer reports a full disk without its errno
+        with open(staging / STATE_FILE, "wb") as handle:
+            torch.save(state.__dict__, handle)
         (staging / CONFIG_FILE).write_text(config_yaml)
         (staging / RUN_ID_FILE).write_text(f"{run_id or ''}\n")
         os.chmod(staging, 0o777 & ~current_umask())
@@ -75,9 +94,37 @@ def save_training_checkpoint(
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     write_bytes_atomic(parent / LATEST_FILE, (final.name + "\n").encode())
-    for old in _step_folders(parent, run_id)[keep:]:
-        shutil.rmtree(old, ignore_errors=True)
-    return final
+
+
+def _disk_problem(error: BaseException) -> str | None:
+    """What `DISK_ERRORS` calls the full or unwritable disk behind `error`, None for any other
+    failure: an OSError; torch's RuntimeError, which keeps the OSError of the file it wrote as
+    its context; or safetensors' error, which keeps only the system's words ("No space left on
+    device (os error 28)")."""
+    while error is not None:
+        if isinstance(error, OSError) and error.errno in DISK_ERRORS:
+            return DISK_ERRORS[error.errno]
+        code = re.search(r"\(os error (\d+)\)", str(error)) if isinstance(error, SafetensorError) else None
+        if code is not None and int(code.group(1)) in DISK_ERRORS:
+            return DISK_ERRORS[int(code.group(1))]
+        error = error.__cause__ or error.__context__
+    return None
+
+
+@contextlib.contextmanager
+def disk_errors_named(folder: Path, writing: str, then: str = "continue with --resume") -> Iterator[None]:
+    """A full or unwritable disk met while `writing` (e.g. "the checkpoint of step 8") into
+    `folder` as an InputError naming both and saying what to do `then`: the user's to fix, not
+    an internal error. The writers stage what they write, so nothing half-written is left to be
+    taken for whole."""
+    try:
+        yield
+    except (OSError, RuntimeError, SafetensorError) as error:
+        problem = _disk_problem(error)
+        if problem is None:
+            raise
+        raise InputError(f"{folder}: {problem} while writing {writing}, which was not kept; make room or make the "
+                         f"folder writable, then {then}") from error
 
 
 def _run_of(folder: Path) -> str | None:
@@ -135,3 +182,10 @@ def load_training_checkpoint(folder: Path, model: Lumos3D) -> TrainingState:
         raise InputError(f"{folder / STATE_FILE}: cannot be read ({type(error).__name__}: {reason}); the checkpoint is damaged") from None
     model.load_state_dict(checkpoint.tensors)
     return state
+
+
+def newest_checkpoint_before(output: Path, run_id: str | None, step: int) -> Path | None:
+    """The run `run_id`'s newest checkpoint of fewer than `step` steps (None: none)."""
+    parent = output / "checkpoints"
+    folders = _step_folders(parent, run_id) if parent.is_dir() else []
+    return next((folder for folder in folders if int(folder.name.removeprefix("step_")) < step), None)

@@ -22,7 +22,7 @@ from lumos3d_cli.errors import InputError
 from lumos3d_cli.losses.appearance import SSIM_WEIGHT
 from lumos3d_cli.losses.loss_config import LossConfig
 from lumos3d_cli.train.selection import SELECTION_SCORES
-from lumos3d_cli.typed_config import apply_override, from_dict, to_dict
+from lumos3d_cli.typed_config import apply_overrides, from_dict, to_dict
 
 logger = logging.getLogger(__name__)
 
@@ -221,13 +221,20 @@ def _override_value(text: str):
         raise InputError(f"override value {text!r}: invalid YAML{_yaml_problem(error)}; quote it or correct it") from None
 
 
+_MERGE_TAG = "tag:yaml.org,2002:merge"  # `<<: *anchor`, YAML 1.1's merge key
+
+
 class _UniqueKeyLoader(yaml.SafeLoader):
     """YAML's safe loader, refusing a key given twice in one mapping (a second `optim:` block
-    replaced the first without a word: 6 steps became 30,000)."""
+    replaced the first without a word: 6 steps became 30,000). Merge keys (`<<: *base`) work as
+    in `yaml.safe_load`: a key given explicitly beside them overrides the merged one, as YAML
+    intends, so only the explicit keys must be unique."""
 
     def construct_mapping(self, node, deep=False):
+        explicit = [key_node for key_node, _ in node.value if key_node.tag != _MERGE_TAG]
+        self.flatten_mapping(node)  # resolves the merge keys, which have no constructor of their own
         seen = set()
-        for key_node, _ in node.value:
+        for key_node in explicit:
             key = self.construct_object(key_node, deep=True)
             try:
                 hash(key)
@@ -256,16 +263,22 @@ def load_config(path: Path | str, overrides: list[str] = ()) -> TrainConfig:
     wrote its final weights)."""
     path = Path(path)
     try:
-        values = yaml.load(path.read_text(), Loader=_UniqueKeyLoader) or {}
+        values = yaml.load(path.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader) or {}
     except OSError as error:
         raise InputError(f"{path}: cannot read config ({error.strerror})") from error
+    except UnicodeDecodeError as error:
+        raise InputError(f"{path}: not a UTF-8 text file (byte {error.object[error.start]:#04x} at offset "
+                         f"{error.start}); give a YAML config") from None
     except yaml.YAMLError as error:
         raise InputError(f"{path}: invalid YAML{_yaml_problem(error)}; correct the file") from None
     if not isinstance(values, dict):
         raise InputError(f"{path}: a config must be a YAML mapping")
-    for assignment in overrides:
-        apply_override(values, assignment, _override_value)
-    config = from_dict(TrainConfig, values)
+    apply_overrides(values, overrides, _override_value)
+    try:
+        config = from_dict(TrainConfig, values)
+    except InputError as error:  # "missing required key(s)" of an empty file named no file at all
+        source = f"{path} with its overrides" if overrides else str(path)
+        raise InputError(f"{source}: {error}") from error
     non_finite = _non_finite(to_dict(config))  # after conversion: `nan` written as a string is a float here
     if non_finite:
         raise InputError(f"config {', '.join(non_finite)}: not a finite number; give one (NaN and infinity train "

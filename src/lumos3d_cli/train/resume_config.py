@@ -57,11 +57,13 @@ def read_run_config(saved_config: Path, config_type: type) -> dict[str, Any] | N
     release no longer reads, the keys it holds). None when the checkpoint has none; InputError
     when it cannot be read (the checkpoint is damaged)."""
     try:
-        values = yaml.safe_load(saved_config.read_text()) or {}
+        values = yaml.safe_load(saved_config.read_text(encoding="utf-8")) or {}
     except FileNotFoundError:
         return None
+    except UnicodeDecodeError:
+        raise InputError(f"{saved_config}: cannot be read (not UTF-8 text)") from None
     except (OSError, yaml.YAMLError) as error:
-        raise InputError(f"{saved_config}: cannot be read ({error})") from None
+        raise InputError(f"{saved_config}: cannot be read ({' '.join(str(error).split())})") from None
     if not isinstance(values, dict):
         raise InputError(f"{saved_config}: holds no config")
     try:

@@ -5,11 +5,14 @@ the lines of the work it is about to redo, so the logs read like those of an uni
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.atomic import write_bytes_atomic
 from lumos3d_cli.io.json_text import finite_document
+
+logger = logging.getLogger(__name__)
 
 
 class RunLogs:
@@ -45,7 +48,7 @@ class RunLogs:
         for name, last_kept in (("metrics.jsonl", start - 1), ("validation.jsonl", start)):
             path = self.output / name
             if path.is_file():
-                kept = [line for line in path.read_text().splitlines() if line and json.loads(line)["step"] <= last_kept]
+                kept = [text for text, line in _logged_lines(path) if line["step"] <= last_kept]
                 write_bytes_atomic(path, ("\n".join(kept) + "\n" if kept else "").encode())
 
     def validated_steps(self) -> set[int]:
@@ -53,8 +56,32 @@ class RunLogs:
         path = self.output / "validation.jsonl"
         if not path.is_file():
             return set()
-        return {int(json.loads(line)["step"]) for line in path.read_text().splitlines() if line}
+        return {int(line["step"]) for _, line in _logged_lines(path)}
 
     def close(self) -> None:
         if self._tensorboard is not None:
             self._tensorboard.close()
+
+
+def _logged_lines(path: Path) -> list[tuple[str, dict]]:
+    """The lines of a log file with what they say. A last line that is not a whole entry is
+    what a process killed in the middle of appending it leaves: it is dropped with a warning.
+    Damage anywhere else is an InputError naming the file and the line."""
+    texts = path.read_text(encoding="utf-8", errors="replace").splitlines()
+    last = max((index for index, text in enumerate(texts) if text), default=-1)
+    lines = []
+    for index, text in enumerate(texts):
+        if not text:
+            continue
+        try:
+            line = json.loads(text)
+        except json.JSONDecodeError:
+            line = None
+        if not (isinstance(line, dict) and isinstance(line.get("step"), int)):
+            if index == last:
+                logger.warning("%s: dropping its last line, which a stopped run left unfinished: %.60s", path, text)
+                break
+            raise InputError(f"{path}: line {index + 1} is not a log entry ({text[:60]!r}); the log is damaged: "
+                             "remove or repair that line, then resume")
+        lines.append((text, line))
+    return lines

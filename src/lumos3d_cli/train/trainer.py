@@ -24,7 +24,7 @@ from torch.nn.parallel import DistributedDataParallel
 from lumos3d_cli.data.degradations import degrade, white_balance_shift
 from lumos3d_cli.data.multiview_dataset import MultiViewDataset
 from lumos3d_cli.data.scene_records import scan_dl3dv, scan_scene_folders
-from lumos3d_cli.errors import STOP_SIGNALS, InputError, NonFiniteError, RunError
+from lumos3d_cli.errors import STOP_SIGNALS, InputError, Interrupted, NonFiniteError, RunError
 from lumos3d_cli.losses.appearance import appearance_loss
 from lumos3d_cli.losses.objective import StageBatch, TrainingObjective
 from lumos3d_cli.model.appearance.conversion import with_appearance
@@ -32,12 +32,15 @@ from lumos3d_cli.model.architectures import ARCHITECTURES
 from lumos3d_cli.model.checkpoints import read_provenance, save_checkpoint
 from lumos3d_cli.model.loading import load_model
 from lumos3d_cli.model.lumos3d import Lumos3D, build_model
+from lumos3d_cli.model.voxelize import PointsBeyondVoxelGrid
 from lumos3d_cli.train.bracket_samples import BracketSamples, check_bracket_model
 from lumos3d_cli.train.checkpointing import (
     CONFIG_FILE,
     MODEL_FILE,
     TrainingState,
+    disk_errors_named,
     load_training_checkpoint,
+    newest_checkpoint_before,
     resume_candidates,
     save_training_checkpoint,
 )
@@ -86,7 +89,8 @@ class TrainResult:
     """What `Trainer.run` did. `stop_signal`: the signal that stopped the run early (after a
     checkpoint was saved), None when it ran to its end or stopped on `stop_after`.
     `selected_checkpoint`: output/selected.safetensors when the run selects (config `select`)
-    and it exists."""
+    and it exists. `skipped_steps`: the steps of the whole run skipped for a non-finite loss or
+    gradient (those before a resume included)."""
 
     steps_done: int
     history: list[StepReport] = field(default_factory=list)
@@ -95,6 +99,7 @@ class TrainResult:
     stop_signal: int | None = None
     last_checkpoint: Path | None = None
     selected_checkpoint: Path | None = None
+    skipped_steps: int = 0
 
 
 def check_max_steps(max_steps: int | None) -> None:
@@ -309,6 +314,9 @@ class Trainer:
         except NonFiniteError as error:
             logger.warning("step %d: %s", step, error)
             terms, finite = {}, False
+        except PointsBeyondVoxelGrid as error:  # a diverged model's finite but useless geometry
+            logger.warning("step %d: the predicted geometry cannot be fused: %s", step, error)
+            terms, finite = {}, False
         if any_rank(not finite, self.context):
             finite = False
         if finite:
@@ -326,10 +334,8 @@ class Trainer:
             self.nonfinite_in_a_row += 1
             self.nonfinite_total += 1
             if self.nonfinite_in_a_row >= self.config.max_nonfinite_steps:
-                raise RunError(
-                    f"training stopped at step {step}: {self.nonfinite_in_a_row} steps in a row had a non-finite loss "
-                    f"or gradient; lower optim.lr, check the data, or resume from the last checkpoint"
-                )
+                raise self._diverged(f"training stopped at step {step}: {self.nonfinite_in_a_row} steps in a row had a "
+                                     "non-finite loss or gradient", step - self.nonfinite_in_a_row + 1)
         self.scheduler.step()
         values = {name: float(all_reduce_mean(value.detach().float(), self.context)) for name, value in terms.items()}
         return StepReport(step, learning_rate, values, not finite, time.perf_counter() - started)
@@ -349,8 +355,41 @@ class Trainer:
             "teacher": self.config.teacher, "seed": self.config.seed, "world_size": self.context.world_size,
         }
 
+    def _untrusted_weights(self) -> str | None:
+        """Why the weights are not to be saved as the run's (None: they may be): the last steps
+        were skipped, so these are the weights that made their loss or gradient non-finite, or a
+        weight is not finite. Every rank holds the same weights and counts, so all agree."""
+        skipped = self.nonfinite_in_a_row
+        if skipped:
+            steps = f"the last {skipped} steps were" if skipped > 1 else "the last step was"
+            return f"{steps} skipped for a non-finite loss or gradient"
+        tensors = self.model.state_dict().values()
+        if not all(bool(torch.isfinite(tensor).all()) for tensor in tensors if tensor.is_floating_point()):
+            return "the weights are not finite"
+        return None
+
+    def _diverged(self, what: str, first_bad_step: int) -> RunError:
+        """The error of a run that diverged: `what` happened, first seen at the step of index
+        `first_bad_step`. It names the newest checkpoint whose weights still trained (a
+        checkpoint holding N steps is what step N starts from): --resume takes the newest one
+        and the run's optimizer with the rate that diverged, and refuses another optim.lr."""
+        run_id = self.run_identity.run_id if self.run_identity is not None else None
+        before = newest_checkpoint_before(self.output, run_id, first_bad_step)
+        if before is None:
+            return RunError(f"{what}; training diverged, and no checkpoint of this run holds weights from before: "
+                            "start a new run (--new-run) with a lower optim.lr")
+        return RunError(f"{what}; training diverged. {before} holds the weights from before: start a new run from them "
+                        f"with a lower rate (model={before / MODEL_FILE} optim.lr=... --new-run); --resume would go "
+                        "on with the rate that diverged (a resume may not change optim.lr)")
+
     def save(self, step: int) -> Path | None:
-        """Checkpoint after `step` steps (rank 0 writes; every rank waits for it)."""
+        """Checkpoint after `step` steps (rank 0 writes; every rank waits for it); None, saving
+        nothing, when the weights cannot be trusted (`_untrusted_weights`): retention keeps the
+        last three checkpoints, which must not all be a diverged model's."""
+        untrusted = self._untrusted_weights()
+        if untrusted is not None:
+            logger.warning("no checkpoint saved of the %d steps done: %s", step, untrusted)
+            return None
         folder = None
         if self.context.is_main:
             folder = save_training_checkpoint(
@@ -423,6 +462,10 @@ class Trainer:
         wait in this step's all-reduce until torchrun ends them: only one process saves.)"""
         if self.context.enabled or steps_done == start:
             raise error
+        untrusted = self._untrusted_weights()
+        if untrusted is not None:  # `save` refuses them (and refused them at a multiple of checkpoint_every)
+            raise InputError(f"{error}; no checkpoint of the {steps_done} steps done was saved ({untrusted}): replace "
+                             "the file, then add --resume to go on from the newest checkpoint") from error
         if not (self.config.checkpoint_every and steps_done % self.config.checkpoint_every == 0):
             self.save(steps_done)  # (at a multiple of checkpoint_every it is saved already)
         raise InputError(f"{error}; the checkpoint of the {steps_done} steps done is saved: replace the file, then add "
@@ -454,8 +497,10 @@ class Trainer:
             line, path = validate(self.model, samples, step, self.output, self.config.validation_views,
                                   self.config.loss.background, self._autocast, extra)
         except NonFiniteError as error:  # the weights, not the data: the run diverged (exit 1, not bad input)
-            raise RunError(f"validation after step {step}: the model's output is not finite ({error}); training "
-                           "diverged: lower optim.lr, or resume from an earlier checkpoint") from error
+            raise self._diverged(f"validation after step {step}: the model's output is not finite ({error})", step) from error
+        except PointsBeyondVoxelGrid as error:
+            raise self._diverged(f"validation after step {step}: the predicted geometry cannot be fused ({error})",
+                                 step) from error
         self._kept_work = True
         self._files.record(path)
         self.model.train()
@@ -467,8 +512,9 @@ class Trainer:
         key = self.config.select
         best = best_earlier_score(self.output / "validation.jsonl", key, step)
         if is_improvement(score, best):
-            save_checkpoint(self.model, self.output / SELECTED_FILE,
-                            {**self._provenance(step), "selected_by": key, "score": score}, overwrite=True)
+            with disk_errors_named(self.output, SELECTED_FILE):
+                save_checkpoint(self.model, self.output / SELECTED_FILE,
+                                {**self._provenance(step), "selected_by": key, "score": score}, overwrite=True)
             self._files.record(self.output / SELECTED_FILE)
             logger.info("selected step %d: %s %.4f (best before: %s)", step, key, score,
                         "none" if best is None else f"{best:.4f}")
@@ -609,6 +655,12 @@ class Trainer:
                     result.last_checkpoint = self.save(step + 1)
                     result.stopped_early = True
                     result.stop_signal = self._stop_signal
+                    result.skipped_steps = self.nonfinite_total
+                    if result.last_checkpoint is None and self.context.is_main and self._stop_signal is not None:
+                        # the CLI would say a checkpoint was saved
+                        raise Interrupted(self._stop_signal, f"stopped after {step + 1} steps without a checkpoint of "
+                                                             f"them ({self._untrusted_weights()}); --resume goes on "
+                                                             "from the run's newest checkpoint")
                     return result
                 if self.config.checkpoint_every and (step + 1) % self.config.checkpoint_every == 0:
                     self.save(step + 1)
@@ -617,12 +669,20 @@ class Trainer:
                         self.validate(step + 1)
                     except InputError as error:
                         self._keep_the_steps_done(error, step + 1, start)
+            untrusted = self._untrusted_weights()
+            if untrusted is not None:  # its checkpoint and final weights would be the diverged model's
+                raise self._diverged(f"training ended after {result.steps_done} steps, but {untrusted}; no checkpoint "
+                                     f"or final weights were written of them ({self.nonfinite_total} skipped in all)",
+                                     result.steps_done - self.nonfinite_in_a_row)
             if result.steps_done > start:
                 self.save(result.steps_done)
             if self.context.is_main and result.steps_done >= self.config.optim.steps:
-                result.final_checkpoint = save_checkpoint(self.model, self.output / FINAL_FILE, self._provenance(result.steps_done),
-                                                          overwrite=True)  # the run's own (RunFiles)
+                with disk_errors_named(self.output, FINAL_FILE):
+                    result.final_checkpoint = save_checkpoint(self.model, self.output / FINAL_FILE,
+                                                              self._provenance(result.steps_done),
+                                                              overwrite=True)  # the run's own (RunFiles)
                 self._files.record(result.final_checkpoint)
+            result.skipped_steps = self.nonfinite_total
             if self.config.select is not None and (self.output / SELECTED_FILE).is_file():
                 result.selected_checkpoint = self.output / SELECTED_FILE
             return result
