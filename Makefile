@@ -35,7 +35,7 @@ test-cuda: $(STAMP)
 
 demo: $(STAMP)
 	$(BIN)/lumos3d restore examples/lowlight-buu -o out/demo/scene.ply
-	@echo "results in out/demo/: scene.ply, cameras.json, restored/, contact_sheet.png, preview.glb, summary.json"
+	@echo "results in out/demo/: scene.ply, cameras.json, colmap/, restored/, contact_sheet.png, preview.glb, summary.json"
 
 # Retrain the bundled models from ../shared/data/scenes (docs/model-card.md; hours on a CPU).
 weights: $(STAMP)
