@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import pytest
 import torch
+import torch.nn.functional as F
 from assertions import expect_input_error
 
 from lumos3d_cli.io.cameras import Cameras
@@ -123,6 +124,11 @@ def test_targets_leave_out_held_out_views_and_follow_the_cameras(buu):
     assert fitted.names == ["c.png", "a.png"] and targets.shape == (2, 3, 42, 56)
     colours = network_colours(network, model, (42, 56))
     assert torch.equal(targets[1], colours[0]) and 0 <= float(colours.min()) <= float(colours.max()) <= 1
+    # at refinement's working size: the full-size stack was a third full-resolution copy of the photos
+    restored = torch.rand(3, 3, 42, 56, generator=torch.Generator().manual_seed(1))
+    targets, fitted = refinement_targets(network, model, photos, restored, [0, 1, 2], names, cameras, None, max_side=28)
+    assert targets.shape == (3, 3, 21, 28) and fitted.sizes == cameras.sizes  # refinement rescales the cameras
+    torch.testing.assert_close(targets[1], F.interpolate(restored[None, 0], size=(21, 28), mode="area")[0])
 
 
 @pytest.mark.parametrize("steps", [0, 3])

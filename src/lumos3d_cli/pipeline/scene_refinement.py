@@ -22,6 +22,7 @@ from lumos3d_cli.model.gaussian_adapter import SH_START
 from lumos3d_cli.model.lumos3d import Lumos3D
 from lumos3d_cli.pipeline.network_pass import NetworkPass
 from lumos3d_cli.pipeline.progress import JobProgress
+from lumos3d_cli.refine.photometric import working_size
 from lumos3d_cli.refine.refinement import RefinementResult, refine_gaussians
 from lumos3d_cli.refine.settings import DensifySettings, RefineSettings
 
@@ -40,11 +41,15 @@ def network_colours(network: NetworkPass, model: Lumos3D, size: tuple[int, int])
 def refinement_targets(
     network: NetworkPass, model: Lumos3D, photos: torch.Tensor, restored_photos: torch.Tensor | None,
     selected: Sequence[int], names: Sequence[str], cameras: Cameras, fitted: Sequence[bool] | None,
+    max_side: int | None = None,
 ) -> tuple[torch.Tensor, Cameras]:
-    """(targets [T, 3, H, W], their cameras) for the views that have a camera, a target and are
+    """(targets [T, 3, h, w], their cameras) for the views that have a camera, a target and are
     fitted. photos [V, 3, H, W] (the working copy); restored_photos [V, 3, H, W] the operator's
     restoration of all photos, or None for a regression model (then only the `selected` views,
-    which the network saw, have a target); fitted [V] bool (None: all)."""
+    which the network saw, have a target); fitted [V] bool (None: all). With `max_side` each
+    target is area-downsampled to the size refinement works at (`refine.photometric.working_size`)
+    before they are stacked: at the photos' size they were a third full-resolution copy of every
+    photo (1.9 GB for six of 27 MP). The cameras keep the photos' size (refinement rescales them)."""
     if restored_photos is not None:
         sources = {name: restored_photos[index] for index, name in enumerate(names)}
     else:
@@ -52,7 +57,15 @@ def refinement_targets(
         sources = {names[index]: colours[position] for position, index in enumerate(selected)}
     keep = [i for i, name in enumerate(cameras.names)
             if name in sources and (fitted is None or fitted[list(names).index(name)])]
-    return torch.stack([sources[cameras.names[i]] for i in keep]), cameras[keep]
+    height, width = photos.shape[-2:]
+    size = (width, height) if max_side is None else working_size(width, height, max_side)
+
+    def at_working_size(image: torch.Tensor) -> torch.Tensor:
+        if tuple(image.shape[-2:]) == (size[1], size[0]):
+            return image
+        return F.interpolate(image[None].float(), size=(size[1], size[0]), mode="area")[0]
+
+    return torch.stack([at_working_size(sources[cameras.names[i]]) for i in keep]), cameras[keep]
 
 
 def refine_scene(

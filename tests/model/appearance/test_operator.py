@@ -4,6 +4,7 @@ import torch
 from lumos3d_cli.io.colour import linear_to_srgb, srgb_to_linear
 from lumos3d_cli.model.appearance.curve import CURVE_KNOTS, MAX_GAIN
 from lumos3d_cli.model.appearance.local_correction import LOCAL_MAX_STOPS
+from lumos3d_cli.model.appearance import operator as operator_module
 from lumos3d_cli.model.appearance.operator import MATRIX_BOUND, AppearanceOperator
 
 
@@ -108,6 +109,24 @@ def test_gradients_reach_every_parameter():
     out.mean().backward()
     for parameter in raw:
         assert bool(torch.isfinite(parameter.grad).all()) and float(parameter.grad.abs().sum()) > 0
+
+
+@pytest.mark.parametrize("band", [1, 7 * 3 * 24, 10**9])  # one row a band, a band of 7 rows, one band
+def test_restoring_in_bands_of_rows_gives_the_whole_images_result_and_gradients(monkeypatch, band):
+    """Full-resolution photos are restored in bands of rows (a 27-MP view held 3 GB of temporaries)."""
+    images = _images(1, 3, height=20, width=24) * 1.2  # some near-clipped pixels: their chromaticity is kept
+    raw = [torch.randn(1, 3, CURVE_KNOTS - 1) * 2, torch.randn(1, 3, 3), torch.randn(1, 3, 1, 8, 8)]
+    monkeypatch.setattr(operator_module, "_PIXELS_PER_BAND", 10**9)
+    parameters = [tensor.clone().requires_grad_(True) for tensor in raw]
+    whole = AppearanceOperator.from_raw(*parameters).apply(images.clamp(0, 1))
+    whole.square().mean().backward()
+    monkeypatch.setattr(operator_module, "_PIXELS_PER_BAND", band)
+    banded_parameters = [tensor.clone().requires_grad_(True) for tensor in raw]
+    banded = AppearanceOperator.from_raw(*banded_parameters).apply(images.clamp(0, 1))
+    banded.square().mean().backward()
+    torch.testing.assert_close(banded, whole, atol=1e-6, rtol=0)
+    for ours, theirs in zip(banded_parameters, parameters):
+        torch.testing.assert_close(ours.grad, theirs.grad, atol=1e-6, rtol=1e-5)
 
 
 def test_require_finite_names_the_part():

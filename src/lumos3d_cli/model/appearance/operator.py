@@ -24,6 +24,7 @@ from lumos3d_cli.model.appearance.clipped_highlights import keep_input_chromatic
 from lumos3d_cli.model.appearance.curve import CURVE_KNOTS, MAX_GAIN, apply_curve, bound_slopes, curve_knots
 from lumos3d_cli.model.appearance.local_correction import LOCAL_MAX_STOPS, bound_log_gain, upsample_log_gain
 
+_PIXELS_PER_BAND = 1 << 22  # pixels of all images together restored at once (one band of 4 M: 0.4 GB of temporaries)
 MATRIX_BOUND = 0.5  # every entry within +-0.5 of the identity's: casts, not channel swaps
 
 
@@ -109,16 +110,28 @@ class AppearanceOperator:
         if batch != self.batch:
             raise ValueError(f"operator holds {self.batch} scenes, images {batch}")
         with torch.autocast(linear.device.type, enabled=False):
-            # Negative values after the matrix are light that does not exist: clamp them to black.
-            mixed = torch.einsum("bij,bvjhw->bvihw", self.matrix.float(), linear.float()).clamp_min(0.0)
+            gain = None
             if self.local_log2_gain is not None:
                 if self.local_log2_gain.shape[1] != views:
                     raise ValueError(f"operator has local grids for {self.local_log2_gain.shape[1]} views, images {views}")
                 grid = self.local_log2_gain.flatten(0, 1)  # [B*V, C, g, g]
                 gain = torch.exp2(upsample_log_gain(grid, height, width)).reshape(batch, views, -1, height, width)
-                mixed = mixed * gain
-            # near-clipped photo pixels keep their own chromaticity (model/appearance/clipped_highlights.py)
-            return keep_input_chromaticity(linear.float(), apply_curve(mixed, self.curve_slopes, self.knots))
+            # Every step below is per pixel: done in bands of rows, so that a full-resolution photo
+            # (27 MP) does not hold a dozen full-size temporaries at once (3 GB of them a view)
+            rows = max(1, _PIXELS_PER_BAND // max(1, batch * views * width))
+            bands = [self._apply_to_rows(linear[..., top:top + rows, :], None if gain is None else gain[..., top:top + rows, :])
+                     for top in range(0, height, rows)]
+            return bands[0] if len(bands) == 1 else torch.cat(bands, dim=-2)
+
+    def _apply_to_rows(self, linear: torch.Tensor, gain: torch.Tensor | None) -> torch.Tensor:
+        """`apply_linear` of rows of the images, linear [B, V, 3, h, W], with the local gain of
+        those rows, gain [B, V, C, h, W] (None: no local grid)."""
+        # Negative values after the matrix are light that does not exist: clamp them to black.
+        mixed = torch.einsum("bij,bvjhw->bvihw", self.matrix.float(), linear.float()).clamp_min(0.0)
+        if gain is not None:
+            mixed = mixed * gain
+        # near-clipped photo pixels keep their own chromaticity (model/appearance/clipped_highlights.py)
+        return keep_input_chromaticity(linear.float(), apply_curve(mixed, self.curve_slopes, self.knots))
 
     def apply(self, images: torch.Tensor) -> torch.Tensor:
         """images [B, V, 3, H, W] sRGB in [0, 1] -> restored sRGB [B, V, 3, H, W] in [0, 1], float32."""
