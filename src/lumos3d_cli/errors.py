@@ -37,6 +37,11 @@ class NonFiniteError(InputError):
     """A tensor or file holds NaN or Inf where finite values are required."""
 
 
+class DiskError(InputError):
+    """A full or unwritable disk met while writing: the user's to fix (exit 2), but no fault of
+    the data being read, which a caller that skips bad data must not take it for."""
+
+
 class RunError(Exception):
     """A long run stopped for a reason its message explains (e.g. training diverged)."""
 

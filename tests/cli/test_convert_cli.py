@@ -136,4 +136,8 @@ def test_links_that_lead_round_in_a_loop_are_named(tmp_path, run_cli):
     (tmp_path / "c.splat").symlink_to("d.splat")
     expect_input_error(run_cli("convert", tmp_path / "scene.ply", "-o", tmp_path / "c.splat"),
                        "c.splat is a link to d.splat, whose links lead round in a loop")
-    assert listing(tmp_path) == ["a.ply", "b.ply", "c.splat", "d.splat", "scene.ply"]
+    (tmp_path / "e.splat").symlink_to("f.splat")  # a chain of links that ends at nothing is no loop
+    (tmp_path / "f.splat").symlink_to("nowhere.splat")
+    expect_input_error(run_cli("convert", tmp_path / "scene.ply", "-o", tmp_path / "e.splat"),
+                       "e.splat is a link to f.splat, which does not exist")
+    assert listing(tmp_path) == ["a.ply", "b.ply", "c.splat", "d.splat", "e.splat", "f.splat", "scene.ply"]

@@ -165,10 +165,10 @@ def test_reads_files_from_other_writers(tmp_path):
         np.testing.assert_array_equal(fields, expected.astype(np.float32))
 
 
-@pytest.mark.parametrize("text", [False, True])
-def test_a_float64_file_beyond_float32_is_refused_naming_the_property(tmp_path, text):
+@pytest.mark.parametrize(("text", "byte_order"), [(False, "<"), (False, ">"), (True, "<")])
+def test_a_float64_file_beyond_float32_is_refused_naming_the_property(tmp_path, text, byte_order):
     """numpy's overflow warning, then the finite 1e39 called "NaN or Inf" (info: exit 0)."""
-    scene = _plyfile_scene(ply_property_names(0), dtype="f8", text=text)
+    scene = _plyfile_scene(ply_property_names(0), dtype="f8", text=text, byte_order=byte_order)
     scene["vertex"].data["y"][1] = -1e39
     scene.write(str(tmp_path / "far.ply"))
     with warnings.catch_warnings():

@@ -129,6 +129,13 @@ def test_yaml_merge_keys_work_and_explicit_keys_stay_unique(tmp_path):
     (tmp_path / "twice.yaml").write_text("stage: teacher\noutput: x\ndata: {<<: {views: 6}, width: 56, width: 112}\n")
     with pytest.raises(InputError, match=r"twice.yaml: invalid YAML at line 3, column \d+ \(key 'width' given twice"):
         load_config(tmp_path / "twice.yaml")
+    # a mapping merged into one that is itself merged: its own keys beside its merge are no repeats
+    (tmp_path / "nested.yaml").write_text("stage: teacher\noutput: x\nbase: &base {lr: 0.001, steps: 10}\n"
+                                          "defaults: {optim: &o {<<: *base, lr: 0.002}}\noptim: {<<: *o}\n")
+    with pytest.raises(InputError, match="unknown config key 'base'"):  # parsed: the schema has no such key
+        load_config(tmp_path / "nested.yaml")
+    with pytest.raises(InputError, match=r"override value .*invalid YAML.*key 'lr' given twice"):
+        load_config(tmp_path / "merge.yaml", ["optim={lr: 1, lr: 2}"])
 
 
 def test_a_mapping_override_merges_into_its_section_and_a_key_is_given_once(tmp_path):

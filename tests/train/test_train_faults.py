@@ -285,7 +285,8 @@ def test_a_run_that_ends_diverged_fails_without_final_weights(tiny_config):
     assert _unwrapped("(3 skipped in all); training diverged, and no checkpoint of this run holds weights from before: "
                       "start a new run (--new-run) with a lower optim.lr") in _unwrapped(result.err)
     assert result.out == "" and not (_output(config) / "final.safetensors").exists()
-    assert not list(_output(config).glob("checkpoints/step_*"))
+    # after one skipped step (one bad batch, as far as the run can tell) step 2 was still saved
+    assert [p.name for p in _output(config).glob("checkpoints/step_*")] == ["step_00000002"]
 
 
 def _full_disk_in_torch_save(obj, handle):
@@ -330,6 +331,29 @@ def test_a_full_disk_during_a_checkpoint_is_named_and_leaves_the_earlier_ones(ti
         trainer.run()
     assert sorted(p.name for p in checkpoints.iterdir()) == ["latest", "step_00000001"]  # nothing half-written
     assert (checkpoints / "latest").read_text().strip() == "step_00000001"
+
+
+def test_a_full_disk_while_selecting_is_no_bad_sample(tiny_config, monkeypatch):
+    """selected.safetensors' full disk went the way of a bad validation sample: a checkpoint
+    written onto the full disk, and advice to leave a scene out."""
+    import errno
+
+    from lumos3d_cli.train import trainer as trainer_module
+
+    trainer = Trainer(load_config(tiny_config(name="full-select", optim__steps=4, validate_every=2,
+                                              validation_samples=1, select="psnr"), []), setup_distributed("cpu"))
+    real_save = trainer_module.save_checkpoint
+
+    def full_for_the_selection(model, path, *args, **kwargs):
+        if path.name == "selected.safetensors":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_save(model, path, *args, **kwargs)
+
+    monkeypatch.setattr(trainer_module, "save_checkpoint", full_for_the_selection)
+    with pytest.raises(InputError) as error:
+        trainer.run()
+    assert str(error.value) == (f"{trainer.output}: no space left on the device while writing selected.safetensors, which "
+                                "was not kept; make room or make the folder writable, then continue with --resume")
 
 
 def test_a_failure_of_a_checkpoint_writer_that_is_no_full_disk_stays_an_error(tiny_config, monkeypatch):

@@ -519,8 +519,10 @@ def test_checkpoints_stop_at_divergence_and_the_stop_names_one_to_start_from(tin
     with pytest.raises(RunError) as error:
         trainer.run()
     checkpoints = trainer.output / "checkpoints"
-    assert sorted(p.name for p in checkpoints.glob("step_*")) == ["step_00000001", "step_00000002", "step_00000003"]
-    assert (checkpoints / "latest").read_text().strip() == "step_00000003"
+    # step 4 follows one skipped step (one bad batch, as far as the run can tell): saved; from two
+    # in a row on, none. Retention keeps step 2, from before the first non-finite loss
+    assert sorted(p.name for p in checkpoints.glob("step_*")) == ["step_00000002", "step_00000003", "step_00000004"]
+    assert (checkpoints / "latest").read_text().strip() == "step_00000004"
     # step_00000003 holds the weights step 3 started from, which gave the first non-finite loss
     good = checkpoints / "step_00000002"
     assert str(error.value).startswith("training stopped at step 5: 3 steps in a row had a non-finite loss")
@@ -535,29 +537,40 @@ def test_a_run_that_ends_on_skipped_steps_writes_no_weights_of_them(tiny_config,
     """A run whose last steps were skipped wrote final.safetensors from the weights that made them
     non-finite and said "4 steps done"."""
     trainer = _trainer(tiny_config(name="ends-skipped", optim__steps=4, checkpoint_every=2))
-    _nan_from(trainer, monkeypatch, {1, 4})
-    with pytest.raises(RunError, match=r"training ended after 4 steps, but the last step was skipped for a non-finite "
-                                       r"loss or gradient; no checkpoint or final weights were written of them \(2 "
-                                       r"skipped in all\); training diverged"):
+    _nan_from(trainer, monkeypatch, {3, 4})
+    with pytest.raises(RunError, match=r"training ended after 4 steps, but the last 2 steps were skipped for a "
+                                       r"non-finite loss or gradient; no checkpoint or final weights were written of "
+                                       r"them \(2 skipped in all\); training diverged"):
         trainer.run()
     assert not (trainer.output / "final.safetensors").exists()
     assert [p.name for p in (trainer.output / "checkpoints").glob("step_*")] == ["step_00000002"]
 
 
+def test_one_skipped_step_at_the_end_is_one_bad_batch_not_a_diverged_run(tiny_config, monkeypatch):
+    """A skipped step leaves the weights as they were: refusing them failed a run on its last
+    batch, and a resume replayed that batch."""
+    trainer = _trainer(tiny_config(name="last-batch", optim__steps=4, checkpoint_every=2))
+    _nan_from(trainer, monkeypatch, {4})
+    result = trainer.run()
+    assert result.final_checkpoint.is_file() and result.skipped_steps == 1
+    assert (trainer.output / "checkpoints" / "latest").read_text().strip() == "step_00000004"
+
+
 def test_a_signal_after_a_skipped_step_saves_no_checkpoint_and_says_so(tiny_config, monkeypatch):
     trainer = _trainer(tiny_config(name="stop-skipped", optim__steps=4, checkpoint_every=1))
-    calls = _nan_from(trainer, monkeypatch, {2})
+    calls = _nan_from(trainer, monkeypatch, {2, 3})
     step = trainer.step
 
-    def signalled_in_step_2(index):
+    def signalled_in_step_3(index):
         report = step(index)
-        if calls["n"] == 2:
+        if calls["n"] == 3:
             os.kill(os.getpid(), signal.SIGTERM)  # run()'s handler asks for a stop after this step
         return report
 
-    monkeypatch.setattr(trainer, "step", signalled_in_step_2)
-    with pytest.raises(Interrupted, match=r"stopped after 2 steps without a checkpoint of them \(the last step was "
-                                          r"skipped .*\); --resume goes on from the run's newest checkpoint") as stop:
+    monkeypatch.setattr(trainer, "step", signalled_in_step_3)
+    with pytest.raises(Interrupted, match=r"stopped after 3 steps without a checkpoint of them \(the last 2 steps "
+                                          r"were skipped .*\); --resume goes on from the run's newest checkpoint") as stop:
         trainer.run()
     assert stop.value.signum == signal.SIGTERM
-    assert (trainer.output / "checkpoints" / "latest").read_text().strip() == "step_00000001"
+    # step 2's weights are step 1's (a skipped step changes none): saved; step 3 followed a second skip
+    assert (trainer.output / "checkpoints" / "latest").read_text().strip() == "step_00000002"

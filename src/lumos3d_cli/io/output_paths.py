@@ -3,6 +3,7 @@ then fails to write: its folder must be creatable (no regular file on the way) a
 
 from __future__ import annotations
 
+import errno
 import os
 from pathlib import Path
 
@@ -27,6 +28,15 @@ def dangling_link(path: Path) -> Path | None:
     return None
 
 
+def _leads_round(link: Path) -> bool:
+    """Whether following `link` ends in a loop of links (a chain that ends at nothing does not)."""
+    try:
+        os.stat(link)
+    except OSError as error:
+        return error.errno == errno.ELOOP
+    return False
+
+
 def check_output_path(path: Path | str | None, parameter: str | None, folder: bool = False) -> None:
     """InputError (naming `parameter` and `path`) unless `path` can be written: as a folder when
     `folder`, else as a file. None (an optional output not asked for) passes."""
@@ -36,7 +46,7 @@ def check_output_path(path: Path | str | None, parameter: str | None, folder: bo
     link = dangling_link(path)
     if link is not None:
         target = os.readlink(link)
-        if os.path.lexists(link.parent / target):  # there, but leading on through links back to itself
+        if _leads_round(link):  # not a link to nothing: links that lead back to themselves
             raise InputError(f"{path}: {link} is a link to {target}, whose links lead round in a loop; fix the links or "
                              "choose another path", parameter=parameter)
         raise InputError(f"{path}: {link} is a link to {target}, which does not exist; create it or choose "

@@ -197,7 +197,7 @@ def read_ply_fields(path: Path | str) -> tuple[np.ndarray, int]:
     largest = float(np.finfo(np.float32).max)
     for name in wanted:  # a float64 file's value beyond float32 became Inf in the cast (numpy's warning, then "Inf")
         values = columns.get(name)
-        if values is not None and values.dtype == np.float64:
+        if values is not None and values.dtype.kind == "f" and values.dtype.itemsize == 8:  # '>f8' too
             beyond = np.isfinite(values) & (np.abs(values) > largest)
             if beyond.any():
                 raise InputError(f"{path}: property {name} holds values up to {float(np.abs(values[beyond]).max()):.4g}, "

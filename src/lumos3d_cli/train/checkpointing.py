@@ -18,7 +18,7 @@ from pathlib import Path
 import torch
 from safetensors import SafetensorError
 
-from lumos3d_cli.errors import InputError
+from lumos3d_cli.errors import DiskError, InputError
 from lumos3d_cli.io.atomic import current_umask, remove_leftovers, temporary_prefix, write_bytes_atomic
 from lumos3d_cli.io.output_set import DISK_ERRORS
 from lumos3d_cli.model.checkpoints import read_checkpoint, save_checkpoint
@@ -123,8 +123,8 @@ def disk_errors_named(folder: Path, writing: str, then: str = "continue with --r
         problem = _disk_problem(error)
         if problem is None:
             raise
-        raise InputError(f"{folder}: {problem} while writing {writing}, which was not kept; make room or make the "
-                         f"folder writable, then {then}") from error
+        raise DiskError(f"{folder}: {problem} while writing {writing}, which was not kept; make room or make the "
+                        f"folder writable, then {then}") from error
 
 
 def _run_of(folder: Path) -> str | None:

@@ -213,14 +213,6 @@ def _yaml_problem(error: yaml.YAMLError) -> str:
     return f"{where} ({getattr(error, 'problem', None) or ' '.join(str(error).split())})"
 
 
-def _override_value(text: str):
-    """An override's value by YAML's rules; InputError (one line) when it is not YAML."""
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as error:
-        raise InputError(f"override value {text!r}: invalid YAML{_yaml_problem(error)}; quote it or correct it") from None
-
-
 _MERGE_TAG = "tag:yaml.org,2002:merge"  # `<<: *anchor`, YAML 1.1's merge key
 
 
@@ -230,11 +222,19 @@ class _UniqueKeyLoader(yaml.SafeLoader):
     in `yaml.safe_load`: a key given explicitly beside them overrides the merged one, as YAML
     intends, so only the explicit keys must be unique."""
 
+    def flatten_mapping(self, node):
+        """Resolves the merge keys (which have no constructor of their own), noting first the keys
+        each mapping gives itself: a mapping merged into another is flattened with it, before
+        its own turn, and its merged keys must not then count as written twice."""
+        explicit = self.__dict__.setdefault("_explicit_keys", {})
+        if id(node) not in explicit:
+            explicit[id(node)] = (node, [key_node for key_node, _ in node.value if key_node.tag != _MERGE_TAG])
+        super().flatten_mapping(node)
+
     def construct_mapping(self, node, deep=False):
-        explicit = [key_node for key_node, _ in node.value if key_node.tag != _MERGE_TAG]
-        self.flatten_mapping(node)  # resolves the merge keys, which have no constructor of their own
+        self.flatten_mapping(node)
         seen = set()
-        for key_node in explicit:
+        for key_node in self._explicit_keys[id(node)][1]:
             key = self.construct_object(key_node, deep=True)
             try:
                 hash(key)
@@ -246,6 +246,15 @@ class _UniqueKeyLoader(yaml.SafeLoader):
                                                         key_node.start_mark)
             seen.add(key)
         return super().construct_mapping(node, deep=deep)
+
+
+def _override_value(text: str):
+    """An override's value by YAML's rules, a key given twice in it refused as in a file
+    (`'optim={lr: 1, lr: 2}'`); InputError (one line) when it is not YAML."""
+    try:
+        return yaml.load(text, Loader=_UniqueKeyLoader)
+    except yaml.YAMLError as error:
+        raise InputError(f"override value {text!r}: invalid YAML{_yaml_problem(error)}; quote it or correct it") from None
 
 
 def _non_finite(values, prefix: str = "") -> list[str]:

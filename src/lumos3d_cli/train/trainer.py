@@ -24,7 +24,7 @@ from torch.nn.parallel import DistributedDataParallel
 from lumos3d_cli.data.degradations import degrade, white_balance_shift
 from lumos3d_cli.data.multiview_dataset import MultiViewDataset
 from lumos3d_cli.data.scene_records import scan_dl3dv, scan_scene_folders
-from lumos3d_cli.errors import STOP_SIGNALS, InputError, Interrupted, NonFiniteError, RunError
+from lumos3d_cli.errors import STOP_SIGNALS, DiskError, InputError, Interrupted, NonFiniteError, RunError
 from lumos3d_cli.losses.appearance import appearance_loss
 from lumos3d_cli.losses.objective import StageBatch, TrainingObjective
 from lumos3d_cli.model.appearance.conversion import with_appearance
@@ -100,6 +100,11 @@ class TrainResult:
     last_checkpoint: Path | None = None
     selected_checkpoint: Path | None = None
     skipped_steps: int = 0
+
+
+# Steps skipped in a row from which the weights, not one batch, are taken to be what failed: two
+# batches in a row (training draws them at random) are not both broken.
+_DIVERGED_IN_A_ROW = 2
 
 
 def check_max_steps(max_steps: int | None) -> None:
@@ -356,13 +361,14 @@ class Trainer:
         }
 
     def _untrusted_weights(self) -> str | None:
-        """Why the weights are not to be saved as the run's (None: they may be): the last steps
-        were skipped, so these are the weights that made their loss or gradient non-finite, or a
-        weight is not finite. Every rank holds the same weights and counts, so all agree."""
+        """Why the weights are not to be saved as the run's (None: they may be): the last
+        `_DIVERGED_IN_A_ROW` steps or more were skipped, so the weights, not one batch, made their
+        loss or gradient non-finite (a skipped step leaves the weights as they were: one bad batch
+        says nothing of them, and refusing them failed a 30,000-step run on its last batch), or
+        a weight is not finite. Every rank holds the same weights and counts, so all agree."""
         skipped = self.nonfinite_in_a_row
-        if skipped:
-            steps = f"the last {skipped} steps were" if skipped > 1 else "the last step was"
-            return f"{steps} skipped for a non-finite loss or gradient"
+        if skipped >= _DIVERGED_IN_A_ROW:
+            return f"the last {skipped} steps were skipped for a non-finite loss or gradient"
         tensors = self.model.state_dict().values()
         if not all(bool(torch.isfinite(tensor).all()) for tensor in tensors if tensor.is_floating_point()):
             return "the weights are not finite"
@@ -667,6 +673,8 @@ class Trainer:
                 if self.config.validate_every and (step + 1) % self.config.validate_every == 0:
                     try:
                         self.validate(step + 1)
+                    except DiskError:  # writing selected.safetensors: no bad sample to leave out
+                        raise
                     except InputError as error:
                         self._keep_the_steps_done(error, step + 1, start)
             untrusted = self._untrusted_weights()
