@@ -22,6 +22,7 @@ from collections.abc import Sequence
 from concurrent.futures import Future
 from pathlib import Path
 
+import numpy as np
 import pycolmap
 
 from lumos3d_cli.checks import require_finite
@@ -75,8 +76,7 @@ class EarlyRegistration:
             return
         self._photos.set_result(photos)
         try:
-            brightened = auto_gamma_array(photos.pixels)
-            require_finite("photos for structure-from-motion", brightened)
+            brightened = _BrightenedPhotos(photos.pixels)
             self._run.set_result(run_colmap(brightened, photos.original_sizes, self.long_side,
                                             threads=matching_threads(len(self.paths)), stop=self._stop))
         except BaseException as error:  # noqa: BLE001 - handed to the thread that waits for it
@@ -89,6 +89,24 @@ class EarlyRegistration:
     def colmap_run(self) -> ColmapRun:
         """COLMAP's run on the photos' blind tone curve (`eval.tone_curve.auto_gamma_array`)."""
         return self._run.result()
+
+
+class _BrightenedPhotos(Sequence):
+    """The photos pixels [V, 3, H, W] through the blind tone curve (`auto_gamma_array`, per
+    photo), each computed when structure-from-motion reads it: brightened all at once they were a
+    full-resolution copy of every photo, held through the whole registration (3.6 GB for 25
+    photos of 12 MP, where SfM sees each at 384 px)."""
+
+    def __init__(self, pixels: np.ndarray):
+        self._pixels = pixels
+
+    def __len__(self) -> int:
+        return len(self._pixels)
+
+    def __getitem__(self, index: int) -> np.ndarray:
+        brightened = auto_gamma_array(self._pixels[index])
+        require_finite("photos for structure-from-motion", brightened)
+        return brightened
 
 
 def start_early_registration(paths: Sequence[Path], preset: RestorePreset, geometry: str,
