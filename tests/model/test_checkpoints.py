@@ -253,6 +253,24 @@ def test_tensors_no_network_parameter_can_take_are_refused_naming_them(tmp_path,
         read_checkpoint(tmp_path / "sparse.pt", REDUCED)
 
 
+def test_a_zip_bomb_is_refused_before_torch_expands_it(tmp_path, source):
+    """A 1 MB .pt whose one entry deflates to 1 GB took 1.4 GB of memory in `info` before it was
+    found to be no checkpoint: torch.save stores its entries uncompressed."""
+    import zipfile
+
+    path = tmp_path / "bomb.pt"
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        with archive.open("bomb/data/0", "w", force_zip64=True) as entry:
+            for _ in range(80):
+                entry.write(bytes(1 << 20))  # 80 MiB of zeros, streamed: a few kB on disk
+    for read in (read_checkpoint, summarize_checkpoint):
+        with pytest.raises(InputError, match=r"bomb\.pt: entry bomb/data/0 expands \d+-fold to 0.08 GiB; torch.save "
+                                             r"compresses nothing"):
+            read(path)
+    torch.save(_vggt_state(source), tmp_path / "vggt.pt")  # what torch.save writes is read as before
+    assert read_checkpoint(tmp_path / "vggt.pt", REDUCED).format == "vggt"
+
+
 def test_two_keys_naming_one_parameter_are_refused(tmp_path, source):
     """AnySplat's `encoder.x` beside an unprefixed `x`: one copy won by key order, the load called strict."""
     state = _anysplat_state(source)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pickle
 import warnings
+import zipfile
 from pathlib import Path
 
 import torch
@@ -60,7 +61,32 @@ def read_state_dict(path: Path | str) -> dict[str, torch.Tensor]:
     return load_torch_state_dict(path)
 
 
+# torch.save stores its archive's entries uncompressed; a compressed entry that expands this much
+# (and beyond _MAX_EXPANDED_BYTES) is a zip bomb, which torch.load would expand in memory before
+# any key is checked (a 1 MB file took 1.4 GB for `info`)
+_MAX_EXPANSION = 100
+_MAX_EXPANDED_BYTES = 64 << 20
+
+
+def _refuse_a_zip_bomb(path: Path) -> None:
+    """InputError when `path` is a zip archive holding a compressed entry that expands more than
+    _MAX_EXPANSION-fold to over _MAX_EXPANDED_BYTES; anything else (not a zip, damaged) is left
+    to torch.load to judge."""
+    try:
+        with zipfile.ZipFile(path) as archive:
+            entries = archive.infolist()
+    except (zipfile.BadZipFile, OSError, ValueError):
+        return
+    for entry in entries:
+        if (entry.compress_type != zipfile.ZIP_STORED and entry.file_size > _MAX_EXPANDED_BYTES
+                and entry.file_size > _MAX_EXPANSION * max(1, entry.compress_size)):
+            raise InputError(f"{path}: entry {entry.filename} expands {entry.file_size / max(1, entry.compress_size):.0f}-fold "
+                             f"to {entry.file_size / 2**30:.2f} GiB; torch.save compresses nothing, so this is no "
+                             "checkpoint it wrote (a zip bomb?): lumos3d does not load it")
+
+
 def load_torch_state_dict(path: Path) -> dict[str, torch.Tensor]:
+    _refuse_a_zip_bomb(path)
     try:
         with warnings.catch_warnings():  # torch's warnings about a raw pickle's protocol: the error below says it
             warnings.simplefilter("ignore")
