@@ -65,7 +65,7 @@ def test_registration_on_the_restoration_runs_after_the_network_on_its_own_threa
     built = build_scene(photos, NAMES, model, preset, geometry="sfm", max_views=3)
     assert len(threads) == 1 and threads[0].startswith("lumos3d-sfm")
     assert built.geometry.summary()["brightening"] == "the model's restoration operator"
-    brightened = scene_stages.Brightened(scene_stages._global_restoration(built.network, photos), "restoration")
+    brightened = scene_stages.Brightened(scene_stages.operator_restoration(built.network, photos, []), "restoration")
     direct = register_views(photos, NAMES, "sfm", None, SilentProgress(), brightened, sfm_long_side=384)
     assert torch.equal(built.registration.cameras.extrinsics, direct.cameras.extrinsics)
     torch.testing.assert_close(built.restored_photos, operator_restoration(built.network, photos, built.selected))

@@ -19,6 +19,7 @@ process may have taken since (after a reboot; in a container every run may be pr
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import logging
 import os
@@ -73,7 +74,14 @@ def owner_tag() -> str:
     """This process as temporary names and work folders carry it, "<pid>-<host>-<start time>" (0
     where the start time cannot be told): enough to tell a killed run's from a live one's, also
     when the process id has been reused (in a container every run may be process 1)."""
-    return f"{os.getpid()}-{_HOST}-{_start_time(os.getpid()) or 0}"
+    return _own_tag(os.getpid())
+
+
+@functools.lru_cache(maxsize=4)
+def _own_tag(pid: int) -> str:
+    """`owner_tag` of process `pid`, read from /proc once: every temporary name carries it (a
+    render of thousands of frames), and a process's start time does not change."""
+    return f"{pid}-{_HOST}-{_start_time(pid) or 0}"
 
 
 def owner_has_ended(tag: str) -> bool:

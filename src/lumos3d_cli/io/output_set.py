@@ -72,7 +72,9 @@ def _is_within(path: Path, folder: Path) -> bool:
 def _resolved(path: Path) -> Path:
     try:
         return Path(path).expanduser().resolve(strict=False)
-    except (RuntimeError, OSError) as error:  # Python 3.11 raises RuntimeError for a loop of links, 3.13 OSError
+    except (RuntimeError, OSError) as error:  # a loop of links: Python 3.11 raises RuntimeError, 3.13 OSError ELOOP
+        if isinstance(error, OSError) and error.errno != errno.ELOOP:
+            raise
         raise InputError(f"{path}: its symbolic links lead round in a loop, to no file; fix or remove the link") from error
 
 

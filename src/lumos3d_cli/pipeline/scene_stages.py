@@ -80,13 +80,6 @@ def _network_pass(job: SceneJob, selected: list[int]) -> NetworkPass:
     return network
 
 
-def _global_restoration(network: NetworkPass, photos: torch.Tensor) -> torch.Tensor:
-    """Photos [V, 3, H, W] through the scene's predicted operator without its per-view local
-    grids (those exist only for the views the network saw), on the CPU."""
-    operator = network.prediction.appearance.scene(0)
-    return _restored_view_by_view(photos, range(len(photos)), AppearanceOperator(operator.curve_slopes, operator.matrix, None))
-
-
 def _restored_view_by_view(photos: torch.Tensor, views: Sequence[int], operator: AppearanceOperator,
                            restored: torch.Tensor | None = None) -> torch.Tensor:
     """restored[views[i]] = `operator` (its view i's local grid, if any) applied to photos[views[i]],
@@ -96,15 +89,15 @@ def _restored_view_by_view(photos: torch.Tensor, views: Sequence[int], operator:
     restored = torch.empty(photos.shape, dtype=torch.float32) if restored is None else restored
     with torch.no_grad():
         for position, view in enumerate(views):
-            one = operator if operator.local_log2_gain is None else operator.views(slice(position, position + 1))
+            one = operator.views(slice(position, position + 1))
             restored[view] = restore_photos(photos[view:view + 1].to(operator.matrix.device), one)[0].cpu()
     return restored
 
 
-def operator_restoration(network: NetworkPass, photos: torch.Tensor, selected: list[int]) -> torch.Tensor:
+def operator_restoration(network: NetworkPass, photos: torch.Tensor, selected: Sequence[int]) -> torch.Tensor:
     """All photos [V, 3, H, W] restored as the Gaussians' colours are: the whole operator (with
-    its per-view local grid) for the views the network saw, its curve and matrix for the rest;
-    on the CPU."""
+    its per-view local grid) for the views the network saw, its curve and matrix for the rest
+    (every view, with `selected` empty); on the CPU."""
     operator = network.prediction.appearance.scene(0)
     others = sorted(set(range(len(photos))) - set(selected))
     restored = _restored_view_by_view(photos, selected, operator)
@@ -124,7 +117,7 @@ def restoration_pass(job: SceneJob) -> SceneJob:
         return job
     job.selected = even_subset(len(job.names), job.view_limit, required=list(job.required_views))
     job.network = _network_pass(job, job.selected)
-    job.brightened = Brightened(_global_restoration(job.network, job.photos), "the model's restoration operator")
+    job.brightened = Brightened(operator_restoration(job.network, job.photos, []), "the model's restoration operator")
     return job
 
 
