@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from lumos3d_cli.errors import InputError
+from lumos3d_cli.model.checkpoints import read_provenance
 from lumos3d_cli.train.config import load_config
 from lumos3d_cli.train.distributed import setup_distributed
 from lumos3d_cli.train.trainer import Trainer
@@ -194,6 +195,25 @@ def test_a_resume_from_an_older_checkpoint_drops_what_later_steps_wrote(tiny_con
     assert [json.loads(line)["step"] for line in (output / "validation.jsonl").read_text().splitlines()] == [3]
     manifest = json.loads((output / ".lumos3d-manifest.json").read_text())["files"]
     assert "final.safetensors" not in manifest and "validation/step_00000006.png" not in manifest
+
+
+def test_a_resume_past_the_final_step_drops_the_shorter_runs_final_weights(tiny_config):
+    """A finished 4-step run resumed to 8 steps and stopped at 6 by --max-steps kept the 4-step
+    final.safetensors beside a config of 8 steps, as if it were the run's final weights."""
+    config = tiny_config(name="longer", optim__steps=4)
+    Trainer(load_config(config, []), setup_distributed("cpu")).run()
+    output = _output(config)
+    assert read_provenance(output / "final.safetensors")["steps"] == 4
+    result = run_lumos3d("train", config, "optim.steps=8", "--resume", "--max-steps", 6, "--json")
+    assert result.code == 0, result.err[-3000:]
+    assert json.loads(result.out)["steps_done"] == 6 and not (output / "final.safetensors").exists()
+    assert "final.safetensors" not in json.loads((output / ".lumos3d-manifest.json").read_text())["files"]
+    result = run_lumos3d("train", config, "optim.steps=8", "--resume", "--json")  # on to the end: final again
+    assert result.code == 0, result.err[-3000:]
+    assert read_provenance(output / "final.safetensors")["steps"] == 8
+    result = run_lumos3d("train", config, "optim.steps=8", "--resume", "--json")  # nothing left to do: kept
+    assert result.code == 0, result.err[-3000:]
+    assert read_provenance(output / "final.safetensors")["steps"] == 8
 
 
 def test_files_may_move_on_resume_but_not_appear_or_go():

@@ -544,16 +544,20 @@ class Trainer:
         return [self.output / "config.yaml", self.output / SELECTED_FILE, *final, *redone]
 
     def _abandoned_on_resume(self, start: int) -> list[Path]:
-        """The files of steps after `start` that a resume from an older checkpoint leaves behind
-        (the newest was damaged): final weights saved later, the pictures of later validations.
-        The resume removes them: they are the work of steps it does again, or not at all."""
+        """The files a resume at `start` leaves out of date: the pictures of validations after
+        `start` (a resume from an older checkpoint, the newest damaged), and final weights of any
+        step count but `start` when the run has reached optim.steps there: saved later, or of an
+        earlier, shorter optim.steps that this run goes on past (a resume stopped by --max-steps
+        or a signal would leave them as the run's "final" weights). The resume removes them:
+        they are the work of steps it does again, or superseded; a checkpoint holds the weights
+        it goes on from."""
         pictures = [path for path in self._written_by_a_run() if path.parent.name == "validation"
                     and int(path.stem.removeprefix("step_")) > start]
         final = self.output / FINAL_FILE
         # only the run's own, as it wrote it (a file of the user's there is the replacement check's to refuse)
-        later_final = (final.is_file() and self._files.manifest.owns(final)
-                       and int(read_provenance(final).get("steps", start + 1)) > start)
-        return [*([final] if later_final else []), *pictures]
+        superseded = (final.is_file() and self._files.manifest.owns(final)
+                      and not (start >= self.config.optim.steps and int(read_provenance(final).get("steps", -1)) == start))
+        return [*([final] if superseded else []), *pictures]
 
     def _request_stop(self, signum, frame) -> None:
         logger.warning("%s: saving a checkpoint and stopping after this step", signal.Signals(signum).name)
@@ -617,7 +621,7 @@ class Trainer:
                     abandoned = self._abandoned_on_resume(start)
                     self._files.require_replaceable([*self._replaced_on_resume(start, end), *abandoned])
                     for path in abandoned:
-                        logger.info("removing %s: written after step %d, which this run continues from", path, start)
+                        logger.info("removing %s: out of date once the run goes on from step %d", path, start)
                         path.unlink()
                         self._files.forget(path)
                 except Exception as error:  # an unreadable file too: every rank must hear of it
