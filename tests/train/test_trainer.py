@@ -361,6 +361,22 @@ def test_a_run_refused_at_the_folder_check_leaves_the_other_runs_files(tiny_conf
     assert (run / "run.json").read_text().startswith('{"run_id": "other"') and (run / "metrics.jsonl").is_file()
 
 
+def test_a_resume_without_the_runs_run_json_says_so(tiny_config):
+    """run.json deleted (or another run's put there): the resume said the checkpoint `latest`
+    names "is missing", beside the folder that holds it."""
+    config = tiny_config(name="unnamed", optim__steps=4, checkpoint_every=2)
+    run = Path(str(config).replace(".yaml", ""))
+    _trainer(config).run(max_steps=2)
+    saved_by = json.loads((run / "run.json").read_text())["run_id"]
+    (run / "run.json").unlink()
+    with pytest.raises(InputError, match=f"saved by run {saved_by}, but .* records no run \\(its .*run.json is missing"):
+        _trainer(config).run(resume=True)
+    (run / "run.json").write_text('{"run_id": "other", "config": "x", "started": "now"}')
+    with pytest.raises(InputError, match=f"saved by run {saved_by}, but .* records run other; put back"):
+        _trainer(config).run(resume=True)
+    assert (run / "checkpoints" / "step_00000002" / "model.safetensors").is_file()
+
+
 def test_a_fresh_run_that_fails_after_its_first_step_keeps_its_logs_and_selection(tiny_config, monkeypatch):
     config = tiny_config(name="late", validate_every=2, validation_samples=1, select="psnr", max_nonfinite_steps=1)
     run = Path(str(config).replace(".yaml", ""))

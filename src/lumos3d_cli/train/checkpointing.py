@@ -23,6 +23,7 @@ from lumos3d_cli.io.atomic import current_umask, remove_leftovers, temporary_pre
 from lumos3d_cli.io.output_set import DISK_ERRORS
 from lumos3d_cli.model.checkpoints import read_checkpoint, save_checkpoint
 from lumos3d_cli.model.lumos3d import Lumos3D
+from lumos3d_cli.train.run_folder import RUN_FILE
 
 MODEL_FILE = "model.safetensors"
 STATE_FILE = "training_state.pt"
@@ -156,6 +157,13 @@ def resume_candidates(output: Path, run_id: str | None) -> list[Path]:
     if named is not None and named not in folders:
         logger.warning("%s names %s, which is missing or not of this run", pointer, named)
     if not folders:
+        others = sorted({_run_of(p) for p in parent.glob("step_*") if p not in folders and (p / MODEL_FILE).is_file()}
+                        - {None, run_id}) if parent.is_dir() else []
+        if others:  # run.json gone or replaced: the checkpoints are there, of another run id
+            recorded = f"run {run_id}" if run_id else f"no run (its {output / RUN_FILE} is missing)"
+            raise InputError(f"{parent}: its checkpoints were saved by run {', '.join(others)}, but {output} records "
+                             f"{recorded}; put back the run's run.json, or start from a checkpoint's weights with "
+                             "model=.../model.safetensors --new-run")
         if named is not None:
             raise InputError(f"{pointer} names {named.name}, but the folder {named} is missing and no other "
                              "checkpoint of the run is there; start without --resume")
