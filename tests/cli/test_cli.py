@@ -125,6 +125,20 @@ def test_degrade_refuses_seeds_beyond_the_generator_and_jpeg_beyond_its_sizes(ru
         expect_input_error(result, f"{image}: 65501x2 pixels; JPEG holds at most 65500 a side")
         assert ".staging" not in result.err
     assert listing(tmp_path) == ["strip.png"]
+    wide = tmp_path / "wide.tif"  # libpng's limit of 1,000,000 a side: OpenCV's encoder failed, an internal error
+    cv2.imwrite(str(wide), np.full((1, 1_000_001, 3), 128, np.uint8))
+    result = run_cli("degrade", wide, "-o", tmp_path / "o")
+    expect_input_error(result, f"{wide}: 1000001x1 pixels; a PNG written here holds at most 1,000,000 a side")
+    assert listing(tmp_path) == ["strip.png", "wide.tif"]
+
+
+def test_an_empty_argument_is_refused_not_read_as_the_current_folder(run_cli, tmp_path, monkeypatch):
+    """`-o "$OUT"` with OUT unset wrote every output into the current folder; `degrade ""` read it."""
+    cv2.imwrite(str(tmp_path / "a.png"), np.full((4, 4, 3), 128, np.uint8))
+    monkeypatch.chdir(tmp_path)
+    expect_input_error(run_cli("degrade", "a.png", "-o", ""), "an empty argument (after '-o' on the command line")
+    expect_input_error(run_cli("degrade", "", "-o", "out"), "an empty argument (after 'degrade'")
+    assert listing(tmp_path) == ["a.png"]
 
 
 def test_degrade_single_file_and_raw(run_cli, shared_data, tmp_path):

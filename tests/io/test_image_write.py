@@ -36,4 +36,6 @@ def test_refuses_non_finite_pixels_and_bad_formats(tmp_path):
         write_image(tmp_path / "a.jpg", np.zeros((4, 4, 3), np.float32), bit_depth=16)
     with pytest.raises(InputError, match="cannot write '.gif'"):
         write_image(tmp_path / "a.gif", np.zeros((4, 4, 3), np.float32))
+    with pytest.raises(InputError, match="1000001x1 pixels; a PNG written here holds at most 1,000,000 a side"):
+        write_image(tmp_path / "a.png", np.zeros((1, 1_000_001, 3), np.float32))  # OSError from OpenCV's encoder
     assert not any(tmp_path.iterdir())

@@ -394,3 +394,53 @@ def _icc_profile(description: str) -> np.ndarray:
     header += bytes(128 - len(header))
     table = struct.pack(">I", 1) + b"desc" + struct.pack(">II", 144, len(desc))
     return np.frombuffer(header + table + desc, np.uint8)
+
+
+@pytest.mark.parametrize("fmt, dtype", [("float", np.float32), ("half", np.float16), ("uint16", np.uint16)])
+def test_grey_tiffs_opencv_misreads_keep_their_samples_and_orientation(tmp_path, caplog, fmt, dtype):
+    """OpenCV refused a one-channel float TIFF as corrupt and read a 16-bit grey one with alpha at
+    8 bits (40000 came back as 156 * 257). The oracle: the samples written, rotated as EXIF
+    orientation 6 says (90 degrees clockwise), alpha warned of as for every photo."""
+    rng = np.random.default_rng(5)
+    grey = (rng.random((4, 6, 1)) * (1 if fmt != "uint16" else 65535)).astype(dtype)
+    _write_oiio(tmp_path / "grey.tif", grey, fmt, Orientation=6)
+    image = read_image(tmp_path / "grey.tif")
+    scale = 65535 if fmt == "uint16" else 1
+    expected = np.rot90(grey.astype(np.float32) / scale, k=-1)
+    np.testing.assert_array_equal(image.pixels, np.repeat(expected, 3, axis=2))
+    assert image.encoding == ("linear" if fmt != "uint16" else "srgb")
+    with_alpha = np.concatenate([grey, np.full_like(grey, 1 if fmt != "uint16" else 65535)], axis=2)
+    with_alpha[0, 0, 1] = 0
+    _write_oiio(tmp_path / "ga.tif", with_alpha, fmt)
+    with caplog.at_level(logging.WARNING):
+        image = read_image(tmp_path / "ga.tif")
+    np.testing.assert_array_equal(image.pixels, np.repeat(grey.astype(np.float32) / scale, 3, axis=2))
+    assert "ga.tif: 4.2 % of its pixels are transparent" in caplog.text
+
+
+def test_photos_beyond_opencvs_limits_are_refused_in_one_line(tmp_path, monkeypatch):
+    """A side beyond 2**20 pixels was an internal error (cv2.error out of imdecode)."""
+    assert cv2.imwrite(str(tmp_path / "wide.tif"), np.full((1, (1 << 20) + 10, 3), 100, np.uint8))
+    with pytest.raises(InputError, match=r"wide.tif: OpenCV cannot decode it \(.*CV_IO_MAX_IMAGE_WIDTH.*\); downscale"):
+        read_image(tmp_path / "wide.tif")
+    import lumos3d_cli.io.photo as photo
+
+    monkeypatch.setattr(photo, "OPENCV_MAX_PIXELS", 100)  # a 1-gigapixel photo, without holding one
+    cv2.imwrite(str(tmp_path / "big.png"), np.zeros((10, 11, 3), np.uint8))
+    with pytest.raises(InputError, match=r"big.png: 11x10 pixels is beyond what OpenCV decodes \(at most 1,048,576 a side"):
+        read_image(tmp_path / "big.png")
+
+
+def test_exr_channels_that_are_neither_rgb_nor_grey_are_refused(tmp_path):
+    """Two colour channels (R, G) read as the first one repeated, G dropped without a word."""
+    pixels = np.stack([np.full((3, 4), 0.2), np.full((3, 4), 0.8)], axis=2).astype(np.float32)
+    _write_oiio(tmp_path / "rg.exr", pixels, "float")
+    with pytest.raises(InputError, match=r"rg.exr: holds the channels R, G, neither RGB nor grey \(Y\)"):
+        read_image(tmp_path / "rg.exr")
+    height, width = pixels.shape[:2]
+    spec = oiio.ImageSpec(width, height, 2, "float")
+    spec.channelnames = ("A", "Y")
+    out = oiio.ImageOutput.create(str(tmp_path / "ya.exr"))
+    assert out.open(str(tmp_path / "ya.exr"), spec) and out.write_image(pixels)
+    out.close()
+    np.testing.assert_array_equal(read_image(tmp_path / "ya.exr").pixels, np.full((3, 4, 3), 0.8, np.float32))

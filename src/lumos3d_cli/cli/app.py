@@ -110,6 +110,16 @@ _GLOBAL_FLAGS = ("--debug", "--quiet", "-q")
 _ARGUMENT_NAMES = {"photos": "PHOTOS", "root": "ROOT", "output": "-o"}
 
 
+def _refuse_empty_arguments(args: list[str]) -> None:
+    """InputError for an empty argument: no option takes one, and click reads an empty path as
+    the current folder, so `-o "$OUT"` with OUT unset wrote every output there and `degrade ""`
+    read it as the input."""
+    for index, arg in enumerate(args):
+        if not arg:
+            where = f"after '{args[index - 1]}'" if index else "first"
+            raise InputError(f"an empty argument ({where} on the command line; an unset shell variable?): give a value")
+
+
 def _error_line(label: str, message: str) -> None:
     """`label: message` on stderr, the label in bold red; the message as plain text (it quotes
     paths and values the user typed, which may hold rich markup such as "IMG [edited].jpg")."""
@@ -151,6 +161,7 @@ def _run(args: list[str], debug: bool, claim_signals: Callable[[], None]) -> int
     """Run the app; map its errors to messages and exit codes (interruptions pass through).
     `claim_signals` re-installs the CLI's signal handlers over any the imports installed."""
     try:
+        _refuse_empty_arguments(args)
         command_line = add_commands(args)
         claim_signals()
         # Not standalone: click returns the code of typer.Exit and `--help`, and raises its usage

@@ -31,14 +31,21 @@ def _open(path: Path) -> oiio.ImageInput:
     return source
 
 
-def _rgb_channels(spec: oiio.ImageSpec) -> list[int]:
-    """Indices of R, G, B (by name, else the first three; a single channel is repeated)."""
+def _rgb_channels(path: Path, spec: oiio.ImageSpec) -> list[int]:
+    """Indices of R, G, B (by name, else the first three); a grey image's one channel (Y, or the
+    only one) repeated. Two channels of colour (R and G, say) are refused: repeating the first
+    would drop the other without a word."""
     names = [name.split(".")[-1].upper() for name in spec.channelnames]
     if all(letter in names for letter in "RGB"):
         return [names.index(letter) for letter in "RGB"]
     if spec.nchannels >= 3:
         return [0, 1, 2]
-    return [0, 0, 0]
+    if "Y" in names:
+        return [names.index("Y")] * 3
+    if spec.nchannels == 1:
+        return [0, 0, 0]
+    raise InputError(f"{path}: holds the channels {', '.join(spec.channelnames)}, neither RGB nor grey (Y); save it "
+                     "with R, G and B, or with one grey channel")
 
 
 def read_hdr(path: Path) -> DecodedImage:
@@ -52,7 +59,7 @@ def read_hdr(path: Path) -> DecodedImage:
     finally:
         source.close()
     pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
-    rgb = np.ascontiguousarray(pixels[..., _rgb_channels(spec)])
+    rgb = np.ascontiguousarray(pixels[..., _rgb_channels(path, spec)])
     require_finite_samples(path, rgb)
     bits = 16 if spec.format.basetype == oiio.HALF else 32
     return DecodedImage(path, rgb, "linear", bits, "hdr")

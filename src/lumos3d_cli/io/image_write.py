@@ -15,6 +15,7 @@ from lumos3d_cli.io.atomic import atomic_path, write_bytes_atomic
 _MAX_CODE = {8: 255, 16: 65535}
 DEFAULT_JPEG_QUALITY = 95
 JPEG_MAX_SIDE = 65500  # the JPEG format's 16-bit sizes, less libjpeg's margin
+PNG_MAX_SIDE = 1_000_000  # libpng's default limit on either side when OpenCV writes
 _DTYPE = {8: np.uint8, 16: np.uint16}
 
 
@@ -38,6 +39,9 @@ def write_image(path: Path | str, srgb: np.ndarray, bit_depth: int = 8, jpeg_qua
     if suffix != ".png" and max(srgb.shape[:2]) > JPEG_MAX_SIDE:
         raise InputError(f"{path}: {srgb.shape[1]}x{srgb.shape[0]} pixels; JPEG holds at most {JPEG_MAX_SIDE} a side: "
                          "use .png")
+    if max(srgb.shape[:2]) > PNG_MAX_SIDE:
+        raise InputError(f"{path}: {srgb.shape[1]}x{srgb.shape[0]} pixels; a PNG written here holds at most "
+                         f"{PNG_MAX_SIDE:,} a side: crop or downscale the image")
     codes = np.ascontiguousarray(quantize(srgb, bit_depth)[..., ::-1])
     params = [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality] if suffix != ".png" else []
     ok, encoded = cv2.imencode(suffix, codes, params)

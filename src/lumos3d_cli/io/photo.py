@@ -1,5 +1,5 @@
 """JPEG, PNG, TIFF, WebP and BMP through OpenCV (EXIF orientation applied, alpha dropped with a
-warning where it hides pixels)."""
+warning where it hides pixels); the grey TIFFs OpenCV misreads through OpenImageIO."""
 
 from __future__ import annotations
 
@@ -22,6 +22,10 @@ from lumos3d_cli.io.native_messages import pass_on, with_native_messages
 _READ_FLAGS = cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH
 _TRANSPOSING_ORIENTATIONS = {5, 6, 7, 8}
 _ALPHA_SUFFIXES = {".png", ".tif", ".tiff", ".webp"}  # the photo formats that can carry alpha
+_TIFF_SUFFIXES = {".tif", ".tiff"}
+# OpenCV's default decoding limits (CV_IO_MAX_IMAGE_WIDTH/HEIGHT and _PIXELS): imdecode raises beyond them
+OPENCV_MAX_SIDE = 1 << 20
+OPENCV_MAX_PIXELS = 1 << 30
 # libjpeg's warnings of damaged data (it decodes on, filling in garbage or grey): a bad Huffman or
 # arithmetic code, a segment or the file ending early, a lost restart marker
 _JPEG_CORRUPTION = ("Corrupt JPEG data", "Premature end of JPEG file")
@@ -56,12 +60,17 @@ def require_finite_samples(path: Path, rgb: np.ndarray) -> None:
 @dataclass(frozen=True)
 class _Header:
     """What a photo's header says that OpenCV's decoding does not apply: an alpha channel, its
-    EXIF orientation, the name of an embedded ICC colour profile, and a PNG's gAMA of 1 (linear)."""
+    EXIF orientation, the name of an embedded ICC colour profile, and a PNG's gAMA of 1 (linear);
+    and its size, for OpenCV's limits, and whether OpenCV misreads its samples (`grey_tiff`: a
+    one-channel float TIFF it refuses, a grey one with alpha it reads at 8 bits)."""
 
     has_alpha: bool = False
     orientation: int = 1
     profile: str | None = None
     linear: bool = False
+    width: int = 0
+    height: int = 0
+    grey_tiff: bool = False
 
 
 def _header(path: Path) -> _Header:
@@ -75,7 +84,10 @@ def _header(path: Path) -> _Header:
         has_alpha = path.suffix.lower() in _ALPHA_SUFFIXES and (spec.alpha_channel >= 0 or spec.nchannels in (2, 4))
         profile = spec.get_string_attribute("ICCProfile:profile_description") or None
         linear = path.suffix.lower() == ".png" and spec.get_string_attribute("oiio:ColorSpace").startswith("lin_")
-        return _Header(has_alpha, spec.get_int_attribute("Orientation", 1), profile, linear)
+        floats = spec.format.basetype in (oiio.HALF, oiio.FLOAT, oiio.DOUBLE)
+        grey_tiff = path.suffix.lower() in _TIFF_SUFFIXES and (spec.nchannels == 2 or (spec.nchannels == 1 and floats))
+        return _Header(has_alpha, spec.get_int_attribute("Orientation", 1), profile, linear, spec.width, spec.height,
+                       grey_tiff)
     finally:
         source.close()
 
@@ -95,7 +107,11 @@ def _decode(path: Path, data: np.ndarray, header: _Header) -> tuple[np.ndarray |
     """`_decode_pixels`, with what libjpeg and libpng print while decoding captured: a JPEG whose
     data is corrupt is an InputError naming the file (OpenCV returns its garbage as an image); a
     file OpenCV cannot decode at all gets this module's one line, not the library's own as well."""
-    (bgr, alpha), printed = with_native_messages(lambda: _decode_pixels(path, data, header))
+    try:
+        (bgr, alpha), printed = with_native_messages(lambda: _decode_pixels(path, data, header))
+    except cv2.error as error:  # a check of OpenCV's own failing (most return no image instead)
+        raise InputError(f"{path}: OpenCV cannot decode it ({error.err}); downscale it where it is that large, else "
+                         "convert it to an 8- or 16-bit PNG, or leave it out") from None
     lines = printed.splitlines(keepends=True)
     # what another thread printed meanwhile goes where it was going
     pass_on("".join(line for line in lines if not line.startswith(_DECODER_MESSAGES)))
@@ -128,6 +144,8 @@ def _decode_pixels(path: Path, data: np.ndarray, header: _Header) -> tuple[np.nd
     """(BGR [H, W, 3] as OpenCV's colour decoding gives it, alpha [H, W] or None). A photo with
     alpha is decoded once, unchanged, where no EXIF rotation applies (OpenCV's colour decoding
     drops alpha and turns grey into three channels: the same done here); a rotated one twice."""
+    if header.grey_tiff:
+        return _decode_grey_tiff(path)
     has_alpha, orientation = header.has_alpha, header.orientation
     if has_alpha and orientation == 1:
         pixels = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
@@ -142,6 +160,22 @@ def _decode_pixels(path: Path, data: np.ndarray, header: _Header) -> tuple[np.nd
         if pixels is not None and pixels.ndim == 3 and pixels.shape[2] in (2, 4):
             alpha = pixels[..., -1]
     return bgr, alpha
+
+
+def _decode_grey_tiff(path: Path) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """`_decode_pixels` of a grey TIFF (one channel, or grey and alpha) through OpenImageIO, at its
+    own sample type, its orientation applied; (None, None) where it cannot be decoded."""
+    source = oiio.ImageBuf(str(path))
+    native = source.spec().format
+    pixels = None if source.has_error else oiio.ImageBufAlgo.reorient(source).get_pixels(native)
+    if pixels is None:
+        oiio.geterror()  # retrieved, or OpenImageIO prints it at exit; read_photo's one line says it
+        source.geterror()
+        return None, None
+    if pixels.dtype == np.float16:  # as OpenCV decodes half floats
+        pixels = pixels.astype(np.float32)
+    grey = np.ascontiguousarray(np.repeat(pixels[..., :1], 3, axis=2))
+    return grey, pixels[..., 1] if pixels.shape[2] == 2 else None
 
 
 def _warn_of_transparency(path: Path, alpha: np.ndarray | None) -> None:
@@ -159,6 +193,9 @@ def read_photo(path: Path) -> DecodedImage:
     """Decode a photo to RGB float32: [0, 1] sRGB for 8/16-bit files, linear for float TIFFs."""
     data = read_file_bytes(path)
     header = _header(path)
+    if max(header.width, header.height) > OPENCV_MAX_SIDE or header.width * header.height > OPENCV_MAX_PIXELS:
+        raise InputError(f"{path}: {header.width}x{header.height} pixels is beyond what OpenCV decodes (at most "
+                         f"{OPENCV_MAX_SIDE:,} a side and {OPENCV_MAX_PIXELS:,} pixels); crop or downscale it")
     bgr, alpha = _decode(path, data, header)
     if bgr is None:
         raise InputError(

@@ -16,7 +16,7 @@ from lumos3d_cli.data.degradations import (
     MAX_COLOUR_CAST, MODES, Degradation, apply_degradation, is_valid_range, range_rule, sample_parameters,
 )
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.io.image_write import DEFAULT_JPEG_QUALITY, JPEG_MAX_SIDE, write_image
+from lumos3d_cli.io.image_write import DEFAULT_JPEG_QUALITY, JPEG_MAX_SIDE, PNG_MAX_SIDE, write_image
 from lumos3d_cli.io.images import read_image, to_srgb
 from lumos3d_cli.pipeline.degrade_outputs import degrade_outputs, is_single_file
 from lumos3d_cli.pipeline.progress import JobProgress, SilentProgress
@@ -73,6 +73,9 @@ def degrade_files(
             if (writes_jpeg or jpeg_quality is not None) and max(image.shape[1:]) > JPEG_MAX_SIDE:
                 raise InputError(f"{source}: {image.shape[2]}x{image.shape[1]} pixels; JPEG holds at most {JPEG_MAX_SIDE} "
                                  "a side: degrade it without JPEG (no --jpeg-quality, a .png output)")
+            if max(image.shape[1:]) > PNG_MAX_SIDE:
+                raise InputError(f"{source}: {image.shape[2]}x{image.shape[1]} pixels; a PNG written here holds at most "
+                                 f"{PNG_MAX_SIDE:,} a side: crop or downscale it")
             parameters = shared if shared is not None else sample_parameters(degradation, (), generator)
             degraded = apply_degradation(image, mode, replace(parameters, jpeg_quality=None) if writes_jpeg else parameters,
                                          generator)
