@@ -71,6 +71,11 @@ def test_eval_bad_inputs(run_cli, lom_copy, tmp_path, random_checkpoint):
                      "--out", out, "--geometry", "network")
     expect_input_error(result, "--max-views 3: under the holdout protocol buu's 3 test frame(s)", "raise it above 3")
     assert "fuse" not in result.err
+    # under context too, before any scene's work (it was refused by the network pass of this scene,
+    # after the scenes before it were evaluated)
+    result = run_cli("eval", lom_copy.parent, "--max-views", 2, "--checkpoint", random_checkpoint, "--out", out)
+    expect_input_error(result, "--max-views 2: buu's 3 test frames must all go through the network", "at least 3")
+    assert "eval (context)" not in result.err
     only_tests = lom_copy.parent.parent / "only-tests" / "buu"  # every frame a test frame
     shutil.copytree(lom_copy, only_tests)
     for photo in [*(only_tests / "low").iterdir(), *(only_tests / "high").iterdir(), *(only_tests / "over_exp").iterdir()]:
@@ -113,6 +118,33 @@ def test_what_is_in_the_way_is_refused_before_any_scene_is_read(run_cli, lom_cop
     expect_input_error(result, "zz/low/13.JPG")
     assert "eval (context)" not in result.err  # refused before the evaluation's progress began
     assert sorted(p.name for p in out.iterdir()) == []
+
+
+def test_eval_inside_a_scene_checks_its_contact_sheet_before_any_work(run_cli, lom_copy, tmp_path, random_checkpoint,
+                                                                     monkeypatch):
+    """`eval .` named the sheet contact_sheet_.png in the first check, so a file of the user's in
+    the way of contact_sheet_buu.png was refused only after the whole evaluation."""
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / "contact_sheet_buu.png").write_text("the user's")
+    monkeypatch.chdir(lom_copy)
+    result = run_cli("eval", ".", "--checkpoint", random_checkpoint, "--out", out, "--geometry", "network",
+                     "--max-views", 4, "--refine-steps", 0)
+    expect_input_error(result, "contact_sheet_buu.png: exists and was not written by lumos3d")
+    assert "eval (context)" not in result.err
+    assert (out / "contact_sheet_buu.png").read_text() == "the user's"
+
+
+def test_a_frame_listed_as_a_restore_output_is_refused_not_skipped(run_cli, lom_copy, tmp_path, random_checkpoint):
+    """A frame photo the folder's manifest names as an earlier restore's output was left out of the
+    photos read, and every later frame was scored against the next one's photo (exit 0)."""
+    manifest = {"format": "lumos3d-manifest/1",
+                "files": {"5.JPG": {"bytes": 1, "sha256": "00", "command": "restore", "output_set": "restore"}}}
+    (lom_copy / "low" / ".lumos3d-manifest.json").write_text(json.dumps(manifest))
+    result = run_cli("eval", lom_copy.parent, "--checkpoint", random_checkpoint, "--out", tmp_path / "report",
+                     "--geometry", "network", "--max-views", 4, "--refine-steps", 0)
+    expect_input_error(result, "low/5.JPG: written by an earlier restore", "put the scene's own photo back")
+    assert not (tmp_path / "report").exists()
 
 
 def test_a_model_trained_for_the_other_mode_is_named(run_cli, buu, tmp_path, caplog):

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import torch
 
-from lumos3d_cli.data.lom_layout import DEGRADED_FOLDERS, lom_scene_folders, scene_name
+from lumos3d_cli.data.lom_layout import DEGRADED_FOLDERS, lom_scene_folders, named_root, scene_name
 from lumos3d_cli.errors import InputError, listed
 from lumos3d_cli.io.image_files import IMAGE_SUFFIXES, natural_sort_key
 from lumos3d_cli.io.input_folders import require_folder
@@ -113,9 +113,7 @@ def _missing_parts(folder: Path) -> str:
 def find_lom_scenes(root: Path | str, mode: str, names: str | Sequence[str] | None = None) -> list[LomScene]:
     """Scenes under `root` (or `root` itself when it is one): all (`names` None), or those named
     (one name, or several)."""
-    root = Path(root)
-    if root.name in ("", ".."):  # `eval .`: the scene is named after the folder, not ""
-        root = root.resolve()
+    root = named_root(root)
     require_folder(root, "that holds the LOM scenes, or one scene")
     names = [names] if isinstance(names, str) else names
     if names is not None and len(names) == 0:

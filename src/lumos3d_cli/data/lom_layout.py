@@ -17,9 +17,17 @@ def is_lom_scene(folder: Path) -> bool:
     )
 
 
+def named_root(root: Path | str) -> Path:
+    """`root` with a name to give a scene: `.` or `..` (`eval .` inside a scene) resolved, so the
+    scene is named after its folder, not ""."""
+    root = Path(root)
+    return root.resolve() if root.name in ("", "..") else root
+
+
 def lom_scene_folders(root: Path) -> list[Path]:
-    """The LOM scenes `root` holds, in name order: `root` itself when it is one, else its
-    sub-folders that are; none when `root` is no folder."""
+    """The LOM scenes `root` holds, in name order: `root` itself when it is one (`named_root`),
+    else its sub-folders that are; none when `root` is no folder."""
+    root = named_root(root)
     if is_lom_scene(root):
         return [root]
     if not root.is_dir():

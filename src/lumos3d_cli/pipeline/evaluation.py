@@ -128,13 +128,17 @@ def evaluate_lom(
 
 def _check_scene_fits_the_report(scene: LomScene, protocol: str, max_views: int) -> None:
     """InputError before any work for a scene the report cannot hold: one named like the mean
-    rows, or one whose test frames alone fill `max_views` under the holdout protocol (they go
-    through the network but are left out of the scene, which then has no view to be built from)."""
+    rows, one with more test frames than `max_views` (every test frame goes through the network),
+    or one whose test frames alone fill `max_views` under the holdout protocol (they go through the
+    network but are left out of the scene, which then has no view to be built from)."""
     if scene.name == MEAN_ROW:
         raise InputError(f"{scene.root}: a scene named {MEAN_ROW!r} cannot be told from the report's mean rows; "
                          "rename its folder")
     if protocol == "holdout" and len(scene.test) >= len(scene.frames):
         raise InputError(f"{scene.root}: the holdout protocol needs views besides the test frames")
+    if len(scene.frames) > max_views and len(scene.test) > max_views:
+        raise InputError(f"{max_views}: {scene.name}'s {len(scene.test)} test frames must all go through the network; "
+                         f"raise it to at least {len(scene.test)}", parameter="max_views")
     if protocol == "holdout" and len(scene.frames) > max_views and len(scene.test) >= max_views:
         raise InputError(f"{max_views}: under the holdout protocol {scene.name}'s {len(scene.test)} test frame(s) go "
                          "through the network but are left out of the scene, leaving no view to build it from; raise it "

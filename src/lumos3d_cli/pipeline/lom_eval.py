@@ -83,9 +83,14 @@ class LomPhotos:
 
 
 def _load_same_size(paths: list[Path], size: tuple[int, int] | None = None) -> torch.Tensor:
-    """[N, 3, H, W]; InputError naming the first photo whose size differs from the first's (or
-    from `size`, width and height)."""
+    """[N, 3, H, W], one per path; InputError naming the first photo whose size differs from the
+    first's (or from `size`, width and height), or one that is not read as a photo: every frame
+    after it would be scored against the next frame's photo."""
     batch = load_images(paths)
+    left_out = [path for path in paths if path not in batch.paths]
+    if left_out:  # io/scene_photos.py: the folder's manifest names it as an earlier restore's output
+        raise InputError(f"{left_out[0]}: written by an earlier restore (its folder's .lumos3d-manifest.json says so), "
+                         "not a photo of the scene; put the scene's own photo back")
     expected = batch.original_sizes[0] if size is None else size
     for path, found in zip(paths, batch.original_sizes):
         if found != expected:
