@@ -49,6 +49,17 @@ def plane_depth(cameras: Cameras) -> torch.Tensor:
     return torch.stack(depths)
 
 
+def plane_texture(world: torch.Tensor, seed: int = 0) -> torch.Tensor:
+    """[..., 3] world points -> [..., 3] colours in [0, 1]: a sum of sinusoids on the plane's x, y
+    (about 3-10 pixels a period at these cameras), the same wherever a camera sees the point."""
+    generator = torch.Generator().manual_seed(seed)
+    frequencies = 6 + 14 * torch.rand(12, 2, generator=generator, dtype=torch.float64)
+    phases = 2 * math.pi * torch.rand(12, generator=generator, dtype=torch.float64)
+    weights = torch.rand(12, 3, generator=generator, dtype=torch.float64)
+    waves = torch.sin(world[..., :2] @ frequencies.T + phases)  # [..., 12]
+    return (0.5 + 0.4 * (waves @ weights) / weights.sum(0)).clamp(0, 1)
+
+
 def plane_points(cameras: Cameras, count: int, seed: int = 0) -> SparsePoints:
     """`count` points on the plane, observed by every camera whose image they fall into."""
     generator = torch.Generator().manual_seed(seed)

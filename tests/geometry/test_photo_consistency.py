@@ -10,27 +10,16 @@ from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.geometry import unproject_depth
 
-from synthetic_scene import plane_cameras, plane_depth
+from synthetic_scene import plane_cameras, plane_depth, plane_texture
 
 WIDTH, HEIGHT = 96, 64
-
-
-def _texture(world: torch.Tensor, seed: int = 0) -> torch.Tensor:
-    """[..., 3] world points -> [..., 3] colours in [0, 1]: a sum of sinusoids on the plane's x, y
-    (about 3-10 pixels a period at these cameras), the same wherever a camera sees the point."""
-    generator = torch.Generator().manual_seed(seed)
-    frequencies = 6 + 14 * torch.rand(12, 2, generator=generator, dtype=torch.float64)
-    phases = 2 * math.pi * torch.rand(12, generator=generator, dtype=torch.float64)
-    weights = torch.rand(12, 3, generator=generator, dtype=torch.float64)
-    waves = torch.sin(world[..., :2] @ frequencies.T + phases)  # [..., 12]
-    return (0.5 + 0.4 * (waves @ weights) / weights.sum(0)).clamp(0, 1)
 
 
 def _scene(views: int = 5):
     cameras = plane_cameras(views, WIDTH, HEIGHT)
     depth = plane_depth(cameras)
     world = unproject_depth(depth, cameras.extrinsics, cameras.intrinsics)  # [V, h, w, 3]
-    images = _texture(world).permute(0, 3, 1, 2).float()
+    images = plane_texture(world).permute(0, 3, 1, 2).float()
     return cameras, depth, images
 
 
@@ -88,7 +77,7 @@ def test_views_too_close_together_for_the_depth_change_nothing(shrink):
     truth = plane_depth(cameras)
     world = unproject_depth(truth, cameras.extrinsics, cameras.intrinsics)
     noise = 0.01 * torch.randn(5, 3, HEIGHT, WIDTH, generator=torch.Generator().manual_seed(1))
-    images = (_texture(world).permute(0, 3, 1, 2).float() + noise).clamp(0, 1)
+    images = (plane_texture(world).permute(0, 3, 1, 2).float() + noise).clamp(0, 1)
     for start in (truth, _biased(truth)):
         swept = sweep_depth(start, cameras, images)
         assert torch.equal(swept.depth, start) and swept.share == 0.0 and swept.views_without_neighbours == 5
@@ -133,7 +122,7 @@ def test_a_view_seen_only_at_wide_angles_keeps_its_depth():
                    [*cameras.names, "far.png"])
     wide_truth = plane_depth(wide)
     world = unproject_depth(wide_truth, wide.extrinsics, wide.intrinsics)
-    wide_images = _texture(world).permute(0, 3, 1, 2).float()
+    wide_images = plane_texture(world).permute(0, 3, 1, 2).float()
     assert float(triangulation_angles(wide, wide_truth)[5, :5].min()) > DepthSweepSettings().max_angle
     biased = _biased(wide_truth)
     swept = sweep_depth(biased, wide, wide_images)

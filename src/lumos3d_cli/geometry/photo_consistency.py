@@ -85,6 +85,17 @@ def box_mean(values: torch.Tensor, radius: int) -> torch.Tensor:
     return (columns[..., size:, :] - columns[..., :-size, :]) / (size * size)
 
 
+def grey_windows(images: torch.Tensor, height: int, width: int, radius: int) -> tuple[torch.Tensor, ...]:
+    """images [V, 3, H, W] -> (grey [V, 1, height, width] area-resized and centred on 0, the mean
+    and the standard deviation of each (2 radius + 1)² window [V, 1, height, width], the
+    deviation floored at `_VARIANCE_FLOOR`): what `window_scores` compares, in float32."""
+    grey = F.interpolate(images.float(), size=(height, width), mode="area").mean(1, keepdim=True)
+    grey = grey - 0.5  # centred: the window sums lose less to float32 rounding
+    mean = box_mean(grey, radius)
+    deviation = (box_mean(grey * grey, radius) - mean.square()).clamp_min(_VARIANCE_FLOOR).sqrt()
+    return grey, mean, deviation
+
+
 def triangulation_angles(cameras: Cameras, depth: torch.Tensor) -> torch.Tensor:
     """[V, V] degrees: for each view v (row), the angle at the point on v's optical axis at v's
     median depth between the rays from v's centre and from each other camera's centre to it (the
@@ -131,7 +142,7 @@ def depth_agreement(depth: torch.Tensor, changed: torch.Tensor, cameras: Cameras
     return agreed & changed
 
 
-def _scores(grey: torch.Tensor, mean: torch.Tensor, deviation: torch.Tensor, cameras: Cameras, view: int,
+def window_scores(grey: torch.Tensor, mean: torch.Tensor, deviation: torch.Tensor, cameras: Cameras, view: int,
             others: list[int], points: torch.Tensor, factors: torch.Tensor, radius: int) -> torch.Tensor:
     """[N, J, h, w] NCC of `view`'s windows with each neighbour's photo sampled at the J depth
     hypotheses; -inf where a hypothesis takes part of the window out of a neighbour's photo or
@@ -167,7 +178,7 @@ def _scores(grey: torch.Tensor, mean: torch.Tensor, deviation: torch.Tensor, cam
     return torch.stack(scores)
 
 
-def _mean_of_best(scores: torch.Tensor, count: int) -> tuple[torch.Tensor, torch.Tensor]:
+def mean_of_best(scores: torch.Tensor, count: int) -> tuple[torch.Tensor, torch.Tensor]:
     """scores [N, J, h, w] (-inf: not seen) -> (the mean of the `count` highest seen scores per
     hypothesis [J, h, w], -1 where none is seen; [J, h, w] whether any neighbour sees the
     hypothesis). The highest taken one at a time: for the few neighbours here, faster than a
@@ -209,10 +220,7 @@ def sweep_depth(
                else torch.tensor([bool(v) for v in neighbour_views], dtype=torch.bool))
     cameras = cameras.to(device=device, dtype=torch.float32)
     working = depth.float()
-    grey = F.interpolate(images.to(device).float(), size=(height, width), mode="area").mean(1, keepdim=True)
-    grey = grey - 0.5  # centred: the window sums lose less to float32 rounding
-    mean = box_mean(grey, settings.radius)
-    deviation = (box_mean(grey * grey, settings.radius) - mean.square()).clamp_min(_VARIANCE_FLOOR).sqrt()
+    grey, mean, deviation = grey_windows(images.to(device), height, width, settings.radius)
     factors = torch.linspace(-settings.span, settings.span, settings.hypotheses, device=device)
     step = float(factors[1] - factors[0])
     middle = settings.hypotheses // 2
@@ -225,11 +233,11 @@ def sweep_depth(
     for view, others in enumerate(neighbours):
         if not others or not bool(allowed[view]):  # a held-out view's Gaussians are not fused
             continue
-        scores = _scores(grey[:, 0], mean[:, 0], deviation[:, 0], cameras, view, others, points[view], factors,
+        scores = window_scores(grey[:, 0], mean[:, 0], deviation[:, 0], cameras, view, others, points[view], factors,
                          settings.radius)
         # the mean of the best neighbours that see the window: a neighbour that does not is left
         # out, not scored -1 (else a wrong depth that brings a second neighbour in would win)
-        score, seen = _mean_of_best(scores, min(settings.best, len(others)))  # [J, h, w] each
+        score, seen = mean_of_best(scores, min(settings.best, len(others)))  # [J, h, w] each
         best_score, best = score.max(0)
         inner = best.clamp(1, settings.hypotheses - 2)
         below, at, above = (score.gather(0, (inner + shift)[None])[0] for shift in (-1, 0, 1))

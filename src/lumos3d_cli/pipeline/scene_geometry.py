@@ -34,6 +34,7 @@ from lumos3d_cli.geometry.depth_correction import correct_depth
 from lumos3d_cli.geometry.field_of_view import FOCAL_DISAGREEMENT, focal_ratio, implausible_views
 from lumos3d_cli.geometry.given_poses import read_given_poses
 from lumos3d_cli.geometry.photo_consistency import sweep_depth
+from lumos3d_cli.geometry.scale_sweep import sweep_depth_scale
 from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
 from lumos3d_cli.geometry.colmap_run import SFM_LONG_SIDE, ColmapRun, matching_threads
 from lumos3d_cli.geometry.sfm import Registration, register_photos
@@ -155,7 +156,7 @@ def register_views(
         return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, None)
     if count < 2:
         if geometry == "sfm":
-            raise InputError("sfm: structure-from-motion needs at least two photos; use the network's cameras (geometry network)",
+            raise InputError("sfm: structure-from-motion needs at least two photos; use the network's cameras (--geometry network)",
                              parameter="geometry")
         return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, None)
     run = blind_run() if blind_run is not None and brightened.method == BRIGHTENING else None
@@ -172,8 +173,8 @@ def register_views(
         outcome = (f"gave {len(odd)} view(s) a field of view no lens has "
                    f"({_fields_of_view(registration.cameras.names, odd)})")
     if geometry == "sfm":
-        raise InputError(f"sfm: structure-from-motion {outcome}; use the network's cameras (geometry network) or give "
-                         "poses", parameter="geometry")
+        raise InputError(f"sfm: structure-from-motion {outcome}; use the network's cameras (--geometry network) or give "
+                         "--poses", parameter="geometry")
     logger.warning("structure-from-motion %s; using the network's cameras instead", outcome)
     return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, registration,
                             seconds, brightened.method)
@@ -256,13 +257,15 @@ def _median(values: torch.Tensor) -> float | None:
 
 def _aligned_depth(
     network: NetworkPass, selected: list[int], network_cameras: Cameras, points: SparsePoints, selected_names: list[str],
-    selected_cameras: Cameras,
+    selected_cameras: Cameras, images: torch.Tensor | None, fused: Sequence[bool] | None,
 ) -> tuple[torch.Tensor, dict]:
     """The network's depth [S, h, w] of the selected views in the registered frame, and how it was
     aligned: per view to the sparse points it observes (a scale and shift, then a smooth
-    correction: `geometry.depth_correction`), or — with no points (given poses where
-    structure-from-motion failed) — by the scale of the similarity between the network's cameras
-    and the registered ones."""
+    correction: `geometry.depth_correction`), or — with no points (given poses without
+    structure-from-motion, or where it failed) — by one scale the selected views' photos `images`
+    [S, 3, H, W] agree on (`geometry.scale_sweep`, among the views `fused` marks), and where they
+    agree on none, by the scale of the similarity between the network's cameras and the
+    registered ones (with a warning: the bundled models' cameras make it a poor one)."""
     depth = network.prediction.depth[0].detach().cpu().double()
     if len(points) >= MIN_POINTS:
         observed = _points_of_views(points, selected)
@@ -283,8 +286,15 @@ def _aligned_depth(
                     "median_log_residual_after": _median(correction.residual_after),
                 },
             }
+    swept = sweep_depth_scale(depth, network_cameras, images, fused) if images is not None else None
+    if swept is not None and swept.scale is not None:
+        return depth * swept.scale, {**swept.summary(), "views": len(selected)}
     similarity = fit_camera_similarity(network.network_cameras(selected_names), selected_cameras)
-    return depth * similarity.scale, {"form": "camera similarity scale", "scale": similarity.scale, "views": len(selected)}
+    logger.warning("no sparse points to align the network's depth to, and the photos agree on no scale for it; it is "
+                   "scaled by the similarity between the network's cameras and the given ones, which can put the scene "
+                   "far off (blurred, ghosted views): let structure-from-motion run (--geometry auto) or give more photos")
+    return depth * similarity.scale, {"form": "camera similarity scale", "scale": similarity.scale, "views": len(selected),
+                                      **({"photo_consistency_contrast": round(swept.contrast, 4)} if swept else {})}
 
 
 def _warn_of_disagreeing_focal_lengths(network_cameras: Cameras, network: NetworkPass, registered: torch.Tensor) -> None:
@@ -354,7 +364,8 @@ def place_views(
     if registration.source == "sfm":
         _warn_of_disagreeing_focal_lengths(network_cameras, network, known_selected.cpu())
     points, reprojection_error = _points_in_frame(registration)
-    depth, alignment_report = _aligned_depth(network, selected, network_cameras, points, selected_names, selected_cameras)
+    depth, alignment_report = _aligned_depth(network, selected, network_cameras, points, selected_names, selected_cameras,
+                                             images, fused)
     sweep_report = None
     if sweep is not None and images is not None and len(selected) > 1:
         swept = sweep_depth(depth, network_cameras, images, sweep, fused)

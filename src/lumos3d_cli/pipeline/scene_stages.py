@@ -34,6 +34,7 @@ from lumos3d_cli.model.appearance.operator import AppearanceOperator
 from lumos3d_cli.model.appearance.photo_restoration import restore_photos
 from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DPrediction
 from lumos3d_cli.model.pixel_footprint import DEFAULT_FOOTPRINT_SCALE
+from lumos3d_cli.model.voxelize import PointsBeyondVoxelGrid
 from lumos3d_cli.pipeline.gaussian_grid import dense_grid_size, densify_grid
 from lumos3d_cli.pipeline.early_registration import EarlyRegistration
 from lumos3d_cli.pipeline.module_prefetch import prefetch_modules
@@ -204,11 +205,14 @@ def fusion(job: SceneJob) -> SceneJob:
         # Voxels follow each point's pixel footprint: near detail keeps the grid's resolution
         # while far duplicates still merge (one global size does one or the other; a single
         # photo's huge depth range collapsed into a few hundred voxels with it).
-        output = job.model.assemble(
-            prediction, grid_geometry.network_extrinsics[None], grid_geometry.network_intrinsics[None],
-            grid_geometry.depth[None], footprint_scale=DEFAULT_FOOTPRINT_SCALE * preset.voxel_scale, fuse_views=keep,
-            fuse_pixels=None if grid_geometry.fuse_pixels is None else grid_geometry.fuse_pixels[None],
-        )
+        try:
+            output = job.model.assemble(
+                prediction, grid_geometry.network_extrinsics[None], grid_geometry.network_intrinsics[None],
+                grid_geometry.depth[None], footprint_scale=DEFAULT_FOOTPRINT_SCALE * preset.voxel_scale, fuse_views=keep,
+                fuse_pixels=None if grid_geometry.fuse_pixels is None else grid_geometry.fuse_pixels[None],
+            )
+        except PointsBeyondVoxelGrid as error:  # finite, but no voxel index reaches them
+            raise _unbuildable_scene(job, str(error)) from None
     grid_cameras = Cameras(grid_geometry.network_extrinsics.float(), grid_geometry.network_intrinsics.float(),
                            [job.grid_size] * len(job.selected))
     job.gaussians = apply_sampling_filter(output.gaussians[0].detach(), grid_cameras)
@@ -218,18 +222,23 @@ def fusion(job: SceneJob) -> SceneJob:
 
 
 def _require_finite_scene(job: SceneJob) -> None:
-    """InputError naming what most likely made the fused Gaussians non-finite: the camera file
-    (a position in extreme units overflows the footprints), else the weights (the network's
-    output itself was checked, but a head that gives extreme depths or scales overflows them)."""
+    """InputError naming what most likely made the fused Gaussians non-finite (`_unbuildable_scene`)."""
     try:
         job.gaussians.require_finite("the fused scene's Gaussians")
     except NonFiniteError as error:
-        if job.poses is not None:
-            raise InputError(f"{job.poses}: {error}; check the camera file's positions and units (if they are right, "
-                             "the checkpoint's weights)", parameter="poses") from None
-        source = job.model.provenance.get("path", "the model's weights")
-        raise InputError(f"{source}: {error}, on these photos: damaged or diverged weights; use another "
-                         "checkpoint") from None
+        raise _unbuildable_scene(job, str(error)) from None
+
+
+def _unbuildable_scene(job: SceneJob, what: str) -> InputError:
+    """The error for a fused scene that cannot be built (`what` went wrong), naming its most likely
+    cause: the camera file (a position in extreme units puts points beyond the voxel grid or
+    overflows the footprints), else the weights (the network's output itself was checked, but a
+    head that gives extreme depths or scales overflows them)."""
+    if job.poses is not None:
+        return InputError(f"{job.poses}: {what}; check the camera file's positions and units (if they are right, the "
+                          "checkpoint's weights)", parameter="poses")
+    source = job.model.provenance.get("path", "the model's weights")
+    return InputError(f"{source}: {what}, on these photos: damaged or diverged weights; use another checkpoint")
 
 
 def budget(job: SceneJob) -> SceneJob:

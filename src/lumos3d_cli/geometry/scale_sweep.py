@@ -1,0 +1,127 @@
+"""The scale of the network's depth in the frame of given cameras where no sparse points fix it:
+one global scale swept over a log grid, scored by normalised cross-correlation with the
+neighbouring photos.
+
+With `--poses` and no structure-from-motion points (`--geometry network`, or structure-from-motion
+failing on the photos) the network's depth is known in the given cameras' frame up to one scale
+(the network predicts every view's depth in one frame). The similarity between the network's
+cameras and the given ones has that scale, but the bundled models' cameras nearly collapse onto
+one pose (on LOM buu their mean distance apart is 0.006 of the given frame's 3.6 once scaled), so
+its scale put the scene about ten times too far and every restored view was a ghosted jumble. The
+given cameras are exact, and the photos they see agree only at the right depth: every view's
+depth, scaled by each candidate, is projected into its nearest cameras' photos and scored by
+window NCC as the per-pixel depth sweep scores its hypotheses (`geometry.photo_consistency`); the
+scale the photos agree on best wins, where it stands out from the rest of the sweep.
+
+The candidates are spaced by the ratio of the scene's median depth to the median distance from
+each camera to its nearest other camera: from `MIN_DEPTH_RATIO` (the scene a quarter of a camera
+spacing away) to `MAX_DEPTH_RATIO` (1,024 spacings: under 0.06 degrees of parallax between
+neighbours, beyond which scales no longer differ in what the photos see).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import torch
+
+from lumos3d_cli.geometry.photo_consistency import grey_windows, mean_of_best, window_scores
+from lumos3d_cli.io.cameras import Cameras
+from lumos3d_cli.model.geometry import unproject_depth
+
+MIN_DEPTH_RATIO = 0.25
+MAX_DEPTH_RATIO = 1024.0
+STEPS_PER_OCTAVE = 4
+NEIGHBOURS = 4  # the nearest cameras by centre (no angle test: the angles depend on the scale swept)
+BEST = 2  # the neighbours' scores averaged per candidate, as the depth sweep's `best`
+RADIUS = 3  # the NCC window's half size in depth-map pixels, as the depth sweep's
+# How far the best candidate's score must stand above the sweep's median: on the development
+# scenes' photos the right scale scores 0.3-0.5 above it; a flat sweep (black, clipped or
+# textureless photos, cameras too close together) says nothing about the scale.
+MIN_CONTRAST = 0.05
+
+
+@dataclass(frozen=True)
+class ScaleSweep:
+    """scale: the factor for the depth (None: no candidate stands out, `contrast` below
+    MIN_CONTRAST, or no view has another to be compared with); score: the best candidate's mean
+    agreement (the share-weighted NCC in [0, 1]); contrast: how far it stands above the sweep's
+    median; candidates: how many scales were tried."""
+
+    scale: float | None
+    score: float
+    contrast: float
+    candidates: int
+
+    def summary(self) -> dict:
+        return {"form": "photo-consistency scale", "scale": self.scale, "score": round(self.score, 4),
+                "contrast": round(self.contrast, 4), "candidates": self.candidates}
+
+
+def sweep_depth_scale(depth: torch.Tensor, cameras: Cameras, images: torch.Tensor,
+                      views: Sequence[bool] | None = None) -> ScaleSweep:
+    """depth [V, h, w] (positive, one frame up to scale), cameras [V] (the given ones, intrinsics
+    in pixels of the depth maps), images [V, 3, H, W] in [0, 1] -> the ScaleSweep (module
+    docstring). views [V] bool: the views that take part, compared and compared with (None: all;
+    evaluation's held-out views take no part). Runs in float32 on the depth's device."""
+    count, height, width = depth.shape
+    if images.dim() != 4 or images.shape[:2] != (count, 3) or len(cameras) != count:
+        raise ValueError(f"images {tuple(images.shape)} and {len(cameras)} cameras must match depth {tuple(depth.shape)}")
+    taking_part = [v for v in range(count) if views is None or bool(views[v])]
+    device = depth.device
+    candidates = _candidates(depth, cameras, taking_part)
+    if len(taking_part) < 2 or candidates is None:
+        return ScaleSweep(None, 0.0, 0.0, 0)
+    cameras = cameras.to(device=device, dtype=torch.float32)
+    grey, mean, deviation = grey_windows(images.to(device), height, width, RADIUS)
+    identity = torch.eye(3, 4, device=device).expand(count, 3, 4)
+    points = unproject_depth(depth.float(), identity, cameras.intrinsics)  # [V, h, w, 3] in each camera's frame
+    factors = (candidates - 1).to(device=device, dtype=torch.float32)  # window_scores scales the points by 1 + factor
+    centres = cameras.centers().double()
+    distances = torch.cdist(centres, centres)
+    total = torch.zeros(len(candidates), dtype=torch.float64)
+    for view in taking_part:
+        others = sorted((other for other in taking_part if other != view), key=lambda o: float(distances[view, o]))
+        scores = window_scores(grey[:, 0], mean[:, 0], deviation[:, 0], cameras, view, others[:NEIGHBOURS],
+                               points[view], factors, RADIUS)
+        agreement, _ = mean_of_best(scores, min(BEST, len(scores)))  # [J, h, w]; -1 where no neighbour sees it
+        # unseen and disagreeing pixels count as 0 over the whole view: a scale that throws the
+        # view out of its neighbours' photos scores low, not the mean of the few pixels left
+        total += agreement.clamp_min(0).flatten(1).mean(1).double().cpu()
+    total /= len(taking_part)
+    best = int(total.argmax())
+    contrast = float(total[best] - total.median())
+    if contrast < MIN_CONTRAST:
+        return ScaleSweep(None, float(total[best]), contrast, len(candidates))
+    return ScaleSweep(_refined(candidates, total, best), float(total[best]), contrast, len(candidates))
+
+
+def _candidates(depth: torch.Tensor, cameras: Cameras, views: list[int]) -> torch.Tensor | None:
+    """[J] float64 factors for the depth, evenly spaced in log (module docstring); None where the
+    cameras taking part share one centre (no parallax fixes any scale)."""
+    if len(views) < 2:
+        return None
+    centres = cameras.centers().double()[views]
+    distances = torch.cdist(centres, centres)
+    distances.fill_diagonal_(math.inf)
+    spacing = float(distances.min(dim=1).values.median())
+    median_depth = float(depth[views].double().median())
+    if not spacing > 0 or not math.isfinite(spacing) or not median_depth > 0:
+        return None
+    octaves = math.log2(MAX_DEPTH_RATIO / MIN_DEPTH_RATIO)
+    ratios = MIN_DEPTH_RATIO * 2 ** (torch.arange(int(octaves * STEPS_PER_OCTAVE) + 1, dtype=torch.float64) / STEPS_PER_OCTAVE)
+    return ratios * spacing / median_depth
+
+
+def _refined(candidates: torch.Tensor, total: torch.Tensor, best: int) -> float:
+    """The best candidate moved to the vertex of the parabola through its score and its two
+    neighbours' in log scale (within half a step); the candidate itself at either end."""
+    if best == 0 or best == len(candidates) - 1:
+        return float(candidates[best])
+    below, at, above = (float(total[best + shift]) for shift in (-1, 0, 1))
+    curvature = below - 2 * at + above
+    vertex = min(max(0.5 * (below - above) / curvature, -0.5), 0.5) if curvature < -1e-12 else 0.0
+    step = math.log(float(candidates[1] / candidates[0]))
+    return float(candidates[best]) * math.exp(vertex * step)
