@@ -221,6 +221,19 @@ def test_row12_dark_photos_in_the_over_exposure_mode_are_questioned(tmp_path, bu
     assert "did you mean the low-light mode?" in result.err
 
 
+def test_row12_bright_photos_among_dark_ones_are_named(tmp_path, buu, random_checkpoint):
+    """The mode was checked against the set's mean: two dark and two over-exposed photos average
+    0.5, between both limits, and the low-light restoration blew the bright ones to white unwarned."""
+    photos = copy_photos(buu, tmp_path / "photos", SIX[:2])
+    for name in ("5.jpg", "6.jpg"):
+        shutil.copy(buu / "over_exp" / name, photos / f"bright-{name}")
+    result = run_lumos3d(*restore_args(photos, tmp_path / "out" / "scene.ply", random_checkpoint, "--refine-steps", 0))
+    assert result.code == 0, result.err
+    said = " ".join(result.err.split())
+    assert "2 of 4 photos are bright for the low-light mode, which brightens: bright-5.jpg (0.9" in said, said
+    assert "restore them apart, the bright photos in the over-exposure mode" in said
+
+
 def test_row12_a_white_photo_stays_white_in_the_over_exposure_model(tmp_path, run_cli):
     """The bundled over-exposure operator darkens what it sees; an all-saturated photo records
     nothing to darken, so its restoration is the photo itself. Alone, it is refused: nothing to

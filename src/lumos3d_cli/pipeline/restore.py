@@ -223,16 +223,27 @@ DARK_FOR_OVER_EXPOSURE = 0.3
 BRIGHT_FOR_LOW_LIGHT = 0.6
 
 
-def _warn_of_a_mode_the_photos_contradict(batch: ImageBatch, mode: str) -> None:
+def _warn_of_a_mode_the_photos_contradict(batch: ImageBatch, mode: str, empty: set[int]) -> None:
     """A warning when dark photos go through the over-exposure model (it darkens them further) or
-    bright ones through the low-light model (it brightens them into white)."""
-    level = float(batch.images.mean())
-    if mode == "over-exposure" and level < DARK_FOR_OVER_EXPOSURE:
-        logger.warning("the photos are dark (mean level %.2f) for the over-exposure mode, which darkens; did you mean "
-                       "the low-light mode?", level)
-    elif mode == "low-light" and level > BRIGHT_FOR_LOW_LIGHT:
-        logger.warning("the photos are bright (mean level %.2f) for the low-light mode, which brightens; did you mean "
-                       "the over-exposure mode?", level)
+    bright ones through the low-light model (it brightens them into white): for the set, when
+    every photo contradicts the mode, else naming the photos that do (a flash photo among dark
+    ones, a set mixing both exposures: one restoration of the set ruins them). Photos in `empty`
+    (all black or white, warned of apart) are left out."""
+    levels = {view: float(photo.mean()) for view, photo in enumerate(batch.images) if view not in empty}
+    darkens = mode == "over-exposure"
+    contrary = [view for view, level in levels.items()
+                if (level < DARK_FOR_OVER_EXPOSURE if darkens else level > BRIGHT_FOR_LOW_LIGHT)]
+    if not contrary:
+        return
+    kind, does, other = ("dark", "darkens", "low-light") if darkens else ("bright", "brightens", "over-exposure")
+    if len(contrary) == len(levels):
+        logger.warning("the photos are %s (mean level %.2f) for the %s mode, which %s; did you mean the %s mode?", kind,
+                       sum(levels.values()) / len(levels), mode, does, other)
+        return
+    shown = ", ".join(f"{batch.paths[view].name} ({levels[view]:.2f})" for view in contrary[:5])
+    logger.warning("%d of %d photos are %s for the %s mode, which %s: %s%s; one restoration of the set cannot suit "
+                   "both exposures: restore them apart, the %s photos in the %s mode", len(contrary), len(levels),
+                   kind, mode, does, shown, " ..." if len(contrary) > 5 else "", kind, other)
 
 
 def _warn_of_repeated_photos(batch: ImageBatch, empty: set[int]) -> None:
@@ -290,7 +301,7 @@ def check_photo_contents(batch: ImageBatch, patch_size: int, mode: str) -> None:
     black, saturated = photos_without_content(batch)
     _require_some_content(batch, {*black, *saturated})  # before the warnings that would call them "left out"
     _warn_of_repeated_photos(batch, {*black, *saturated})
-    _warn_of_a_mode_the_photos_contradict(batch, mode)
+    _warn_of_a_mode_the_photos_contradict(batch, mode, {*black, *saturated})
     for kind, indices in (("black", black), ("saturated", saturated)):
         if indices:
             logger.warning("%s %s entirely %s: nothing to restore there (%s stay %s, and the scene's restoration is "
