@@ -124,7 +124,10 @@ def test_render_bad_inputs_leave_nothing(run_cli, tmp_path):
     expect_input_error(run_cli("render", path, "-o", out, "--poses", tmp_path / "missing.json"), "missing.json: no such file")
     (tmp_path / "bad.ply").write_text("not a ply")
     expect_input_error(run_cli("render", tmp_path / "bad.ply", "-o", out, "--orbit", 2), "not a PLY file")
-    assert not out.exists()
+    # was "vv.mp4: is a folder where lumos3d writes a file", of the folder this run had just made
+    expect_input_error(run_cli("render", path, "-o", tmp_path / "vv.mp4", "--orbit", 2, "--video", tmp_path / "vv.mp4"),
+                       "vv.mp4: is the frames' folder -o as well; give the video another path")
+    assert not out.exists() and not (tmp_path / "vv.mp4").exists()
 
 
 def test_camera_files_with_sizes_of_their_own(run_cli, tmp_path):

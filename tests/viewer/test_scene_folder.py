@@ -31,6 +31,33 @@ def test_missing_pieces_become_notes(restore_folder, tmp_path):
     assert any("1 of 3 missing" in note for note in scene.notes)
 
 
+def test_photos_that_cannot_be_read_are_left_out_with_a_note(restore_folder, caplog):
+    """A damaged original photo (the user's, outside the folder) or restored view refused the whole
+    viewer, telling the user to remove their photo; a missing one was a note."""
+    summary = json.loads((restore_folder / "summary.json").read_text())
+    damaged = summary["input_paths"][0]
+    with open(damaged, "w") as photo:
+        photo.write("garbage")
+    (restore_folder / "restored" / "photo2.png").write_bytes(b"not a png")
+    scene = load_viewer_scene(restore_folder)
+    assert scene.inputs[0] is None and scene.inputs[1] is not None and scene.restored[2] is None
+    assert "photos: 2 could not be read" in " ".join(scene.notes)
+    assert f"{damaged}: cannot decode" in caplog.text
+
+
+def test_an_empty_scene_is_refused_and_a_bare_ply_is_shown_whatever_lies_beside_it(tmp_path, caplog):
+    """The viewer served an empty scene without a word (render refuses it); a broken summary.json
+    beside a bare .ply refused it, advising to pass the .ply alone, which had been done."""
+    write_ply(tmp_path / "empty.ply", random_scene(0, 0, degree=0))
+    with pytest.raises(InputError, match="empty.ply: holds no Gaussians; there is nothing to view"):
+        load_viewer_scene(tmp_path / "empty.ply")
+    write_ply(tmp_path / "a.ply", random_scene(20, 0, degree=0))
+    (tmp_path / "summary.json").write_text("{bad")
+    scene = load_viewer_scene(tmp_path / "a.ply")
+    assert len(scene.gaussians) == 20 and "bare .ply" in scene.notes[0]
+    assert "summary.json: not readable JSON" in caplog.text
+
+
 def test_a_bare_ply(tmp_path):
     write_ply(tmp_path / "a.ply", random_scene(20, 0, degree=0))
     scene = load_viewer_scene(tmp_path / "a.ply")

@@ -31,6 +31,15 @@ def test_subsample_keeps_the_most_opaque_and_largest():
         select_splats(gaussians, 0)
 
 
+def test_transparent_huge_gaussians_are_kept_last_not_first():
+    """opacity 0 x an area beyond float32 (scales of 1e26) was NaN, which topk ranks above all."""
+    gaussians = random_gaussians(50, 0)
+    gaussians.opacities[:], gaussians.scales[:] = 0.5, 0.1
+    gaussians.opacities[:10], gaussians.scales[:10] = 0.0, 1e26
+    kept = select_splats(gaussians, 40)
+    assert bool((kept.opacities > 0).all())
+
+
 def test_arrays_in_the_viewer_frame():
     gaussians = random_gaussians(1000, 1)
     frame = frame_scene(gaussians, None)

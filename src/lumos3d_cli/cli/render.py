@@ -75,6 +75,8 @@ def render_command(
         raise InputError(f"--background {background}: a filled frame shows no background; leave one of them out")
     check_output_path(output, "output", folder=True)
     check_output_path(video, "video")
+    if video is not None and video.resolve() == output.resolve():
+        raise InputError(f"--video {video}: is the frames' folder -o as well; give the video another path")
     # a camera file is read (and refused) before the scene, which takes seconds when large
     from_file = camera_file_cameras(poses, width, height) if poses is not None else None
     started = time.perf_counter()

@@ -63,6 +63,27 @@ def thumbnail(path: Path, size: int = THUMBNAIL_SIZE) -> np.ndarray:
     return np.round(np.clip(pixels, 0.0, 1.0) * 255).astype(np.uint8)
 
 
+def _read_scene(path: Path) -> Gaussians:
+    """The .ply's Gaussians; InputError for one that holds none (nothing to show)."""
+    gaussians = read_ply(path)
+    if len(gaussians) == 0:
+        raise InputError(f"{path}: holds no Gaussians; there is nothing to view")
+    return gaussians
+
+
+def _thumbnails(paths: list[Path | None]) -> list[np.ndarray | None]:
+    """`thumbnail` of each path (None: none, or one that cannot be read, with a warning naming it:
+    the photos are what the viewer shows beside the scene, not the scene)."""
+    found = []
+    for path in paths:
+        try:
+            found.append(thumbnail(path) if path is not None else None)
+        except InputError as error:
+            logger.warning("%s; the viewer shows its view without it", error)
+            found.append(None)
+    return found
+
+
 def _read_summary(folder: Path) -> dict | None:
     path = folder / "summary.json"
     if not path.is_file():
@@ -132,27 +153,34 @@ def load_viewer_scene(path: Path | str) -> ViewerScene:
         if path.suffix.lower() != ".ply":
             raise InputError(f"{path}: not a .ply scene; {_HINT}")
         folder = path.parent
-        summary = _read_summary(folder)
+        try:
+            summary = _read_summary(folder)
+        except InputError as error:  # the .ply was given: it is shown whatever lies beside it
+            logger.warning("%s; showing %s alone", error, path)
+            summary = None
         beside = summary is not None and Path(str(summary.get("scene", ""))).name == path.name
         if not beside:
-            return ViewerScene(path, read_ply(path), notes=["a bare .ply: no cameras, photos or summary beside it"])
+            return ViewerScene(path, _read_scene(path), notes=["a bare .ply: no cameras, photos or summary beside it"])
         scene_path = path
     else:
         folder = path
         summary = _read_summary(folder)
         scene_path = _scene_file(folder, summary)
-    scene = ViewerScene(scene_path, read_ply(scene_path), summary=summary, points=_sparse_points(folder))
+    scene = ViewerScene(scene_path, _read_scene(scene_path), summary=summary, points=_sparse_points(folder))
     if find_camera_source(folder) is None:
         scene.notes.append("no cameras.json beside the scene: no camera frustums")
         return scene
     scene.cameras = read_cameras(folder)
     restored_paths = [_restored_photo(folder, name) for name in scene.cameras.names]
-    scene.restored = [thumbnail(p) if p is not None else None for p in restored_paths]
+    scene.restored = _thumbnails(restored_paths)
     if any(p is None for p in restored_paths):
         scene.notes.append(f"restored views: {sum(p is None for p in restored_paths)} of {len(restored_paths)} missing in restored/")
     input_paths, note = _input_photos(folder, summary, scene.cameras)
-    scene.inputs = [thumbnail(p) if p is not None else None for p in input_paths]
+    scene.inputs = _thumbnails(input_paths)
     if note:
         scene.notes.append(note)
+    unreadable = sum(p is not None and t is None for p, t in zip([*restored_paths, *input_paths], [*scene.restored, *scene.inputs]))
+    if unreadable:
+        scene.notes.append(f"photos: {unreadable} could not be read (warned of above); shown without them")
     logger.debug("viewer scene %s: %d Gaussians, %d cameras", scene_path, len(scene.gaussians), len(scene.cameras))
     return scene

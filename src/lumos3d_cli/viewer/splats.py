@@ -35,12 +35,14 @@ class SplatArrays:
 
 
 def splat_importance(gaussians: Gaussians) -> torch.Tensor:
-    """[N] how much each Gaussian can cover on screen: opacity x the area of its two largest axes.
+    """[N] float64 how much each Gaussian can cover on screen, in log: opacity x the area of its
+    two largest axes (-inf for a transparent or flat one).
 
     Keeping the largest values first drops faint and tiny splats, which change the picture the
-    least (the significance score of LightGaussian-style pruning, without rendering)."""
-    largest_two = gaussians.scales.sort(dim=-1).values[:, 1:]
-    return gaussians.opacities * largest_two.prod(dim=-1)
+    least (the significance score of LightGaussian-style pruning, without rendering). In log, as a
+    product in float32 made a transparent huge Gaussian 0 x inf = NaN, which topk ranks first."""
+    largest_two = gaussians.scales.double().sort(dim=-1).values[:, 1:]
+    return gaussians.opacities.double().log() + largest_two.log().sum(dim=-1)
 
 
 def select_splats(gaussians: Gaussians, max_splats: int) -> Gaussians:
