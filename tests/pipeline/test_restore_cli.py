@@ -126,6 +126,8 @@ def test_restore_bad_inputs_leave_nothing(run_cli, buu, tmp_path, random_checkpo
     expect_input_error(run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--reference", small,
                                "--geometry", "network"),
                   f"{small / '1.png'}: 10x10, but input 1.JPG is 500x375; give references of the same size")
+    result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--reference", small / "1.png")
+    expect_input_error(result, f"--reference {small / '1.png'}: is a file, not a folder; give the folder of reference")
     assert not (tmp_path / "out").exists()
 
 

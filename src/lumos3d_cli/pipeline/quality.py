@@ -90,7 +90,9 @@ def load_references(folder: Path | str, names: list[str], sizes: Sequence[tuple[
     its restored view's size (width, height) in `sizes`."""
     folder = Path(folder)
     if not folder.is_dir():
-        raise InputError(f"{folder}: no such folder", parameter="reference")
+        what = "is a file, not a folder" if folder.exists() else "no such folder"
+        raise InputError(f"{folder}: {what}; give the folder of reference photos, named as the inputs",
+                         parameter="reference")
     # stems in any case, as --poses and eval match them (list_images refuses two that differ in case alone)
     available = {p.stem.casefold(): p for p in list_images(folder)}
     paths = []
