@@ -257,23 +257,33 @@ def _median(values: torch.Tensor) -> float | None:
 
 def _aligned_depth(
     network: NetworkPass, selected: list[int], network_cameras: Cameras, points: SparsePoints, selected_names: list[str],
-    selected_cameras: Cameras, images: torch.Tensor | None, fused: Sequence[bool] | None,
+    selected_cameras: Cameras, images: torch.Tensor | None, fused: Sequence[bool] | None, given_cameras: bool,
 ) -> tuple[torch.Tensor, dict]:
     """The network's depth [S, h, w] of the selected views in the registered frame, and how it was
     aligned: per view to the sparse points it observes (a scale and shift, then a smooth
-    correction: `geometry.depth_correction`), or — with no points (given poses without
-    structure-from-motion, or where it failed) — by one scale the selected views' photos `images`
-    [S, 3, H, W] agree on (`geometry.scale_sweep`, among the views `fused` marks), and where they
-    agree on none, by the scale of the similarity between the network's cameras and the
-    registered ones (with a warning: the bundled models' cameras make it a poor one)."""
+    correction: `geometry.depth_correction`), or — with no points to align to (given poses without
+    structure-from-motion, or where it failed or left too few points) — by one scale the selected
+    views' photos `images` [S, 3, H, W] agree on (`geometry.scale_sweep`, among the views `fused`
+    marks), and where they agree on none, by the scale of the similarity between the network's
+    cameras and the registered ones (with a warning: the bundled models' cameras make it a poor
+    one). With `given_cameras` (exact, every view's), the photos' scale is also taken where the
+    points reach fewer than half the views: the others would take the median alignment of the few
+    (on 8 of buu's dark photos, 3 views with points: every view a ghosted double)."""
     depth = network.prediction.depth[0].detach().cpu().double()
     if len(points) >= MIN_POINTS:
         observed = _points_of_views(points, selected)
         try:
             alignment = align_depth(depth, network_cameras, observed)
         except InputError as error:
-            logger.warning("%s; the depth is scaled by the camera similarity instead", error)
+            logger.warning("%s; the depth takes one scale for the whole scene instead", error)
         else:
+            fitted = int(alignment.fitted.sum())
+            swept = (sweep_depth_scale(depth, network_cameras, images, fused)
+                     if given_cameras and images is not None and 2 * fitted < len(selected) else None)
+            if swept is not None and swept.scale is not None:
+                logger.info("sparse points reach %d of %d views: the depth takes the scale the photos agree on", fitted,
+                            len(selected))
+                return depth * swept.scale, {**swept.summary(), "views": len(selected), "points_fitted_views": fitted}
             correction = correct_depth(alignment.depth, network_cameras, observed)
             return correction.depth, {
                 "form": alignment.form, "fitted_views": int(alignment.fitted.sum()), "views": len(selected),
@@ -291,8 +301,9 @@ def _aligned_depth(
         return depth * swept.scale, {**swept.summary(), "views": len(selected)}
     similarity = fit_camera_similarity(network.network_cameras(selected_names), selected_cameras)
     logger.warning("no sparse points to align the network's depth to, and the photos agree on no scale for it; it is "
-                   "scaled by the similarity between the network's cameras and the given ones, which can put the scene "
-                   "far off (blurred, ghosted views): let structure-from-motion run (--geometry auto) or give more photos")
+                   "scaled by the similarity between the network's cameras and the registered ones, which can put the "
+                   "scene far off (blurred, ghosted views): let structure-from-motion run (--geometry auto) or give "
+                   "more photos")
     return depth * similarity.scale, {"form": "camera similarity scale", "scale": similarity.scale, "views": len(selected),
                                       **({"photo_consistency_contrast": round(swept.contrast, 4)} if swept else {})}
 
@@ -365,7 +376,7 @@ def place_views(
         _warn_of_disagreeing_focal_lengths(network_cameras, network, known_selected.cpu())
     points, reprojection_error = _points_in_frame(registration)
     depth, alignment_report = _aligned_depth(network, selected, network_cameras, points, selected_names, selected_cameras,
-                                             images, fused)
+                                             images, fused, registration.source == "poses")
     sweep_report = None
     if sweep is not None and images is not None and len(selected) > 1:
         swept = sweep_depth(depth, network_cameras, images, sweep, fused)
