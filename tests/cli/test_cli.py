@@ -83,6 +83,7 @@ def test_degrade_over_exposure_16_bit_per_image(run_cli, buu, tmp_path):
     assert result.code == 0, result.err
     summary = json.loads(result.out)
     assert len({r["exposure"] for r in summary["images"]}) == 2 and "shot_noise" in summary["images"][0]
+    assert summary["bit_depth"] == 16 and json.loads((tmp_path / "bright" / "degradation.json").read_text())["bit_depth"] == 16
     image = cv2.imread(str(tmp_path / "bright" / "1.png"), cv2.IMREAD_UNCHANGED)
     assert image.dtype == np.uint16 and image.mean() / 65535 > 0.7
 

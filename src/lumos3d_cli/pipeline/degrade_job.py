@@ -89,7 +89,7 @@ def degrade_files(
         summary = {
             "mode": mode, "seed": seed, "exposure_range": list(ranges.exposure), "gamma_range": list(ranges.gamma),
             "noise": noise, "colour_cast": colour_cast, "jpeg_quality": file_quality if writes_jpeg else jpeg_quality,
-            "shared_parameters": not per_image,
+            "shared_parameters": not per_image, "bit_depth": 8 if writes_jpeg else bit_depth,
             "count": len(records), "seconds": round(time.perf_counter() - started, 3), "images": records,
         }
         if not single_file:
