@@ -534,6 +534,31 @@ def test_a_lock_file_that_is_not_lumos3ds_is_never_written_or_removed(tmp_path):
     assert precious.read_text() == "the user's" and (tmp_path / "own" / LOCK_NAME).read_text() == "the user's own .lumos3d.lock"
 
 
+def test_a_lock_file_that_goes_or_comes_empty_never_wedges_the_folder(tmp_path, monkeypatch):
+    """Another run ended (removing its lock file) between this run's look for the file and its
+    open with O_CREAT: this run made an empty file, took it for the user's, refused, and left it,
+    which refused every later run. Also an empty file a run killed before writing its record
+    leaves: taken over, as a killed run's record is."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / LOCK_NAME).write_text("")  # killed between making the file and writing its record
+    _restore_like(out, ["1.png"])
+    assert not (out / LOCK_NAME).exists() and (out / "scene.ply").is_file()
+    original, opened = os.open, []
+
+    def the_other_run_ends_meanwhile(path, flags, *args):
+        if Path(path).name == LOCK_NAME and flags & os.O_EXCL and not opened:
+            opened.append(path)
+            raise FileExistsError(errno.EEXIST, "File exists", str(path))  # its file was there, and is gone now
+        return original(path, flags, *args)
+
+    monkeypatch.setattr(os, "open", the_other_run_ends_meanwhile)
+    _restore_like(out, ["1.png"], text="second")
+    assert opened and not (out / LOCK_NAME).exists()
+    monkeypatch.setattr(os, "open", original)
+    _restore_like(out, ["1.png"], text="third")
+
+
 def test_a_file_of_the_users_under_the_manifests_name_is_refused_not_replaced(tmp_path):
     """A user's notes named .lumos3d-manifest.json drew two "cannot be read" warnings and were
     replaced by a manifest."""

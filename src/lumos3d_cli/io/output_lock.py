@@ -40,10 +40,15 @@ def _describe_holder(descriptor: int) -> str:
 
 
 def _is_our_record(descriptor: int) -> bool:
-    """Whether the lock file holds the record of a lumos3d run (a killed run's is left behind):
-    anything else, an empty file included, is a file of the user's that only shares the name."""
+    """Whether the lock file holds the record of a lumos3d run (a killed run's is left behind), or
+    nothing: a run that made it and was killed before writing its record, or one that made it a
+    moment ago and has not taken it yet (the lock decides between the two runs). Anything else is
+    a file of the user's that only shares the name."""
+    content = os.pread(descriptor, 4096, 0)
+    if not content:
+        return True
     try:
-        return {"command", "pid", "host", "started"} <= set(json.loads(os.pread(descriptor, 4096, 0).decode()))
+        return {"command", "pid", "host", "started"} <= set(json.loads(content.decode()))
     except (ValueError, TypeError, UnicodeDecodeError):
         return False
 
@@ -52,17 +57,34 @@ def _not_ours(path: Path) -> InputError:
     return InputError(f"{path}: is not lumos3d's lock file but takes its name; move it away or choose another output")
 
 
+def _open_lock_file(folder: Path, path: Path) -> int | None:
+    """A descriptor of the lock file, made by this call where there is none (O_EXCL: whether this
+    run made it is known, not guessed from a look before: another run could remove its own in
+    between); None when the file went between the two opens (try again)."""
+    flags = os.O_RDWR | os.O_NOFOLLOW  # never through a link, never onto a folder or device
+    try:
+        return os.open(path, flags | os.O_CREAT | os.O_EXCL, 0o644)
+    except FileExistsError:
+        pass
+    except OSError as error:
+        if not os.path.lexists(path):  # nothing there: the folder takes no file (/sys, a read-only mount)
+            raise InputError(f"{folder}: no file can be written there ({error.strerror}); choose another "
+                             "output") from None
+        raise _not_ours(path) from error
+    try:
+        return os.open(path, flags)
+    except FileNotFoundError:  # its run removed it meanwhile
+        return None
+    except OSError as error:
+        raise _not_ours(path) from error
+
+
 def _acquire(folder: Path, command: str) -> int:
     path = folder / LOCK_NAME
     while True:
-        existed = os.path.lexists(path)
-        try:  # never through a link, never onto a folder or device
-            descriptor = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
-        except OSError as error:
-            if not os.path.lexists(path):  # nothing there: the folder takes no file (/sys, a read-only mount)
-                raise InputError(f"{folder}: no file can be written there ({error.strerror}); choose another "
-                                 "output") from None
-            raise _not_ours(path) from error
+        descriptor = _open_lock_file(folder, path)
+        if descriptor is None:
+            continue
         if not stat.S_ISREG(os.fstat(descriptor).st_mode):
             os.close(descriptor)
             raise _not_ours(path)
@@ -82,7 +104,7 @@ def _acquire(folder: Path, command: str) -> int:
             # that no longer has a name, which excludes no one. Try again on the current file.
             os.close(descriptor)
             continue
-        if existed and not _is_our_record(descriptor):
+        if not _is_our_record(descriptor):
             os.close(descriptor)
             raise _not_ours(path)
         break
