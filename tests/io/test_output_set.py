@@ -559,6 +559,27 @@ def test_a_lock_file_that_goes_or_comes_empty_never_wedges_the_folder(tmp_path, 
     _restore_like(out, ["1.png"], text="third")
 
 
+def test_an_earlier_output_that_cannot_be_read_is_named_not_an_internal_error(tmp_path, monkeypatch):
+    """summary.json of an earlier run made unreadable to this user (chmod 600, another owner): a
+    PermissionError out of the digest was an internal error."""
+    import lumos3d_cli.io.manifest as manifest_module
+
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"])
+    original = manifest_module.file_sha256
+
+    def unreadable(path):
+        if Path(path).name == "summary.json":
+            raise PermissionError(errno.EACCES, "Permission denied", str(path))
+        return original(path)
+
+    monkeypatch.setattr(manifest_module, "file_sha256", unreadable)
+    with pytest.raises(InputError, match=r"out/summary.json: cannot be read \(Permission denied\) to tell whether it is "
+                                         r"still what lumos3d wrote; make it readable"):
+        _restore_like(out, ["1.png"], text="second")
+    assert (out / "summary.json").read_text() == "new"
+
+
 def test_a_file_of_the_users_under_the_manifests_name_is_refused_not_replaced(tmp_path):
     """A user's notes named .lumos3d-manifest.json drew two "cannot be read" warnings and were
     replaced by a manifest."""

@@ -16,6 +16,7 @@ import stat
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from lumos3d_cli.errors import InputError
 from lumos3d_cli.io.file_digest import file_sha256
 
 logger = logging.getLogger(__name__)
@@ -90,7 +91,8 @@ class Manifest:
 
     def owns(self, path: Path) -> bool:
         """True when `path` (inside the folder) is a regular file the manifest lists, unchanged
-        since it was written. A symbolic link is never ours: lumos3d writes none."""
+        since it was written. A symbolic link is never ours: lumos3d writes none. InputError for a
+        listed file that cannot be read (another user's, made unreadable): whose it is cannot be told."""
         name = self.relative(path)
         entry = self.files.get(name) if _inside_name(name) else None
         if entry is None:
@@ -99,7 +101,15 @@ class Manifest:
             info = os.lstat(path)
         except FileNotFoundError:
             return False
-        return stat.S_ISREG(info.st_mode) and info.st_size == entry.bytes and file_sha256(path) == entry.sha256
+        if not (stat.S_ISREG(info.st_mode) and info.st_size == entry.bytes):
+            return False
+        try:
+            return file_sha256(path) == entry.sha256
+        except FileNotFoundError:
+            return False
+        except OSError as error:
+            raise InputError(f"{path}: cannot be read ({error.strerror}) to tell whether it is still what lumos3d wrote; "
+                             "make it readable, or choose another output") from None
 
     def document(self) -> str:
         files = {name: asdict(entry) for name, entry in sorted(self.files.items())}
