@@ -247,6 +247,34 @@ def test_a_second_run_into_the_same_folder_is_refused_naming_the_first(tmp_path)
     assert not (out / LOCK_NAME).exists()
 
 
+def test_a_run_writing_inside_an_output_folder_is_named_and_its_leftovers_go_with_the_folder(tmp_path):
+    """`render -o out/restored` running (or killed) while a restore replaces out/restored: its lock
+    and staging folder there were taken for the user's files ("exists and was not written by
+    lumos3d; move it away"): a live run's lock told the user to move it, and a killed run's
+    leftovers refused every restore into the folder."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"])
+    holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
+        import time
+        from lumos3d_cli.io.output_set import OutputSet
+        with OutputSet({str(out / "views")!r}, "render").add_file("00000.png").staged() as staging:
+            (staging.root / "00000.png").write_text("frame")
+            print("staged", flush=True)
+            time.sleep(60)
+    """)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "staged"
+        with pytest.raises(InputError, match=rf"views: `lumos3d render`, process {holder.pid} .* is writing its outputs here"):
+            _restore_like(out, ["1.png"], text="second")
+    finally:
+        holder.kill()  # a killed run cleans nothing up
+        holder.wait()
+    assert LOCK_NAME in os.listdir(out / "views") and any(name.startswith(".") and name.endswith(".tmp")
+                                                          for name in os.listdir(out / "views"))
+    _restore_like(out, ["1.png"], text="second")
+    assert sorted(os.listdir(out / "views")) == ["1.png"] and (out / "views" / "1.png").read_text() == "second"
+
+
 def test_the_lock_is_reentrant_within_a_process(tmp_path):
     with folder_lock(tmp_path, "restore"):
         with folder_lock(tmp_path, "restore"):

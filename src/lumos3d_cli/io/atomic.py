@@ -100,7 +100,7 @@ def _has_ended(pid: int, host: str, started: str | None) -> bool:
     return started not in (None, "", "0") and now is not None and now != started
 
 
-def _is_leftover(name: str) -> bool:
+def is_leftover(name: str) -> bool:
     """True for a temporary of ours whose writer, a process on this host, has ended (its process
     id free, or taken by a process that started at another time)."""
     match = _OWNER.search(name)
@@ -184,10 +184,10 @@ def _journal_writer_ended(staging: Path) -> bool:
 
 
 def _is_killed_commit(entry: Path) -> bool:
-    """A temporary of this host's whose writer has ended: by its name (`_is_leftover`), or, for a
+    """A temporary of this host's whose writer has ended: by its name (`is_leftover`), or, for a
     staging folder holding a commit journal and for a marker naming one, by the journal's writer
     record when the process id has been reused by a live process."""
-    if _is_leftover(entry.name):
+    if is_leftover(entry.name):
         return True
     match = _OWNER.search(entry.name)
     if not (entry.name.startswith(".") and match is not None and match["host"] == _HOST):

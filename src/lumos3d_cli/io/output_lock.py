@@ -53,6 +53,19 @@ def _is_our_record(descriptor: int) -> bool:
         return False
 
 
+def holds_a_lock_record(path: Path) -> bool:
+    """Whether the file at `path` is a lumos3d lock file (`_is_our_record`): one a killed run left
+    where the lock is not held."""
+    try:
+        descriptor = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
+    except OSError:
+        return False
+    try:
+        return stat.S_ISREG(os.fstat(descriptor).st_mode) and _is_our_record(descriptor)
+    finally:
+        os.close(descriptor)
+
+
 def _not_ours(path: Path) -> InputError:
     return InputError(f"{path}: is not lumos3d's lock file but takes its name; move it away or choose another output")
 

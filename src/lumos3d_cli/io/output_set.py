@@ -43,6 +43,7 @@ from lumos3d_cli.io.atomic import (
     current_umask,
     folders_of_pending_commits,
     holds_unfinished_commit,
+    is_leftover,
     make_folders,
     mark_pending_commit,
     remove_created_folders,
@@ -52,7 +53,7 @@ from lumos3d_cli.io.atomic import (
     write_commit_journal,
 )
 from lumos3d_cli.io.manifest import MANIFEST_NAME, Manifest, describe_file
-from lumos3d_cli.io.output_lock import LOCK_NAME, folder_lock, refuse_if_locked
+from lumos3d_cli.io.output_lock import LOCK_NAME, folder_lock, holds_a_lock_record, refuse_if_locked
 from lumos3d_cli.io.output_paths import check_output_path
 
 logger = logging.getLogger(__name__)
@@ -270,7 +271,12 @@ class OutputSet:
             if path.is_symlink() or not path.is_dir():
                 raise InputError(f"{path}: is a file where lumos3d writes its folder {name}/; move it away or choose "
                                  "another output")
-            for inner in sorted(path.rglob("*")):
+            inside = sorted(path.rglob("*"))
+            for lock in (inner for inner in inside if inner.name == LOCK_NAME):
+                refuse_if_locked(lock.parent)  # a run writing in there now is named, not taken for the user's file
+            for inner in inside:
+                if _left_by_a_killed_run(inner, path):
+                    continue  # lumos3d's own, replaced with the folder
                 if inner.is_dir() and not inner.is_symlink():
                     raise InputError(f"{inner}: a folder lumos3d did not make, inside its output folder {path}; move it "
                                      "away or choose another output")
@@ -516,6 +522,14 @@ def _undo(done: list[tuple[Path, Path]]) -> None:
             os.replace(destination, source)
         except OSError:
             logger.error("could not move %s back to %s while undoing a failed commit", destination, source)
+
+
+def _left_by_a_killed_run(inner: Path, folder: Path) -> bool:
+    """Whether `inner` (inside the output folder `folder`) is what a killed lumos3d run writing in
+    there left (`render -o out/restored` killed): its temporaries, and the lock file it held (no
+    run holds it now: `refuse_if_locked` has refused a held one)."""
+    parts = inner.relative_to(folder).parts
+    return any(is_leftover(part) for part in parts) or (inner.name == LOCK_NAME and holds_a_lock_record(inner))
 
 
 def _refuse_unless_ours(manifest: Manifest, path: Path) -> None:
