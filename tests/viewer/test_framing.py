@@ -1,8 +1,12 @@
 import math
 
 import numpy as np
+import pytest
+import torch
 
-from lumos3d_cli.viewer.framing import view_position_showing
+from lumos3d_cli.viewer.framing import VIEWER_RADIUS, frame_scene, view_position_showing
+
+from factories import random_gaussians
 
 
 def _angles(points, position, up):
@@ -46,3 +50,14 @@ def test_cameras_behind_the_starting_view_are_brought_in_front():
     start = np.array([0.0, 0.0, -12.0])
     position = view_position_showing(cameras, start, np.array([0.0, -1.0, 0.0]), math.radians(40))
     assert np.all(_angles(cameras, position, np.array([0.0, -1.0, 0.0]))[2] > 0)
+
+
+def test_one_gaussian_or_many_at_one_point_is_framed_by_its_size():
+    """The radius of a single Gaussian's centre is 0: the frame fell back to a scale of 1, and a
+    Gaussian of sigma 0.05 showed as a dot some 25 viewer units away."""
+    gaussians = random_gaussians(5, 0)
+    gaussians.means[:] = torch.tensor([1.0, 2.0, 3.0])
+    gaussians.scales[:] = 0.05
+    frame = frame_scene(gaussians, None)
+    assert frame.scale == pytest.approx(VIEWER_RADIUS / 0.15)
+    assert torch.allclose(frame.centre, torch.tensor([1.0, 2.0, 3.0], dtype=torch.float64))

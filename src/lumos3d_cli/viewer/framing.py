@@ -51,8 +51,10 @@ def camera_up(cameras: Cameras) -> np.ndarray:
 
 
 def frame_scene(gaussians: Gaussians, cameras: Cameras | None) -> ViewerFrame:
-    """Centre on the Gaussians' median, scale their 90th-percentile radius to VIEWER_RADIUS; up
-    from the cameras, or -y (the first camera's up, where the world frame is that camera's)."""
+    """Centre on the Gaussians' median, scale their 90th-percentile radius, and no less than three
+    times their median size (one Gaussian, or many at one point, is a scene too: framed as `render
+    --orbit` frames it, not as a dot), to VIEWER_RADIUS; up from the cameras, or -y (the first
+    camera's up, where the world frame is that camera's)."""
     up = camera_up(cameras) if cameras is not None and len(cameras) else np.array([0.0, -1.0, 0.0])
     if len(gaussians) == 0:
         centre = cameras.centers().double().mean(dim=0) if cameras is not None and len(cameras) else torch.zeros(3, dtype=torch.float64)
@@ -61,7 +63,8 @@ def frame_scene(gaussians: Gaussians, cameras: Cameras | None) -> ViewerFrame:
     if len(means) > _QUANTILE_SAMPLE:
         means = means[torch.linspace(0, len(means) - 1, _QUANTILE_SAMPLE).long()]
     centre = means.median(dim=0).values
-    radius = float(torch.quantile((means - centre).norm(dim=-1), _RADIUS_QUANTILE))
+    size = 3 * float(gaussians.scales.detach().to("cpu", torch.float64).amax(dim=1).median())
+    radius = max(float(torch.quantile((means - centre).norm(dim=-1), _RADIUS_QUANTILE)), size)
     return ViewerFrame(centre, VIEWER_RADIUS / radius if radius > 0 else 1.0, up)
 
 
