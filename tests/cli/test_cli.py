@@ -139,6 +139,7 @@ def test_an_empty_argument_is_refused_not_read_as_the_current_folder(run_cli, tm
     monkeypatch.chdir(tmp_path)
     expect_input_error(run_cli("degrade", "a.png", "-o", ""), "an empty argument (after '-o' on the command line")
     expect_input_error(run_cli("degrade", "", "-o", "out"), "an empty argument (after 'degrade'")
+    expect_input_error(run_cli("degrade", "a.png", "--output="), "--output=: gives the option an empty value")
     assert listing(tmp_path) == ["a.png"]
 
 

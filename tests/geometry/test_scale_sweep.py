@@ -6,7 +6,9 @@ import math
 import pytest
 import torch
 
-from lumos3d_cli.geometry.scale_sweep import MIN_CONTRAST, STEPS_PER_OCTAVE, sweep_depth_scale
+from lumos3d_cli.errors import NonFiniteError
+from lumos3d_cli.geometry.scale_sweep import MAX_PIXELS, MIN_CONTRAST, STEPS_PER_OCTAVE, sweep_depth_scale
+from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.geometry import unproject_depth
 
 from synthetic_scene import plane_cameras, plane_depth, plane_texture
@@ -14,8 +16,8 @@ from synthetic_scene import plane_cameras, plane_depth, plane_texture
 WIDTH, HEIGHT = 96, 64
 
 
-def _scene(views: int = 6):
-    cameras = plane_cameras(views, WIDTH, HEIGHT)
+def _scene(views: int = 6, width: int = WIDTH, height: int = HEIGHT):
+    cameras = plane_cameras(views, width, height)
     depth = plane_depth(cameras)
     world = unproject_depth(depth, cameras.extrinsics, cameras.intrinsics)
     return cameras, depth, plane_texture(world).permute(0, 3, 1, 2).float()
@@ -59,3 +61,32 @@ def test_photos_that_agree_on_nothing_give_no_scale():
     rotations_only = type(cameras)(one_centre, cameras.intrinsics, cameras.sizes, cameras.names)
     assert sweep_depth_scale(truth, rotations_only, images).scale is None
 
+
+
+def test_far_from_the_origin_bracketed_and_large_views_keep_the_scale():
+    """Poses a million units from the origin (a geodetic frame) lost the cameras' spacing to
+    float32 rounding (5e6: the scene put 15x too far, accepted); each position shot twice (an
+    exposure bracket) gave a spacing of 0 and no sweep; views beyond MAX_PIXELS are averaged down."""
+    cameras, truth, images = _scene()
+    shifted = cameras.extrinsics.clone()
+    shifted[:, :, 3] -= shifted[:, :, :3] @ torch.tensor([5e6, 5e6, 0.0], dtype=torch.float64)  # centres + (5e6, 5e6, 0)
+    far = Cameras(shifted, cameras.intrinsics, cameras.sizes, cameras.names)
+    assert abs(math.log(sweep_depth_scale(truth / 5, far, images).scale / 5)) < 0.03
+    twice = [view for view in range(len(cameras)) for _ in range(2)]
+    bracketed = Cameras(cameras.extrinsics[twice], cameras.intrinsics[twice], [cameras.sizes[0]] * len(twice))
+    assert abs(math.log(sweep_depth_scale(truth[twice] / 5, bracketed, images[twice]).scale / 5)) < 0.03
+    cameras, truth, images = _scene(width=2 * WIDTH, height=2 * HEIGHT)
+    assert 4 * WIDTH * HEIGHT > MAX_PIXELS
+    assert abs(math.log(sweep_depth_scale(truth / 5, cameras, images).scale / 5)) < 0.03
+
+
+def test_noise_the_views_do_not_share_and_non_finite_depth():
+    """Independent noise in every photo (a score of the best of noise) gives no scale; NaN or Inf
+    depth is refused, not swept into a fallback or a scale."""
+    cameras, truth, images = _scene()
+    assert sweep_depth_scale(truth, cameras, torch.rand(images.shape, generator=torch.Generator().manual_seed(1))).scale is None
+    for bad in (math.nan, math.inf):
+        depth = truth.clone()
+        depth[0, 0, 0] = bad
+        with pytest.raises(NonFiniteError):
+            sweep_depth_scale(depth, cameras, images)

@@ -418,6 +418,18 @@ def test_grey_tiffs_opencv_misreads_keep_their_samples_and_orientation(tmp_path,
     assert "ga.tif: 4.2 % of its pixels are transparent" in caplog.text
 
 
+def test_a_truncated_grey_tiff_is_refused_not_read_as_black(tmp_path, capfd):
+    """OpenImageIO reads lazily: the error of a truncated strip came after the check, and the
+    photo read as zeros (exit 0) under a hundred lines of libtiff's messages."""
+    pixels = np.random.default_rng(2).random((150, 200, 1)).astype(np.float32)
+    _write_oiio(tmp_path / "whole.tif", pixels, "float")
+    data = (tmp_path / "whole.tif").read_bytes()
+    (tmp_path / "cut.tif").write_bytes(data[:len(data) // 2])
+    with pytest.raises(InputError, match=r"cut.tif: cannot decode as TIF \(corrupt, truncated"):
+        read_image(tmp_path / "cut.tif")
+    assert capfd.readouterr().err == ""
+
+
 def test_photos_beyond_opencvs_limits_are_refused_in_one_line(tmp_path, monkeypatch):
     """A side beyond 2**20 pixels was an internal error (cv2.error out of imdecode)."""
     assert cv2.imwrite(str(tmp_path / "wide.tif"), np.full((1, (1 << 20) + 10, 3), 100, np.uint8))

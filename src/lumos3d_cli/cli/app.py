@@ -111,13 +111,18 @@ _ARGUMENT_NAMES = {"photos": "PHOTOS", "root": "ROOT", "output": "-o"}
 
 
 def _refuse_empty_arguments(args: list[str]) -> None:
-    """InputError for an empty argument: no option takes one, and click reads an empty path as
-    the current folder, so `-o "$OUT"` with OUT unset wrote every output there and `degrade ""`
-    read it as the input."""
+    """InputError for an empty argument, or an option given an empty value (`--output=`): no
+    option takes one, and click reads an empty path as the current folder, so `-o "$OUT"` with
+    OUT unset wrote every output there and `degrade ""` read it as the input. (A training
+    override `key=` is no option: it is left to the config's checks.)"""
     for index, arg in enumerate(args):
+        if arg == "--":
+            return
         if not arg:
             where = f"after '{args[index - 1]}'" if index else "first"
             raise InputError(f"an empty argument ({where} on the command line; an unset shell variable?): give a value")
+        if arg.startswith("--") and arg.endswith("=") and arg.count("=") == 1:
+            raise InputError(f"{arg}: gives the option an empty value (an unset shell variable?): give a value")
 
 
 def _error_line(label: str, message: str) -> None:

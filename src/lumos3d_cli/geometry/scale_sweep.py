@@ -26,7 +26,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
+import torch.nn.functional as F
 
+from lumos3d_cli.checks import require_finite
 from lumos3d_cli.geometry.photo_consistency import grey_windows, mean_of_best, window_scores
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.geometry import unproject_depth
@@ -39,9 +41,12 @@ BEST = 2  # the neighbours' scores averaged per candidate, as the depth sweep's 
 RADIUS = 3  # the NCC window's half size in depth-map pixels, as the depth sweep's
 # How far the best candidate's score must stand above the sweep's median: on LOM's low-light
 # photos with their reference poses the right scale scores 0.29-0.45 above it (buu's 25 and 8
-# photos, shrub's 35: the scene within 2 % of where structure-from-motion's points put it); a flat
-# sweep (black, clipped or textureless photos, cameras too close together) says nothing about it.
-MIN_CONTRAST = 0.05
+# photos, shrub's 35: the scene within 2 % of where structure-from-motion's points put it); black,
+# clipped or textureless photos, noise the views do not share (0.006), smooth blobs (0.03) and one
+# photo repeated in every view (0.06) say nothing about the scale.
+MIN_CONTRAST = 0.15
+# The depth-map pixels a view is swept at (the network's 224x168 is averaged to 112x84)
+MAX_PIXELS = 12_000
 
 
 @dataclass(frozen=True)
@@ -66,25 +71,38 @@ def sweep_depth_scale(depth: torch.Tensor, cameras: Cameras, images: torch.Tenso
     """depth [V, h, w] (positive, one frame up to scale), cameras [V] (the given ones, intrinsics
     in pixels of the depth maps), images [V, 3, H, W] in [0, 1] -> the ScaleSweep (module
     docstring). views [V] bool: the views that take part, compared and compared with (None: all;
-    evaluation's held-out views take no part). Runs in float32 on the depth's device."""
-    count, height, width = depth.shape
+    evaluation's held-out views take no part). Depth maps of more than MAX_PIXELS are
+    area-averaged to fewer first (the scale is one number: a quarter of the pixels find it as
+    well, in a quarter of the time). Runs in float32 on the depth's device, the cameras recentred
+    in float64 first (poses in a geodetic frame, a million units from the origin, lose the
+    spacing between cameras to float32 rounding)."""
+    count = depth.shape[0]
     if images.dim() != 4 or images.shape[:2] != (count, 3) or len(cameras) != count:
         raise ValueError(f"images {tuple(images.shape)} and {len(cameras)} cameras must match depth {tuple(depth.shape)}")
+    require_finite("depth", depth)
+    require_finite("images", images)
+    if not bool((depth > 0).all()):
+        raise ValueError("the scale sweep needs positive depth everywhere")
     taking_part = [v for v in range(count) if views is None or bool(views[v])]
-    device = depth.device
-    candidates = _candidates(depth, cameras, taking_part)
-    if len(taking_part) < 2 or candidates is None:
+    distances = _distinct_distances(cameras)
+    candidates = _candidates(depth, distances, taking_part)
+    if candidates is None:
         return ScaleSweep(None, 0.0, 0.0, 0)
+    device = depth.device
+    depth, cameras = _within_budget(depth, _recentred(cameras, taking_part))
+    height, width = depth.shape[-2:]
     cameras = cameras.to(device=device, dtype=torch.float32)
     grey, mean, deviation = grey_windows(images.to(device), height, width, RADIUS)
     identity = torch.eye(3, 4, device=device).expand(count, 3, 4)
     points = unproject_depth(depth.float(), identity, cameras.intrinsics)  # [V, h, w, 3] in each camera's frame
     factors = (candidates - 1).to(device=device, dtype=torch.float32)  # window_scores scales the points by 1 + factor
-    centres = cameras.centers().double()
-    distances = torch.cdist(centres, centres)
     total = torch.zeros(len(candidates), dtype=torch.float64)
     for view in taking_part:
-        others = sorted((other for other in taking_part if other != view), key=lambda o: float(distances[view, o]))
+        # a camera at the same centre (an exposure bracket's twin) sees the same at every scale
+        others = sorted((o for o in taking_part if o != view and math.isfinite(float(distances[view, o]))),
+                        key=lambda o: float(distances[view, o]))
+        if not others:
+            continue
         scores = window_scores(grey[:, 0], mean[:, 0], deviation[:, 0], cameras, view, others[:NEIGHBOURS],
                                points[view], factors, RADIUS)
         agreement, _ = mean_of_best(scores, min(BEST, len(scores)))  # [J, h, w]; -1 where no neighbour sees it
@@ -94,23 +112,56 @@ def sweep_depth_scale(depth: torch.Tensor, cameras: Cameras, images: torch.Tenso
     total /= len(taking_part)
     best = int(total.argmax())
     contrast = float(total[best] - total.median())
-    if contrast < MIN_CONTRAST:
+    if not contrast >= MIN_CONTRAST:
         return ScaleSweep(None, float(total[best]), contrast, len(candidates))
     return ScaleSweep(_refined(candidates, total, best), float(total[best]), contrast, len(candidates))
 
 
-def _candidates(depth: torch.Tensor, cameras: Cameras, views: list[int]) -> torch.Tensor | None:
-    """[J] float64 factors for the depth, evenly spaced in log (module docstring); None where the
-    cameras taking part share one centre (no parallax fixes any scale)."""
+def _distinct_distances(cameras: Cameras) -> torch.Tensor:
+    """[V, V] float64 distances between the cameras' centres; inf between a camera and itself or
+    another at its centre (within 1e-9 of the largest distance: a twin of an exposure bracket)."""
+    centres = cameras.centers().double().cpu()
+    distances = torch.cdist(centres, centres)
+    same = distances <= 1e-9 * float(distances.max()) if distances.numel() else distances.bool()
+    return distances.masked_fill(same, math.inf)
+
+
+def _recentred(cameras: Cameras, views: list[int]) -> Cameras:
+    """The cameras in a world frame moved to the mean centre of `views`, in float64: R x + t =
+    R (x' + m) + t, so t' = t + R m."""
+    extrinsics = cameras.extrinsics.double().clone()
+    middle = cameras.centers().double()[views].mean(dim=0).to(extrinsics.device)
+    extrinsics[:, :, 3] += extrinsics[:, :, :3] @ middle
+    return Cameras(extrinsics, cameras.intrinsics.double(), cameras.sizes, cameras.names)
+
+
+def _within_budget(depth: torch.Tensor, cameras: Cameras) -> tuple[torch.Tensor, Cameras]:
+    """Depth [V, h, w] area-averaged to at most MAX_PIXELS a view (an integer factor), and the
+    cameras' intrinsics for it (pixel-corner origin: the focal lengths and principal point scale
+    with the size)."""
+    height, width = depth.shape[-2:]
+    factor = math.ceil(math.sqrt(height * width / MAX_PIXELS))
+    if factor <= 1:
+        return depth, cameras
+    size = (max(1, height // factor), max(1, width // factor))
+    smaller = F.interpolate(depth[:, None].double(), size=size, mode="area")[:, 0]
+    intrinsics = cameras.intrinsics.double().clone()
+    intrinsics[:, 0] *= size[1] / width
+    intrinsics[:, 1] *= size[0] / height
+    return smaller, Cameras(cameras.extrinsics, intrinsics, cameras.sizes, cameras.names)
+
+
+def _candidates(depth: torch.Tensor, distances: torch.Tensor, views: list[int]) -> torch.Tensor | None:
+    """[J] float64 factors for the depth, evenly spaced in log (module docstring); None with fewer
+    than two views at distinct centres (no parallax fixes any scale)."""
     if len(views) < 2:
         return None
-    centres = cameras.centers().double()[views]
-    distances = torch.cdist(centres, centres)
-    distances.fill_diagonal_(math.inf)
-    spacing = float(distances.min(dim=1).values.median())
-    median_depth = float(depth[views].double().median())
-    if not spacing > 0 or not math.isfinite(spacing) or not median_depth > 0:
+    nearest = distances[views][:, views].min(dim=1).values
+    nearest = nearest[torch.isfinite(nearest)]
+    if len(nearest) < 2:
         return None
+    spacing = float(nearest.median())
+    median_depth = float(depth[views].double().median())
     octaves = math.log2(MAX_DEPTH_RATIO / MIN_DEPTH_RATIO)
     ratios = MIN_DEPTH_RATIO * 2 ** (torch.arange(int(octaves * STEPS_PER_OCTAVE) + 1, dtype=torch.float64) / STEPS_PER_OCTAVE)
     return ratios * spacing / median_depth

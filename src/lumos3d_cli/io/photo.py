@@ -166,10 +166,14 @@ def _decode_grey_tiff(path: Path) -> tuple[np.ndarray | None, np.ndarray | None]
     """`_decode_pixels` of a grey TIFF (one channel, or grey and alpha) through OpenImageIO, at its
     own sample type, its orientation applied; (None, None) where it cannot be decoded."""
     source = oiio.ImageBuf(str(path))
-    native = source.spec().format
-    pixels = None if source.has_error else oiio.ImageBufAlgo.reorient(source).get_pixels(native)
+    # read now, not lazily: a truncated strip fails here, where a lazy read filled it with zeros
+    pixels = None
+    if source.read(0, 0, True) and not source.has_error:
+        oriented = oiio.ImageBufAlgo.reorient(source)
+        pixels = None if oriented.has_error else oriented.get_pixels(source.spec().format)
+        oriented.geterror()
     if pixels is None:
-        oiio.geterror()  # retrieved, or OpenImageIO prints it at exit; read_photo's one line says it
+        oiio.geterror()  # retrieved, or OpenImageIO prints them at exit; read_photo's one line says it
         source.geterror()
         return None, None
     if pixels.dtype == np.float16:  # as OpenCV decodes half floats

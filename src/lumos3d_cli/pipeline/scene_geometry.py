@@ -269,7 +269,8 @@ def _aligned_depth(
     one). With `given_cameras` (exact, every view's), the photos' scale is also taken where the
     points reach fewer than half the views: the others would take the median alignment of the few
     (on 8 of buu's dark photos, 3 views with points: every view a ghosted double)."""
-    depth = network.prediction.depth[0].detach().cpu().double()
+    on_device = network.prediction.depth[0].detach()  # the scale sweep's, where the network ran
+    depth = on_device.cpu().double()
     if len(points) >= MIN_POINTS:
         observed = _points_of_views(points, selected)
         try:
@@ -278,7 +279,7 @@ def _aligned_depth(
             logger.warning("%s; the depth takes one scale for the whole scene instead", error)
         else:
             fitted = int(alignment.fitted.sum())
-            swept = (sweep_depth_scale(depth, network_cameras, images, fused)
+            swept = (sweep_depth_scale(on_device, network_cameras, images, fused)
                      if given_cameras and images is not None and 2 * fitted < len(selected) else None)
             if swept is not None and swept.scale is not None:
                 logger.info("sparse points reach %d of %d views: the depth takes the scale the photos agree on", fitted,
@@ -296,7 +297,7 @@ def _aligned_depth(
                     "median_log_residual_after": _median(correction.residual_after),
                 },
             }
-    swept = sweep_depth_scale(depth, network_cameras, images, fused) if images is not None else None
+    swept = sweep_depth_scale(on_device, network_cameras, images, fused) if images is not None else None
     if swept is not None and swept.scale is not None:
         return depth * swept.scale, {**swept.summary(), "views": len(selected)}
     similarity = fit_camera_similarity(network.network_cameras(selected_names), selected_cameras)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,7 +43,8 @@ def splat_importance(gaussians: Gaussians) -> torch.Tensor:
     least (the significance score of LightGaussian-style pruning, without rendering). In log, as a
     product in float32 made a transparent huge Gaussian 0 x inf = NaN, which topk ranks first."""
     largest_two = gaussians.scales.double().sort(dim=-1).values[:, 1:]
-    return gaussians.opacities.double().log() + largest_two.log().sum(dim=-1)
+    # transparent and infinite (-inf + inf, a caller's tensor: read_ply refuses infinite scales) ranks last
+    return torch.nan_to_num(gaussians.opacities.double().log() + largest_two.log().sum(dim=-1), nan=-math.inf)
 
 
 def select_splats(gaussians: Gaussians, max_splats: int) -> Gaussians:
