@@ -143,7 +143,7 @@ def depth_agreement(depth: torch.Tensor, changed: torch.Tensor, cameras: Cameras
 
 
 def window_scores(grey: torch.Tensor, mean: torch.Tensor, deviation: torch.Tensor, cameras: Cameras, view: int,
-            others: list[int], points: torch.Tensor, factors: torch.Tensor, radius: int) -> torch.Tensor:
+                  others: list[int], points: torch.Tensor, factors: torch.Tensor, radius: int) -> torch.Tensor:
     """[N, J, h, w] NCC of `view`'s windows with each neighbour's photo sampled at the J depth
     hypotheses; -inf where a hypothesis takes part of the window out of a neighbour's photo or
     behind it. points [h, w, 3]: the view's pixels in its camera frame at the current depth (a
@@ -234,7 +234,7 @@ def sweep_depth(
         if not others or not bool(allowed[view]):  # a held-out view's Gaussians are not fused
             continue
         scores = window_scores(grey[:, 0], mean[:, 0], deviation[:, 0], cameras, view, others, points[view], factors,
-                         settings.radius)
+                               settings.radius)
         # the mean of the best neighbours that see the window: a neighbour that does not is left
         # out, not scored -1 (else a wrong depth that brings a second neighbour in would win)
         score, seen = mean_of_best(scores, min(settings.best, len(others)))  # [J, h, w] each
