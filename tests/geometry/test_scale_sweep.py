@@ -90,3 +90,17 @@ def test_noise_the_views_do_not_share_and_non_finite_depth():
         depth[0, 0, 0] = bad
         with pytest.raises(NonFiniteError):
             sweep_depth_scale(depth, cameras, images)
+
+
+def test_a_view_whose_depth_is_off_from_the_others_takes_its_own_scale():
+    """The network's depth is in one frame only nearly (Herz-Jesus: the views' own best scales
+    spread over 10.8-15.3): one scale for all left a view's Gaussians beside the others'."""
+    cameras, truth, images = _scene()
+    depth = truth / 5
+    depth[2] = truth[2] / 6.5  # this view's depth 30 % short of the others'
+    swept = sweep_depth_scale(depth, cameras, images)
+    assert abs(math.log(swept.scale / 5)) < 0.1
+    own = swept.view_scales
+    assert abs(math.log(float(own[2]) / 6.5)) < 0.05
+    assert all(abs(math.log(float(own[v]) / 5)) < 0.05 for v in (0, 1, 3, 4, 5))
+    assert swept.summary()["views_with_their_own_scale"] >= 1

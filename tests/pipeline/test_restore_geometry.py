@@ -123,6 +123,22 @@ def test_given_poses_without_structure_from_motion_take_the_scale_the_photos_agr
         assert float(torch.cdist(means, given.centers()).min(dim=1).values.median()) == pytest.approx(4.85, rel=0.1)
 
 
+def test_poses_that_do_not_belong_to_the_photos_are_warned_of(run_cli, buu, tmp_path):
+    """8 of buu's photos with their poses permuted: a collage of copies, exit 0 and no word; the
+    carried points land 269 px from where the given cameras see them (7 px with their own)."""
+    names = [f"{index}.JPG" for index in range(3, 11)]
+    photos = _photos(buu, tmp_path, names)
+    given = _given_poses(buu, names, tmp_path / "right.json")
+    order = [3, 0, 6, 1, 7, 2, 5, 4]
+    write_transforms_json(tmp_path / "permuted.json", Cameras(given.extrinsics[order], given.intrinsics[order],
+                                                              given.sizes, given.names))
+    result = run_cli("restore", photos, "-o", tmp_path / "out" / "scene.ply", "--poses", tmp_path / "permuted.json",
+                     "--preset", "balanced", "--refine-steps", 0, "--json")
+    assert result.code == 0, result.err
+    said = " ".join(result.err.split())
+    assert "structure-from-motion's points land" in said and "the poses do not belong to these photos" in said, said
+
+
 def test_photos_sfm_cannot_place(run_cli, buu, shared_data, tmp_path, random_checkpoint):
     blank = tmp_path / "blank"
     blank.mkdir()

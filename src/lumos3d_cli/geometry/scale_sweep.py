@@ -3,15 +3,18 @@ one global scale swept over a log grid, scored by normalised cross-correlation w
 neighbouring photos.
 
 With `--poses` and no structure-from-motion points (`--geometry network`, or structure-from-motion
-failing on the photos) the network's depth is known in the given cameras' frame up to one scale
-(the network predicts every view's depth in one frame). The similarity between the network's
+failing on the photos) the network's depth is known in the given cameras' frame up to scale (the
+network predicts every view's depth in one frame, nearly: on Strecha's wide-baseline Herz-Jesus the
+views' own best scales spread over 10.8-15.3, on LOM buu within one step). The similarity between the network's
 cameras and the given ones has that scale, but the bundled models' cameras nearly collapse onto
 one pose (on LOM buu their mean distance apart is 0.006 of the given frame's 3.6 once scaled), so
 its scale put the scene about ten times too far and every restored view was a ghosted jumble. The
 given cameras are exact, and the photos they see agree only at the right depth: every view's
 depth, scaled by each candidate, is projected into its nearest cameras' photos and scored by
 window NCC as the per-pixel depth sweep scores its hypotheses (`geometry.photo_consistency`); the
-scale the photos agree on best wins, where it stands out from the rest of the sweep.
+scale the photos agree on best wins, where it stands out from the rest of the sweep. Each view
+then takes its own best within an octave of it, where its own photos single one out (one scale
+for all left Herz-Jesus's portal doubled, 23 % too far from the cameras).
 
 The candidates are spaced by the ratio of the scene's median depth to the median distance from
 each camera to its nearest other camera: from `MIN_DEPTH_RATIO` (the scene a quarter of a camera
@@ -51,19 +54,25 @@ MAX_PIXELS = 12_000
 
 @dataclass(frozen=True)
 class ScaleSweep:
-    """scale: the factor for the depth (None: no candidate stands out, `contrast` below
-    MIN_CONTRAST, or no view has another to be compared with); score: the best candidate's mean
-    agreement (the share-weighted NCC in [0, 1]); contrast: how far it stands above the sweep's
-    median; candidates: how many scales were tried."""
+    """scale: the scene's factor for the depth (None: no candidate stands out, `contrast` below
+    MIN_CONTRAST, or no view has another to be compared with); view_scales [V]: each view's own
+    (module docstring; the scene's where the view's photos do not single one out); score: the
+    scene's best candidate's mean agreement (the share-weighted NCC in [0, 1]); contrast: how far
+    it stands above the sweep's median; candidates: how many scales were tried."""
 
     scale: float | None
     score: float
     contrast: float
     candidates: int
+    view_scales: torch.Tensor | None = None
 
     def summary(self) -> dict:
+        own = None if self.view_scales is None or self.scale is None else self.view_scales != self.scale
         return {"form": "photo-consistency scale", "scale": self.scale, "score": round(self.score, 4),
-                "contrast": round(self.contrast, 4), "candidates": self.candidates}
+                "contrast": round(self.contrast, 4), "candidates": self.candidates,
+                "views_with_their_own_scale": None if own is None else int(own.sum()),
+                "view_scale_range": None if self.view_scales is None else
+                [round(float(self.view_scales.min()), 6), round(float(self.view_scales.max()), 6)]}
 
 
 def sweep_depth_scale(depth: torch.Tensor, cameras: Cameras, images: torch.Tensor,
@@ -72,8 +81,8 @@ def sweep_depth_scale(depth: torch.Tensor, cameras: Cameras, images: torch.Tenso
     in pixels of the depth maps), images [V, 3, H, W] in [0, 1] -> the ScaleSweep (module
     docstring). views [V] bool: the views that take part, compared and compared with (None: all;
     evaluation's held-out views take no part). Depth maps of more than MAX_PIXELS are
-    area-averaged to fewer first (the scale is one number: a quarter of the pixels find it as
-    well, in a quarter of the time). Runs in float32 on the depth's device, the cameras recentred
+    area-averaged to fewer first (a scale is one number per view: a quarter of the pixels find it
+    as well, in a quarter of the time). Runs in float32 on the depth's device, the cameras recentred
     in float64 first (poses in a geodetic frame, a million units from the origin, lose the
     spacing between cameras to float32 rounding)."""
     count = depth.shape[0]
@@ -96,7 +105,8 @@ def sweep_depth_scale(depth: torch.Tensor, cameras: Cameras, images: torch.Tenso
     identity = torch.eye(3, 4, device=device).expand(count, 3, 4)
     points = unproject_depth(depth.float(), identity, cameras.intrinsics)  # [V, h, w, 3] in each camera's frame
     factors = (candidates - 1).to(device=device, dtype=torch.float32)  # window_scores scales the points by 1 + factor
-    total = torch.zeros(len(candidates), dtype=torch.float64)
+    per_view = torch.zeros(count, len(candidates), dtype=torch.float64)
+    compared = []
     for view in taking_part:
         # a camera at the same centre (an exposure bracket's twin) sees the same at every scale
         others = sorted((o for o in taking_part if o != view and math.isfinite(float(distances[view, o]))),
@@ -108,13 +118,31 @@ def sweep_depth_scale(depth: torch.Tensor, cameras: Cameras, images: torch.Tenso
         agreement, _ = mean_of_best(scores, min(BEST, len(scores)))  # [J, h, w]; -1 where no neighbour sees it
         # unseen and disagreeing pixels count as 0 over the whole view: a scale that throws the
         # view out of its neighbours' photos scores low, not the mean of the few pixels left
-        total += agreement.clamp_min(0).flatten(1).mean(1).double().cpu()
-    total /= len(taking_part)
+        per_view[view] = agreement.clamp_min(0).flatten(1).mean(1).double().cpu()
+        compared.append(view)
+    total = per_view[taking_part].mean(0)
     best = int(total.argmax())
     contrast = float(total[best] - total.median())
     if not contrast >= MIN_CONTRAST:
         return ScaleSweep(None, float(total[best]), contrast, len(candidates))
-    return ScaleSweep(_refined(candidates, total, best), float(total[best]), contrast, len(candidates))
+    scale = _refined(candidates, total, best)
+    return ScaleSweep(scale, float(total[best]), contrast, len(candidates),
+                      _view_scales(candidates, per_view, best, scale, compared))
+
+
+def _view_scales(candidates: torch.Tensor, per_view: torch.Tensor, best: int, scale: float,
+                 compared: list[int]) -> torch.Tensor:
+    """[V] float64 each compared view's own scale: its best candidate within an octave of the
+    scene's `best` (refined as the scene's), where it stands MIN_CONTRAST above the view's own
+    sweep median; the scene's `scale` elsewhere."""
+    scales = torch.full((per_view.shape[0],), scale, dtype=torch.float64)
+    low, high = max(0, best - STEPS_PER_OCTAVE), min(len(candidates) - 1, best + STEPS_PER_OCTAVE)
+    for view in compared:
+        scores = per_view[view]
+        own = low + int(scores[low:high + 1].argmax())
+        if scores[own] - scores.median() >= MIN_CONTRAST:
+            scales[view] = _refined(candidates, scores, own)
+    return scales
 
 
 def _distinct_distances(cameras: Cameras) -> torch.Tensor:
