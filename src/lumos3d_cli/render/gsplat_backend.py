@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import importlib
 import importlib.util
+import sys
+from types import ModuleType
 
 import torch
 
@@ -15,11 +20,23 @@ def gsplat_available() -> bool:
     return importlib.util.find_spec("gsplat") is not None
 
 
+@functools.cache
+def _loaded_gsplat() -> ModuleType:
+    """gsplat with its CUDA extension loaded. The first load on a machine builds the extension (a
+    minute) and prints its progress with rich on standard output, where `--json` writes its
+    document (a first `restore --device cuda --json` wrote unreadable JSON): sent to stderr."""
+    with contextlib.redirect_stdout(sys.stderr):
+        gsplat = importlib.import_module("gsplat")
+        with contextlib.suppress(ImportError):  # where a later gsplat moves it, the first call loads it
+            importlib.import_module("gsplat.cuda._backend")
+    return gsplat
+
+
 def render_with_gsplat(gaussians: Gaussians, cameras: Cameras, settings: RasterSettings, background: torch.Tensor,
                        weights: bool = False):
     """Return images [V,3,H,W], alphas [V,H,W], expected depths [V,H,W], radii [V,N,2] and, with
     `weights`, each Gaussian's rendered weight per view [V,N] (else None)."""
-    import gsplat
+    gsplat = _loaded_gsplat()
 
     device, dtype = gaussians.means.device, gaussians.means.dtype
     viewmats = to_homogeneous(cameras.extrinsics).to(device=device, dtype=dtype)
