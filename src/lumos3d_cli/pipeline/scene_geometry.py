@@ -265,9 +265,10 @@ def _aligned_depth(
     """The network's depth [S, h, w] of the selected views in the registered frame, and how it was
     aligned: per view to the sparse points it observes (a scale and shift, then a smooth
     correction: `geometry.depth_correction`), or — with no points to align to (given poses without
-    structure-from-motion, or where it failed or left too few points) — by one scale the selected
-    views' photos `images` [S, 3, H, W] agree on (`geometry.scale_sweep`, among the views `fused`
-    marks), and where they agree on none, by the scale of the similarity between the network's
+    structure-from-motion, or where it failed or left too few points) — by the scale the selected
+    views' photos `images` [S, 3, H, W] agree on (`geometry.scale_sweep`: the scene's, then each
+    view's own near it, among the views `fused` marks), and where they agree on none, by the
+    scale of the similarity between the network's
     cameras and the registered ones (with a warning: the bundled models' cameras make it a poor
     one). With `given_cameras` (exact, every view's), the photos' scale is also taken where the
     points reach fewer than half the views: the others would take the median alignment of the few
