@@ -25,6 +25,18 @@ def _copy(buu, tmp_path, names, folder="low"):
     return target
 
 
+def test_the_scores_against_references_are_said_on_the_console(run_cli, buu, tmp_path, random_checkpoint):
+    """--reference DIR ("for PSNR/SSIM/LPIPS") put the scores in summary.json alone."""
+    photos = _copy(buu, tmp_path, ["1.JPG", "2.JPG"])
+    out = tmp_path / "out" / "scene.ply"
+    result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--reference", buu / "high",
+                     "--geometry", "network", "--refine-steps", 0)
+    assert result.code == 0, result.err
+    mean = json.loads((out.parent / "summary.json").read_text())["metrics"]["mean"]
+    said = " ".join(result.err.split())
+    assert f"against --reference: PSNR {mean['psnr']:.2f}, SSIM {mean['ssim']:.3f} (mean of the views" in said, said
+
+
 def test_restore_writes_every_output(run_cli, buu, tmp_path, random_checkpoint):
     photos = _copy(buu, tmp_path, ["1.JPG", "2.JPG", "3.JPG"])
     out = tmp_path / "out" / "scene.ply"

@@ -21,11 +21,13 @@ from lumos3d_cli.io.work_folders import remove_work_folders
 EXAMPLES = """
 [bold]Examples[/bold]
 
+  lumos3d restore dark_photos/ -o out/scene.ply                [dim]# restore a scene shot in the dark[/dim]
+  lumos3d eval lom/ --scenes buu --protocol holdout            [dim]# score against LOM's references[/dim]
   lumos3d degrade photos/ -o dark/ --mode low-light --seed 0   [dim]# synthesise a low-light set[/dim]
-  lumos3d degrade photos/ -o bright/ --mode over-exposure     [dim]# synthesise over-exposure[/dim]
+  lumos3d degrade photos/ -o bright/ --mode over-exposure      [dim]# synthesise over-exposure[/dim]
   lumos3d render scene.ply --orbit 60 -o frames/ --video a.mp4 [dim]# fly around a scene[/dim]
-  lumos3d info scene.ply                                      [dim]# summarise a Gaussian scene[/dim]
-  lumos3d info photos/ --json                                 [dim]# image folder summary as JSON[/dim]
+  lumos3d info scene.ply                                       [dim]# summarise a Gaussian scene[/dim]
+  lumos3d info photos/ --json                                  [dim]# image folder summary as JSON[/dim]
 """
 
 app = typer.Typer(

@@ -135,3 +135,8 @@ def _report(scene: RestoredScene, summary: dict, output: Path, video: Path | Non
     say(f"restored {len(scene.names)} view(s) with {geometry_report['source']} cameras: {output} "
         f"({len(scene.gaussians):,} Gaussians), views in {output.parent / 'restored'}, contact sheet "
         f"{output.parent / 'contact_sheet.png'}")
+    mean = (summary.get("metrics") or {}).get("mean") or {}
+    scores = [f"{label} {mean[key]:.{digits}f}" for key, label, digits in
+              (("psnr", "PSNR", 2), ("ssim", "SSIM", 3), ("lpips", "LPIPS", 3)) if mean.get(key) is not None]
+    if scores:  # --reference: the mean over the views (each view's in summary.json)
+        say(f"against --reference: {', '.join(scores)} (mean of the views; each view's in summary.json)")
