@@ -58,7 +58,7 @@ import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from cli_runs import SHARED  # noqa: E402
-from report import machine_description, markdown_table, table_section, write_section  # noqa: E402
+from report import check_result_file, machine_description, markdown_table, table_section, write_section  # noqa: E402
 
 from lumos3d_cli.data.augment import crop_box  # noqa: E402
 from lumos3d_cli.data.brackets import BracketDataset, read_srgb  # noqa: E402
@@ -435,6 +435,8 @@ def main() -> None:
     parser.add_argument("--from-json", type=Path, default=None,
                         help="run nothing: print the table of an earlier run's JSON (and write the doc if it was a full default run)")
     args = parser.parse_args()
+    if (refusal := check_result_file(args.json)) is not None:
+        parser.error(f"--json {refusal}")
     if args.from_json is not None and not args.from_json.is_file():
         parser.error(f"--from-json {args.from_json}: no such file")
     if args.from_json is None and not any(source in SOURCES[mode] for mode in args.modes for source in args.sources):

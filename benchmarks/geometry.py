@@ -21,7 +21,7 @@ from report import machine_description, markdown_table, write_section  # noqa: E
 from lumos3d_cli.pipeline.presets import get_restore_preset  # noqa: E402
 
 SOURCES = ("network", "sfm")
-STAGES = ("load_model", "sfm", "network", "fuse", "render", "write")
+STAGES = ("load_model", "sfm", "network", "fuse", "budget", "refine", "render", "write")  # summary.json's seconds
 
 
 def _evaluation_rows(folder: Path) -> list[list[object]]:

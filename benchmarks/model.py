@@ -27,7 +27,7 @@ import torch
 from torch.utils.flop_counter import FlopCounterMode
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from report import machine_description, markdown_table, median_seconds, peak_rss_mib, write_section  # noqa: E402
+from report import check_result_file, machine_description, markdown_table, median_seconds, peak_rss_mib, write_section  # noqa: E402
 
 from lumos3d_cli.model.architectures import get_architecture  # noqa: E402
 from lumos3d_cli.model.lumos3d import Lumos3D, build_model  # noqa: E402
@@ -309,6 +309,10 @@ def main() -> int:
     parser.add_argument("--retry", type=Path, metavar="JSON", help="re-measure the contended (†) cells of an earlier --json")
     parser.add_argument("--no-write", action="store_true", help="print the section instead of writing docs/performance.md")
     args = parser.parse_args()
+    if args.repeats < 1:
+        parser.error(f"--repeats {args.repeats}: give at least 1")
+    if (refusal := check_result_file(args.json)) is not None:
+        parser.error(f"--json {refusal}")
     if args.render:
         results = json.loads(args.render.read_text())
     elif args.retry:
@@ -317,6 +321,7 @@ def main() -> int:
     else:
         results = measure(args)
         if args.json:
+            args.json.parent.mkdir(parents=True, exist_ok=True)
             args.json.write_text(json.dumps(results, indent=2) + "\n")
     section = render(results, args)
     if args.no_write:

@@ -149,6 +149,8 @@ def main() -> None:
     parser.add_argument("--first-call", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
+    if args.repeats < 1:
+        parser.error(f"--repeats {args.repeats}: give at least 1")
     if args.first_call:
         print(json.dumps(first_call()))
         return

@@ -4,6 +4,7 @@ owns its section)."""
 
 from __future__ import annotations
 
+import json
 import os
 import platform
 import re
@@ -82,6 +83,24 @@ def markdown_table(header: list[str], rows: list[list[object]]) -> str:
 def table_section(heading: str, description: str, table: str) -> str:
     """A measured section: the heading, what was measured and how, the table, and the machine."""
     return "\n".join([heading, "", description, "", table, "", f"Machine: {machine_description()}."])
+
+
+def check_result_file(path: Path | None) -> str | None:
+    """Why `path` cannot take a benchmark's JSON results (None: it can): checked before the run,
+    not after it (a run of minutes lost to a missing folder), and never over a file that is not
+    a JSON document, such as a photo given by mistake (which was replaced)."""
+    if path is None:
+        return None
+    if path.is_dir():
+        return f"{path}: is a folder; give a .json file"
+    if path.suffix.lower() != ".json":
+        return f"{path}: give a .json file"
+    if path.exists():
+        try:
+            json.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, ValueError):
+            return f"{path}: exists and is not a JSON document of results; give another path"
+    return None
 
 
 def write_section(name: str, markdown: str, document: Path = PERFORMANCE_DOC) -> None:
