@@ -85,6 +85,18 @@ def box_mean(values: torch.Tensor, radius: int) -> torch.Tensor:
     return (columns[..., size:, :] - columns[..., :-size, :]) / (size * size)
 
 
+def require_sweep_inputs(sweep: str, depth: torch.Tensor, cameras: Cameras, images: torch.Tensor) -> None:
+    """ValueError unless depth [V, h, w] is positive, with V cameras and images [V, 3, H, W];
+    NonFiniteError for NaN or Inf in the depth or the images. `sweep` names the caller."""
+    views = depth.shape[0]
+    if images.dim() != 4 or images.shape[:2] != (views, 3) or len(cameras) != views:
+        raise ValueError(f"images {tuple(images.shape)} and {len(cameras)} cameras must match depth {tuple(depth.shape)}")
+    require_finite("depth", depth)
+    require_finite("images", images)
+    if not bool((depth > 0).all()):
+        raise ValueError(f"the {sweep} needs positive depth everywhere")
+
+
 def grey_windows(images: torch.Tensor, height: int, width: int, radius: int) -> tuple[torch.Tensor, ...]:
     """images [V, 3, H, W] -> (grey [V, 1, height, width] area-resized and centred on 0, the mean
     and the standard deviation of each (2 radius + 1)² window [V, 1, height, width], the
@@ -209,12 +221,7 @@ def sweep_depth(
     settings = settings or DepthSweepSettings()
     started = time.perf_counter()
     views, height, width = depth.shape
-    if images.dim() != 4 or images.shape[:2] != (views, 3) or len(cameras) != views:
-        raise ValueError(f"images {tuple(images.shape)} and {len(cameras)} cameras must match depth {tuple(depth.shape)}")
-    require_finite("depth", depth)
-    require_finite("images", images)
-    if not bool((depth > 0).all()):
-        raise ValueError("the depth sweep needs positive depth everywhere")
+    require_sweep_inputs("depth sweep", depth, cameras, images)
     device = depth.device
     allowed = (torch.ones(views, dtype=torch.bool) if neighbour_views is None
                else torch.tensor([bool(v) for v in neighbour_views], dtype=torch.bool))

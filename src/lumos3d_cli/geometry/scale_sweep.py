@@ -31,8 +31,8 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
-from lumos3d_cli.checks import require_finite
-from lumos3d_cli.geometry.photo_consistency import grey_windows, mean_of_best, window_scores
+from lumos3d_cli.geometry.photo_consistency import grey_windows, mean_of_best, require_sweep_inputs, window_scores
+from lumos3d_cli.geometry.similarity import Similarity, transform_cameras
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.geometry import unproject_depth
 
@@ -86,12 +86,7 @@ def sweep_depth_scale(depth: torch.Tensor, cameras: Cameras, images: torch.Tenso
     in float64 first (poses in a geodetic frame, a million units from the origin, lose the
     spacing between cameras to float32 rounding)."""
     count = depth.shape[0]
-    if images.dim() != 4 or images.shape[:2] != (count, 3) or len(cameras) != count:
-        raise ValueError(f"images {tuple(images.shape)} and {len(cameras)} cameras must match depth {tuple(depth.shape)}")
-    require_finite("depth", depth)
-    require_finite("images", images)
-    if not bool((depth > 0).all()):
-        raise ValueError("the scale sweep needs positive depth everywhere")
+    require_sweep_inputs("scale sweep", depth, cameras, images)
     taking_part = [v for v in range(count) if views is None or bool(views[v])]
     distances = _distinct_distances(cameras)
     candidates = _candidates(depth, distances, taking_part)
@@ -155,12 +150,10 @@ def _distinct_distances(cameras: Cameras) -> torch.Tensor:
 
 
 def _recentred(cameras: Cameras, views: list[int]) -> Cameras:
-    """The cameras in a world frame moved to the mean centre of `views`, in float64: R x + t =
-    R (x' + m) + t, so t' = t + R m."""
-    extrinsics = cameras.extrinsics.double().clone()
-    middle = cameras.centers().double()[views].mean(dim=0).to(extrinsics.device)
-    extrinsics[:, :, 3] += extrinsics[:, :, :3] @ middle
-    return Cameras(extrinsics, cameras.intrinsics.double(), cameras.sizes, cameras.names)
+    """The cameras in float64, in a world frame moved to the mean centre of `views`."""
+    cameras = cameras.to(dtype=torch.float64)
+    middle = cameras.centers()[views].mean(dim=0)
+    return transform_cameras(cameras, Similarity(1.0, torch.eye(3, dtype=torch.float64), -middle))
 
 
 def _within_budget(depth: torch.Tensor, cameras: Cameras) -> tuple[torch.Tensor, Cameras]:
