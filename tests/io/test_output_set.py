@@ -907,3 +907,86 @@ def test_a_long_lived_process_finishes_a_commit_killed_since_it_last_wrote(tmp_p
     monkeypatch.setattr(atomic, "_cleaned", set())
     _restore_like(out, ["1.png"], text="fourth")  # a fresh process finds nothing to replay
     assert (out / "scene.ply").read_text() == "fourth"
+
+
+def _acting_before_the_moves(monkeypatch, act):
+    """Run `act` once, right before the commit's moves: after the last ownership check, in the
+    moment a user's editor or another process could still write into the output folder."""
+    original = output_set_module.write_commit_journal
+
+    def journal_then_act(*args):
+        original(*args)
+        act()
+
+    monkeypatch.setattr(output_set_module, "write_commit_journal", journal_then_act)
+
+
+@pytest.mark.parametrize("change", ["added to a folder of outputs", "old output edited", "folder made", "video edited"])
+def test_a_file_the_user_writes_between_the_last_check_and_the_moves_survives(tmp_path, monkeypatch, change):
+    """The ownership check runs before the commit; a file written after it and before the moves was
+    deleted with the old outputs (a new file in views/, or scene.ply edited). The old outputs are
+    checked again where the commit moved them: such a commit is undone and refused."""
+    out, video = tmp_path / "out", tmp_path / "videos" / "fly.mp4"
+    video.parent.mkdir()
+    _restore_like(out, ["1.png", "2.png"], text="first", video=video)
+
+    def users_change():
+        if change == "added to a folder of outputs":
+            (out / "views" / "notes.txt").write_text("the user's")
+        elif change == "old output edited":
+            (out / "scene.ply").write_text("edited by the user")
+        elif change == "video edited":
+            video.write_text("cut by the user")
+        else:
+            (out / "views" / "mine").mkdir()
+
+    _acting_before_the_moves(monkeypatch, users_change)
+    place = {"added to a folder of outputs": "out/views/notes.txt", "old output edited": "out/scene.ply",
+             "folder made": "out/views/mine", "video edited": "videos/fly.mp4"}[change]
+    with pytest.raises(InputError, match=rf"{place}: changed or made while this run was committing its outputs.*"
+                                         "nothing was changed"):
+        _restore_like(out, ["1.png"], text="second", video=video)
+    monkeypatch.undo()
+    if change == "added to a folder of outputs":
+        assert (out / "views" / "notes.txt").read_text() == "the user's"
+    elif change == "old output edited":
+        assert (out / "scene.ply").read_text() == "edited by the user"
+    elif change == "video edited":
+        assert video.read_text() == "cut by the user"
+    else:
+        assert (out / "views" / "mine").is_dir()
+    assert sorted(os.listdir(video.parent)) == [MANIFEST_NAME, "fly.mp4"]
+    assert [(out / "views" / name).read_text() for name in ("1.png", "2.png")] == ["first", "first"]
+    assert (out / "summary.json").read_text() == "first" and hidden_entries(out) == []
+    assert sorted(Manifest.read(out).files) == ["scene.ply", "summary.json", "views/1.png", "views/2.png"]
+
+
+def test_a_run_that_begins_writing_inside_a_folder_of_outputs_during_the_commit_is_named(tmp_path, monkeypatch):
+    """`render -o out/views` starting after the restore's last check and before its moves: its
+    lock is checked where the commit moved the old views/, the commit undone and the run named."""
+    out = tmp_path / "out"
+    _restore_like(out, ["1.png"], text="first")
+    holders = []
+
+    def a_render_starts():
+        holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
+            import time
+            from lumos3d_cli.io.output_set import OutputSet
+            with OutputSet({str(out / "views")!r}, "render").add_file("00000.png").staged() as staging:
+                print("staged", flush=True)
+                time.sleep(60)
+        """)], stdout=subprocess.PIPE, text=True)
+        holders.append(holder)
+        assert holder.stdout.readline().strip() == "staged"
+
+    _acting_before_the_moves(monkeypatch, a_render_starts)
+    try:
+        with pytest.raises(InputError, match=rf"out/views: `lumos3d render`, process \d+ .* began writing its outputs "
+                                             "here while this run was committing its own; nothing was changed"):
+            _restore_like(out, ["1.png"], text="second")
+        assert (out / "views" / "1.png").read_text() == "first" and (out / "scene.ply").read_text() == "first"
+        assert LOCK_NAME in os.listdir(out / "views")  # the render's lock and staging stay where it made them
+    finally:
+        for holder in holders:
+            holder.kill()
+            holder.wait()

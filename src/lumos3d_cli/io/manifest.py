@@ -93,7 +93,11 @@ class Manifest:
         """True when `path` (inside the folder) is a regular file the manifest lists, unchanged
         since it was written. A symbolic link is never ours: lumos3d writes none. InputError for a
         listed file that cannot be read (another user's, made unreadable): whose it is cannot be told."""
-        name = self.relative(path)
+        return self.holds(self.relative(path), path)
+
+    def holds(self, name: str, path: Path) -> bool:
+        """True when the file at `path` is what the manifest lists under `name`, unchanged (`owns`,
+        for a file that has since moved: an old output in a commit's trash). InputError as `owns`."""
         entry = self.files.get(name) if _inside_name(name) else None
         if entry is None:
             return False

@@ -128,26 +128,35 @@ def _acquire(folder: Path, command: str) -> int:
     return descriptor
 
 
-def refuse_if_locked(folder: Path | str) -> None:
-    """InputError naming the run that holds `folder`'s lock, if another one does: the check a
-    command makes before its libraries load, so that a second run is refused at once (it takes
-    the lock itself later; this creates nothing)."""
+def lock_holder(folder: Path | str) -> str | None:
+    """The run that holds `folder`'s lock, described (command, process id, host, start time), when
+    another one does; None when none does or this process holds it. Creates nothing."""
     folder = Path(folder).resolve()
     if folder in _held:
-        return
+        return None
     try:
         descriptor = os.open(folder / LOCK_NAME, os.O_RDONLY | os.O_NOFOLLOW)
     except OSError:  # no lock file (or one that is not ours: `folder_lock` names it)
-        return
+        return None
     try:
         if stat.S_ISREG(os.fstat(descriptor).st_mode):
             try:
                 fcntl.flock(descriptor, fcntl.LOCK_SH | fcntl.LOCK_NB)
             except BlockingIOError:
-                raise InputError(f"{folder}: {_describe_holder(descriptor)} is writing its outputs here; wait for it to "
-                                 "end or choose another output folder") from None
+                return _describe_holder(descriptor)
+        return None
     finally:
         os.close(descriptor)  # closing releases a shared lock taken here
+
+
+def refuse_if_locked(folder: Path | str) -> None:
+    """InputError naming the run that holds `folder`'s lock, if another one does: the check a
+    command makes before its libraries load, so that a second run is refused at once (it takes
+    the lock itself later; this creates nothing)."""
+    holder = lock_holder(folder)
+    if holder is not None:
+        raise InputError(f"{Path(folder).resolve()}: {holder} is writing its outputs here; wait for it to end or choose "
+                         "another output folder")
 
 
 @contextlib.contextmanager

@@ -16,7 +16,9 @@ the same folder is refused instead of interleaving its files. Everything is writ
 hidden staging folder inside the output folder (files elsewhere: beside themselves), then
 committed: a journal of the moves is written, and with the stop signals held back the old
 outputs of this output set move into the staging folder and the new ones into place, the
-manifest last, one rename each (a whole folder is one rename). A signal during the commit takes
+manifest last, one rename each (a whole folder is one rename). Before the manifests, the old
+outputs are checked again where they were moved: a file the user wrote among them after the last
+check undoes the commit. A signal during the commit takes
 effect once it is complete; a run killed outright during it (SIGKILL) is finished by
 the next lumos3d run writing into that folder (io/atomic.py). Either way the folder holds the
 complete old set or the complete new one.
@@ -53,7 +55,7 @@ from lumos3d_cli.io.atomic import (
     write_commit_journal,
 )
 from lumos3d_cli.io.manifest import MANIFEST_NAME, Manifest, describe_file
-from lumos3d_cli.io.output_lock import LOCK_NAME, folder_lock, holds_a_lock_record, refuse_if_locked
+from lumos3d_cli.io.output_lock import LOCK_NAME, folder_lock, holds_a_lock_record, lock_holder, refuse_if_locked
 from lumos3d_cli.io.output_paths import check_output_path
 
 logger = logging.getLogger(__name__)
@@ -413,20 +415,24 @@ class OutputSet:
         root = staging.root.absolute()
         trash = root / ".replaced"
         moves: list[tuple[Path, Path, str]] = []
+        replaced: list[tuple[Path, Path, Path]] = []  # (old output, where it is moved, the folder listing it)
+        previous_manifests: dict[Path, Manifest] = {}  # each folder's manifest before the commit
+        manifest_moves: list[tuple[Path, Path, str]] = []  # last: after the old outputs are checked once moved
         leftovers: list[Path] = []  # old files moved beside themselves (outside the staging folder)
         staged_elsewhere: list[Path] = []  # manifests and markers outside the staging folder's: gone if no commit
 
-        def move_away(path: Path) -> None:
+        def move_away(path: Path, listing: Path) -> None:
             if _is_within(path.parent, self.folder.resolve()):
                 destination = trash / str(len(moves))
             else:  # another folder (maybe another file system): beside itself, as a temporary of ours
                 destination = path.parent / f"{temporary_prefix(path.name)}replaced_{len(moves)}_{_unique()}.tmp"
                 leftovers.append(destination)
             moves.append((path, destination, "destination-exists"))
+            replaced.append((path, destination, listing))
 
         for item in items:
             if item.final.exists() or item.final.is_symlink():
-                move_away(item.final)
+                move_away(item.final, item.final.parent)
             if not item.is_folder and not _is_within(item.staged, root):
                 os.chmod(item.staged, 0o666 & ~current_umask())  # mkstemp made it private
             moves.append((item.staged, item.final, "source-gone"))
@@ -436,7 +442,7 @@ class OutputSet:
         try:
             written_sets = {(item.final.parent, item.output_set) for item in items}
             for folder in dict.fromkeys(item.final.parent for item in items):
-                previous = Manifest.read(folder)
+                previous = previous_manifests[folder] = Manifest.read(folder)
                 ours = [item for item in items if item.final.parent == folder]
                 rewritten = {item.final.name for item in ours}
                 manifest = Manifest(folder)
@@ -448,7 +454,7 @@ class OutputSet:
                         # earlier run with more photos): stale; removed unless the user changed it, or
                         # this run read it (an input linking to it): inputs are never touched.
                         if previous.owns(folder / name) and _resolved(folder / name) not in inputs:
-                            move_away(folder / name)
+                            move_away(folder / name, folder)
                         elif previous.owns(folder / name):
                             manifest.files[name] = entry
                             logger.warning("%s: kept: an earlier run's output, and an input of this run", folder / name)
@@ -460,13 +466,16 @@ class OutputSet:
                     for file in files:
                         name = item.final.name + ("/" + file.relative_to(item.staged).as_posix() if item.is_folder else "")
                         manifest.files[name] = describe_file(file, self.command, item.output_set)
+                number = len(moves) + len(manifest_moves)
                 if _is_within(folder, self.folder.resolve()):
-                    staged_manifest = root / f".manifest.{len(moves)}"
+                    staged_manifest = root / f".manifest.{number}"
                 else:  # another folder (a video's, maybe on another file system): staged beside its manifest
-                    staged_manifest = folder / f"{temporary_prefix(MANIFEST_NAME)}manifest_{len(moves)}_{_unique()}.tmp"
+                    staged_manifest = folder / f"{temporary_prefix(MANIFEST_NAME)}manifest_{number}_{_unique()}.tmp"
                     staged_elsewhere.append(staged_manifest)
                 staged_manifest.write_text(manifest.document())
-                moves.append((staged_manifest, folder / MANIFEST_NAME, "source-gone"))
+                manifest_moves.append((staged_manifest, folder / MANIFEST_NAME, "source-gone"))
+            first_manifest = len(moves)
+            moves += manifest_moves
             # the other folders learn of the journal first: a run into them keeps what it still needs
             # (every folder but the output folder itself, compared resolved: a video in out/sub/ or
             # through a link to out/ is in out/sub/ and in out/)
@@ -480,9 +489,17 @@ class OutputSet:
             write_commit_journal(root, self.folder.absolute(), moves)
             with _stop_signals_held():
                 try:
-                    for source, destination, _ in moves:
+                    for index, (source, destination, _) in enumerate(moves):
+                        if index == first_manifest:
+                            # the old outputs are out of the way, where no one else writes: a file written
+                            # into them since the last check (the user's) makes the commit undo itself
+                            _check_still_ours(replaced, previous_manifests)
                         os.replace(source, destination)
                         done.append((source, destination))
+                except InputError:
+                    _undo(done)
+                    done.clear()
+                    raise
                 except OSError as error:
                     _undo(done)
                     done.clear()
@@ -522,6 +539,39 @@ def _undo(done: list[tuple[Path, Path]]) -> None:
             os.replace(destination, source)
         except OSError:
             logger.error("could not move %s back to %s while undoing a failed commit", destination, source)
+
+
+def _check_still_ours(replaced: list[tuple[Path, Path, Path]], manifests: dict[Path, Manifest]) -> None:
+    """InputError naming the first old output that is no longer lumos3d's: a file the user changed
+    or added in the moment between the ownership check before the commit and the moves, or a run
+    that began writing inside a folder of outputs then. Checked on the old outputs where the commit
+    moved them (the staging folder's trash, or beside themselves as temporaries), where no one else
+    writes: what passes is what the commit may delete.
+
+    replaced: (old output, where it lies now, the folder whose manifest lists it); manifests: those
+    folders' manifests as they were before the commit."""
+    for original, moved, listing in replaced:
+        manifest = manifests[listing]
+        folder_of_outputs = moved.is_dir() and not moved.is_symlink()
+        if not folder_of_outputs:
+            contents = [(moved, original)]
+        else:  # a folder of outputs (restored/): judged as `_check_ownership` judged it in place
+            contents = [(inner, original / inner.relative_to(moved)) for inner in sorted(moved.rglob("*"))]
+            for inner, listed in contents:
+                holder = lock_holder(inner.parent) if inner.name == LOCK_NAME else None
+                if holder is not None:
+                    raise InputError(f"{listed.parent}: {holder} began writing its outputs here while this run was "
+                                     "committing its own; nothing was changed: run again once it has ended")
+        for inner, listed in contents:
+            if folder_of_outputs and _left_by_a_killed_run(inner, moved):
+                continue
+            if inner.name == MANIFEST_NAME and Manifest.is_manifest(inner):
+                continue
+            if manifest.holds(manifest.relative(listed), inner):
+                continue
+            raise InputError(f"{listed}: changed or made while this run was committing its outputs, so it is yours; "
+                             "lumos3d never deletes what it did not write, and nothing was changed: move it away or "
+                             "choose another output")
 
 
 def _left_by_a_killed_run(inner: Path, folder: Path) -> bool:
