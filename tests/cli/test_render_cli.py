@@ -1,4 +1,6 @@
 import json
+from dataclasses import replace
+from pathlib import Path
 
 import cv2
 import imageio_ffmpeg
@@ -233,3 +235,50 @@ def test_options_are_checked_before_the_scene_is_read_and_fast_gifs_warned_of(ru
                      "--width", 16)
     assert result.code == 0, result.err
     assert "--fps 60: a GIF holds frame times in hundredths of a second" in " ".join(result.err.split())
+
+
+def _moved_by(cameras, shift):
+    """The same cameras with the world moved by +shift [3]."""
+    rotation = cameras.extrinsics[:, :, :3].double()
+    translation = cameras.extrinsics[:, :, 3].double() - rotation @ shift
+    return type(cameras)(torch.cat([rotation, translation[:, :, None]], 2), cameras.intrinsics.double(), cameras.sizes,
+                         cameras.names)
+
+
+def test_far_poses_render_a_restores_centred_scene_where_it_lies(run_cli, tmp_path):
+    """`restore` centres a scene whose poses lie far from their origin (georeferenced) and records
+    where (summary.json geometry.poses_origin): `render` with the poses in their own frame moves
+    them by that origin onto the scene, and renders what the restore's own cameras.json shows."""
+    path, gaussians = _scene(tmp_path)
+    cameras = orbit_from_gaussians(gaussians, 3, 48, 32)
+    origin = [4.1e6, -2.5e5, 3.3e6]
+    write_transforms_json(tmp_path / "near.json", cameras)
+    write_transforms_json(tmp_path / "far.json", _moved_by(cameras, torch.tensor(origin, dtype=torch.float64)))
+    summary = {"scene": str(path), "geometry": {"source": "poses", "poses_origin": origin}}
+    (path.parent / "summary.json").write_text(json.dumps(summary))
+    for name in ("near", "far"):
+        result = run_cli("render", path, "--poses", tmp_path / f"{name}.json", "-o", tmp_path / name)
+        assert result.code == 0, result.err
+    for frame in listing(tmp_path / "near"):
+        near, far = (cv2.imread(str(tmp_path / name / frame)).astype(float) for name in ("near", "far"))
+        assert near.std() > 5 and np.abs(near - far).max() <= 1
+    # a summary of another scene beside it says nothing about this one: the far cameras see nothing there
+    (path.parent / "summary.json").write_text(json.dumps(summary | {"scene": "other.ply"}))
+    result = run_cli("render", path, "--poses", tmp_path / "far.json", "-o", tmp_path / "unrelated")
+    assert result.code == 0, result.err
+    assert cv2.imread(str(tmp_path / "unrelated" / "00000.png")).max() == 0
+
+
+def test_a_scene_and_cameras_far_from_the_origin_are_rendered_centred():
+    """A scene given with its cameras millions of units out: both are moved to the cameras' centre
+    in float64 before the float32 renderer sees them, so they render as they do near the origin."""
+    from lumos3d_cli.pipeline.render_job import in_rendering_frame
+
+    gaussians = random_scene(400, 0, degree=1, dtype=torch.float64, spread=0.4)
+    cameras = orbit_from_gaussians(gaussians, 2, 48, 32)
+    shift = torch.tensor([5e6, 5e6, 1e5], dtype=torch.float64)
+    far_scene = replace(gaussians, means=gaussians.means + shift)
+    moved_scene, moved_cameras = in_rendering_frame(Path("nowhere/scene.ply"), far_scene, _moved_by(cameras, shift))
+    expected = render(gaussians, cameras.to(dtype=torch.float32)).images
+    got = render(moved_scene, moved_cameras.to(dtype=torch.float32)).images
+    assert expected.std() > 0.02 and (expected - got).abs().max() < 1e-3

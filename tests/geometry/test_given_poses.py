@@ -6,7 +6,8 @@ import torch
 
 from lumos3d_cli.data.lom import lom_reference_extrinsics, read_lom_scene
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.geometry.given_poses import read_given_poses
+from lumos3d_cli.geometry.given_poses import FAR_FROM_ORIGIN, centred_if_far, read_given_poses
+from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.colmap import read_colmap_model, write_colmap_model
 from lumos3d_cli.io.transforms_json import write_transforms_json
 
@@ -97,3 +98,43 @@ def test_a_scene_folder_gives_its_colmap_model_before_a_transforms_json(tmp_path
     names = [f"{i}.JPG" for i in range(1, 26)]
     cameras = read_given_poses(tmp_path, names, [(500, 375)] * 25)
     assert cameras.names == names
+
+
+def _moved_by(cameras, shift):
+    """The same cameras with the world moved by +shift [3] (their centres included)."""
+    rotation = cameras.extrinsics[:, :, :3]
+    translation = cameras.extrinsics[:, :, 3] - rotation @ shift
+    return Cameras(torch.cat([rotation, translation[:, :, None]], 2), cameras.intrinsics, cameras.sizes, cameras.names)
+
+
+@pytest.mark.parametrize("shift", [[5e6, -3e6, 2e5], [0.0, 0.0, 6.4e6]])
+def test_cameras_far_from_the_origin_are_centred_exactly(shift):
+    """Georeferenced poses (UTM, ECEF): the cameras are moved to their mean centre in float64, so a
+    point moved with them projects where it did, and the centre says where the frame was."""
+    shift = torch.tensor(shift, dtype=torch.float64)
+    near = plane_cameras(5)
+    far = _moved_by(near, shift)
+    centred, origin = centred_if_far(far)
+    torch.testing.assert_close(origin, far.centers().mean(0), rtol=1e-15, atol=0)
+    torch.testing.assert_close(centred.centers().mean(0), torch.zeros(3, dtype=torch.float64), rtol=0, atol=1e-8)
+    points = torch.tensor([[0.3, -0.2, 4.0], [1.0, 0.5, 7.0]], dtype=torch.float64)
+    expected, expected_depth = near.project(points)
+    pixels, depth = centred.project(points + shift - origin)
+    torch.testing.assert_close(pixels, expected, rtol=0, atol=1e-6)
+    torch.testing.assert_close(depth, expected_depth, rtol=0, atol=1e-9)
+    assert centred.names == far.names and centred.sizes == far.sizes
+
+
+def test_cameras_near_their_origin_are_left_as_they_are():
+    """A dataset's own frame (COLMAP, nerfstudio, LOM: centres within a few spreads of the origin)
+    and one camera position a unit or so out are not moved: the outputs stay in the poses' frame."""
+    cameras = plane_cameras(5)
+    spread = float((cameras.centers() - cameras.centers().mean(0)).square().sum(1).mean().sqrt())
+    within = _moved_by(cameras, torch.tensor([0.9 * FAR_FROM_ORIGIN * spread, 0.0, 0.0], dtype=torch.float64))
+    for kept in (cameras, within, _moved_by(cameras[[2]], torch.tensor([3.0, 1.0, 0.0], dtype=torch.float64))):
+        same, origin = centred_if_far(kept)
+        assert origin is None and same is kept
+    beyond = _moved_by(cameras, torch.tensor([1.1 * FAR_FROM_ORIGIN * spread, 0.0, 0.0], dtype=torch.float64))
+    assert centred_if_far(beyond)[1] is not None
+    one_far = _moved_by(cameras[[2]], torch.tensor([0.0, 2e6, 0.0], dtype=torch.float64))
+    assert centred_if_far(one_far)[1] is not None  # one centre: measured in units

@@ -123,6 +123,36 @@ def test_given_poses_without_structure_from_motion_take_the_scale_the_photos_agr
         assert float(torch.cdist(means, given.centers()).min(dim=1).values.median()) == pytest.approx(4.85, rel=0.1)
 
 
+def test_poses_far_from_their_frames_origin_restore_as_they_do_near_it(run_cli, buu, tmp_path):
+    """Georeferenced poses (UTM, ECEF) lie millions of units from their frame's origin, where float32
+    rounds a position to half a unit: buu's photos with their poses moved 5e6 out restored as streaks
+    (a fortieth of the Gaussians), exit 0. The scene is built centred on the cameras, and summary.json
+    says where that centre lies in the poses' frame."""
+    photos = _photos(buu, tmp_path)
+    given = _given_poses(buu, FRAMES, tmp_path / "near.json")
+    shift = torch.tensor([5e6, -3e6, 2e5], dtype=torch.float64)
+    far = Cameras(torch.cat([given.extrinsics[:, :, :3], (given.extrinsics[:, :, 3] - given.extrinsics[:, :, :3] @ shift)[:, :, None]], 2),
+                  given.intrinsics, given.sizes, given.names)
+    write_transforms_json(tmp_path / "far.json", far)
+    restored, summaries = {}, {}
+    for name in ("near", "far"):
+        out = tmp_path / name / "scene.ply"
+        result = run_cli("restore", photos, "-o", out, "--poses", tmp_path / f"{name}.json", "--preset", "fast",
+                         "--refine-steps", 0, "--json")
+        assert result.code == 0, result.err
+        summaries[name] = json.loads(result.out)
+        restored[name] = [cv2.imread(str(out.parent / "restored" / f"{n[:-4]}.png")).astype(np.float64) for n in FRAMES]
+    assert summaries["far"]["gaussians"]["kept"] == pytest.approx(summaries["near"]["gaussians"]["kept"], rel=0.01)
+    for near_view, far_view in zip(restored["near"], restored["far"]):
+        assert 10 * np.log10(255**2 / np.mean((near_view - far_view) ** 2)) > 35
+    assert summaries["near"]["geometry"]["poses_origin"] is None
+    origin = torch.tensor(summaries["far"]["geometry"]["poses_origin"], dtype=torch.float64)
+    torch.testing.assert_close(origin, far.centers().mean(0), rtol=0, atol=1e-3)  # the file holds 16 digits
+    assert "units from the origin" in " ".join(result.err.split())
+    written = read_cameras(tmp_path / "far" / "cameras.json")  # the cameras of the centred scene
+    torch.testing.assert_close(written.centers().double() + origin, far.centers(), rtol=0, atol=1e-3)
+
+
 def test_poses_that_do_not_belong_to_the_photos_are_warned_of(run_cli, buu, tmp_path):
     """8 of buu's photos with their poses permuted: a collage of copies, exit 0 and no word; the
     carried points land 269 px from where the given cameras see them (7 px with their own)."""

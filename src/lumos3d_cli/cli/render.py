@@ -57,7 +57,7 @@ def render_command(
         from lumos3d_cli.io.ply import read_ply
         from lumos3d_cli.io.video import video_kind
         from lumos3d_cli.pipeline.render_job import (
-            camera_file_cameras, output_size, render_cameras, render_frames, render_outputs,
+            camera_file_cameras, in_rendering_frame, output_size, render_cameras, render_frames, render_outputs,
         )
     if (poses is None) == (orbit is None):
         raise InputError("give exactly one of --poses CAMERAS or --orbit N")
@@ -84,6 +84,7 @@ def render_command(
     if len(gaussians) == 0:
         raise InputError(f"{scene}: holds no Gaussians; there is nothing to render")
     cameras, source = from_file if from_file is not None else render_cameras(scene, gaussians, None, orbit, width, height)
+    gaussians, cameras = in_rendering_frame(scene, gaussians, cameras)
     outputs = render_outputs(len(cameras), output, video, [scene, poses])
     with outputs.reserved(), progress_bar() as bars:
         frames = render_frames(gaussians, cameras, output, video, fps, colour, antialiased, ProgressBars(bars), [scene, poses],

@@ -4,14 +4,20 @@ frames and optionally a video (H.264 or GIF), all or nothing."""
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
+import math
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+
+import torch
 
 from lumos3d_cli.errors import InputError, listed
 from lumos3d_cli.geometry.field_of_view import MEASURED_FOV_DEGREES, implausible_views
+from lumos3d_cli.geometry.given_poses import centred_if_far
+from lumos3d_cli.geometry.similarity import Similarity, transform_cameras
 from lumos3d_cli.io.camera_files import camera_sources, find_camera_source, read_cameras
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
@@ -97,6 +103,40 @@ def render_cameras(
         logger.warning("%s: %s; orbiting around the scene's bounds instead", scene, readable)
     size = output_size((DEFAULT_ORBIT_SIZE,) * 2, width, height)
     return orbit_from_gaussians(gaussians, orbit, *size), "orbit around the scene bounds"
+
+
+def in_rendering_frame(scene: Path, gaussians: Gaussians, cameras: Cameras) -> tuple[Gaussians, Cameras]:
+    """The Gaussians read from `scene` and the cameras to render them from, in a frame the
+    renderer's float32 holds: unchanged unless the cameras lie far from the origin
+    (`centred_if_far`). Then, when the scene is a restore's that centred its far poses (its
+    summary.json beside it records `geometry.poses_origin`), the cameras are moved by that origin
+    onto the scene; otherwise both are moved to the cameras' mean centre (in float64)."""
+    moved, centre = centred_if_far(cameras)
+    if centre is None:
+        return gaussians, cameras
+    origin = _restore_origin(scene)
+    if origin is not None:
+        logger.info("%s: the scene was centred on its poses by restore; the cameras are moved by the same %s",
+                    scene, origin.tolist())
+        return gaussians, transform_cameras(cameras.to(dtype=torch.float64),
+                                            Similarity(1.0, torch.eye(3, dtype=torch.float64), -origin))
+    means = (gaussians.means.double() - centre.to(gaussians.means.device)).to(gaussians.means.dtype)
+    return replace(gaussians, means=means), moved
+
+
+def _restore_origin(scene: Path) -> torch.Tensor | None:
+    """summary.json's `geometry.poses_origin` [3] (float64) beside `scene`, when that summary is
+    the scene's restore's and records one; else None."""
+    try:
+        summary = json.loads((scene.parent / "summary.json").read_text())
+        origin = summary["geometry"]["poses_origin"]
+        named = Path(summary["scene"]).name
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if named != scene.name or not (isinstance(origin, list) and len(origin) == 3 and all(
+            isinstance(value, (int, float)) and math.isfinite(value) for value in origin)):
+        return None
+    return torch.tensor(origin, dtype=torch.float64)
 
 
 @dataclass

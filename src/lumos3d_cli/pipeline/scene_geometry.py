@@ -32,7 +32,7 @@ from lumos3d_cli.geometry.depth_alignment import MIN_POINTS, align_depth
 from lumos3d_cli.geometry.depth_correction import GRID as DEPTH_CORRECTION_GRID
 from lumos3d_cli.geometry.depth_correction import correct_depth
 from lumos3d_cli.geometry.field_of_view import FOCAL_DISAGREEMENT, focal_ratio, implausible_views
-from lumos3d_cli.geometry.given_poses import read_given_poses
+from lumos3d_cli.geometry.given_poses import centred_if_far, read_given_poses
 from lumos3d_cli.geometry.photo_consistency import sweep_depth
 from lumos3d_cli.geometry.scale_sweep import sweep_depth_scale
 from lumos3d_cli.geometry.sweep_settings import DepthSweepSettings
@@ -68,7 +68,8 @@ class ViewRegistration:
     """Cameras known before the network runs: `source` ("sfm", "poses" or "network"), each
     photo's own (width, height), the cameras of the views that have one (at their photos' sizes;
     `known` [V] bool says which), and the structure-from-motion result behind them (None when it
-    did not run)."""
+    did not run). `origin` [3] float64: where given poses far from their frame's origin were moved
+    from (the cameras are in the frame centred there; `centred_if_far`), else None."""
 
     requested: str
     sizes: list[tuple[int, int]]
@@ -78,6 +79,7 @@ class ViewRegistration:
     sfm: Registration | None
     seconds: dict[str, float] = field(default_factory=dict)
     brightening: str | None = None
+    origin: torch.Tensor | None = None
 
     def views_needing_network(self) -> list[int]:
         """Views the network must see because only it can place them."""
@@ -146,7 +148,11 @@ def register_views(
     sizes = list(sizes) if sizes is not None else [(int(images.shape[-1]), int(images.shape[-2]))] * count
     started = time.perf_counter()
     if poses is not None:
-        given = read_given_poses(poses, names, sizes)
+        given, origin = centred_if_far(read_given_poses(poses, names, sizes))
+        if origin is not None:
+            logger.warning("%s: the cameras lie %.3g units from the origin, beyond what float32 positions hold; the "
+                           "scene and its cameras are written centred on them (add summary.json's geometry.poses_origin "
+                           "to their positions to place them in the poses' frame)", poses, float(origin.norm()))
         odd = implausible_views(given.intrinsics, given.sizes)
         if odd:  # a telescope or a fisheye may be meant; a focal length in the wrong unit more likely
             logger.warning("%s: %d view(s) have a field of view no ordinary lens has (%s); if the focal lengths are "
@@ -154,7 +160,7 @@ def register_views(
                            len(odd), _fields_of_view(names, odd))
         sfm = _structure_from_motion(images, names, sizes, progress, sfm_long_side) if geometry != "network" and count > 1 else None
         return ViewRegistration(geometry, sizes, "poses", torch.ones(count, dtype=torch.bool), given, sfm,
-                                {"sfm": time.perf_counter() - started}, brightened.method)
+                                {"sfm": time.perf_counter() - started}, brightened.method, origin)
     if geometry == "network":
         return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, None)
     if count < 2:
@@ -426,6 +432,7 @@ def place_views(
         "depth_sweep": sweep_report,
         "depth_consistency": round(consistency.share, 4) if consistency is not None else None,
         "pixels_kept": round(float(fuse_pixels.float().mean()), 4),
+        "poses_origin": registration.origin.tolist() if registration.origin is not None else None,
     }
     return SceneGeometry(registration.source, cameras, network_cameras.extrinsics, network_cameras.intrinsics,
                          depth, points, report, fuse_pixels)
