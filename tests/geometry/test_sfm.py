@@ -88,7 +88,7 @@ def test_photos_of_two_scenes_are_flagged(buu_low, shared_data):
     fountain = F.interpolate(fountain[:4], size=images.shape[-2:], mode="bilinear", antialias=True)
     registration = register_photos(torch.cat([images[[0, 3, 6, 9]], fountain]), [f"{i}.png" for i in range(8)], long_side=320, threads=1)
     assert not registration.looks_like_one_scene
-    assert registration.registered_count <= 4 and "do not look like one scene" in registration.describe()
+    assert registration.registered_count <= 4 and "overlap too little to join, or show more than one scene" in registration.describe()
 
 
 @pytest.mark.parametrize("photos", [
@@ -188,3 +188,37 @@ def test_colmap_logging_is_put_back_when_runs_in_two_threads_overlap():
         assert pycolmap.logging.minloglevel == 1
     finally:
         pycolmap.logging.minloglevel = before
+
+
+def test_a_view_taken_out_of_a_registration_takes_its_observations_and_lone_points_along():
+    """Registration.without_views: the view's camera and observations go, points only it observed
+    go, and every other observation still names its own point and view."""
+    from lumos3d_cli.io.sparse_points import SparsePoints
+    from synthetic_scene import plane_cameras
+
+    cameras = plane_cameras(3)  # photos 0, 2 and 3 of four registered
+    xyz = torch.tensor([[0.0, 0.0, 5.0], [1.0, 0.0, 5.0], [0.0, 1.0, 6.0]], dtype=torch.float64)
+    view = torch.tensor([0, 2, 2, 3, 0, 3])
+    point = torch.tensor([0, 0, 1, 1, 2, 2])
+    points = SparsePoints(xyz, torch.tensor([[1, 1, 1], [2, 2, 2], [3, 3, 3]], dtype=torch.uint8),
+                          torch.tensor([0.1, 0.2, 0.3], dtype=torch.float64), view, point,
+                          torch.arange(12, dtype=torch.float64).reshape(6, 2))
+    registration = Registration(cameras, torch.tensor([True, False, True, True]), points, 0.2, [3], "exhaustive",
+                                [(48, 32)] * 4, 1.0)
+    both = registration.without_views([2, 3])
+    assert both.registered.tolist() == [True, False, False, False] and both.cameras.names == [cameras.names[0]]
+    assert both.points.view.tolist() == [0, 0] and both.points.point.tolist() == [0, 1]  # point 1: photos 2, 3 alone
+    torch.testing.assert_close(both.points.pixel, points.pixel[[0, 4]])
+    assert both.points.rgb.tolist() == [[1, 1, 1], [3, 3, 3]] and both.points.error.tolist() == [0.1, 0.3]
+    one = registration.without_views([2])
+    assert one.registered_indices == [0, 3] and one.cameras.names == [cameras.names[0], cameras.names[2]]
+    assert len(one.points) == 3 and one.points.view.tolist() == [0, 3, 0, 3]
+    # the frame normalised again as COLMAP does (the remaining centres' 10-90 % box 10 units
+    # across, centred), one similarity: every point projects where it did in every kept camera
+    centres = one.cameras.centers()
+    low, high = torch.quantile(centres, 0.1, dim=0), torch.quantile(centres, 0.9, dim=0)
+    assert float((high - low).norm()) == pytest.approx(10.0) and float(((high + low) / 2).norm()) < 1e-9
+    before, _ = cameras[[0, 2]].project(xyz)
+    after, _ = one.cameras.project(one.points.xyz)
+    torch.testing.assert_close(after, before, rtol=0, atol=1e-9)
+    assert registration.without_views([1]) is registration  # not registered: nothing to take out

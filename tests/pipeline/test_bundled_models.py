@@ -68,7 +68,7 @@ def test_one_photo_restores_as_2d_restoration(run_cli, shared_data, buu, tmp_pat
     out = tmp_path / "night" / "scene.ply"
     result = run_cli("restore", night, "-o", out, "--json")
     assert result.code == 0, result.err
-    assert "field of view no lens has" in result.err
+    assert "the network predicted a camera no lens has (" in result.err
     summary = json.loads(result.out)
     photo = load_images([night]).images[0]
     restored = load_images([out.parent / "restored" / "003.png"]).images[0]

@@ -309,6 +309,39 @@ def test_cameras_with_a_field_of_view_no_lens_has(run_cli, buu, tmp_path, random
             assert result.code == 0, result.err
 
 
+def test_one_camera_with_a_field_of_view_no_lens_has_is_placed_like_an_unregistered_view(
+        run_cli, buu, tmp_path, random_checkpoint, monkeypatch):
+    """One of Strecha's British Museum's 10 photos got a field of view of 0.001 degrees from
+    structure-from-motion, which sent all 10 views to the network's cameras (every view a ghosted
+    copy). That view alone is placed as one that did not register; the other four keep their
+    cameras, and its observations leave the sparse points."""
+    from lumos3d_cli.pipeline import scene_geometry
+
+    real = scene_geometry.register_photos
+
+    def one_telescopic(*args, **kwargs):
+        registration = real(*args, **kwargs)
+        registration.cameras.intrinsics[2, :2, :2] *= 200  # the third photo, 5.JPG
+        return registration
+
+    monkeypatch.setattr(scene_geometry, "register_photos", one_telescopic)
+    photos = _photos(buu, tmp_path)
+    out = tmp_path / "out" / "scene.ply"
+    result = run_cli("restore", photos, "-o", out, "--checkpoint", random_checkpoint, "--geometry", "sfm",
+                     "--refine-steps", 0, "--json")
+    assert result.code == 0, result.err
+    said = " ".join(result.err.split())
+    assert "structure-from-motion gave 1 view(s) a field of view no lens has (5.JPG 0." in said, said
+    assert "placed as views it did not register" in said and "not registered by structure-from-motion" in said
+    geometry = json.loads(result.out)["geometry"]
+    assert geometry["source"] == "sfm" and geometry["registered_views"] == 4
+    written = read_colmap_model(out.parent / "colmap")
+    points = read_colmap_points(out.parent / "colmap" / "points3D.txt")
+    assert written.names == FRAMES and len(points.xyz) == geometry["sparse_points"] > 50
+    # the written cameras of the other four are structure-from-motion's (a field of view a lens has)
+    assert not scene_geometry.implausible_views(written.intrinsics, written.sizes)
+
+
 def test_structure_from_motion_far_from_the_networks_focal_length_is_warned_of(run_cli, tmp_path, caplog):
     """Four of the example photos: structure-from-motion on their restoration settles on a focal
     length 2.3x the reference's (843 px against 368; all eight photos: 365) and still reprojects

@@ -21,6 +21,7 @@ import torch
 from lumos3d_cli.checks import require_finite
 from lumos3d_cli.errors import InputError
 from lumos3d_cli.geometry.colmap_run import EXHAUSTIVE_MATCHING_LIMIT, MAX_FEATURES, SFM_LONG_SIDE, ColmapRun, run_colmap
+from lumos3d_cli.geometry.similarity import Similarity, transform_cameras
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.colmap import sparse_points_of
 from lumos3d_cli.io.images import common_size
@@ -74,6 +75,29 @@ class Registration:
         """Fewer than two views registered: there are no usable cameras."""
         return self.registered_count < 2
 
+    def without_views(self, views: Sequence[int]) -> Registration:
+        """The registration with `views` (indices into the V photos) no longer registered: their
+        cameras and their observations go, and so do the points no other view observes (a camera
+        with a field of view no lens has is placed like a view that did not register). The frame is
+        normalised again as COLMAP normalises its models (`_normalised`): such a camera sits a
+        world away, and had squeezed the others into a speck (British Museum's nine into 0.03
+        units, nearer than the renderer's near plane)."""
+        views = sorted(set(views) & set(self.registered_indices))
+        if not views:
+            return self
+        registered = self.registered.clone()
+        registered[views] = False
+        rows = [row for row, view in enumerate(self.registered_indices) if view not in views]
+        points = self.points
+        keep = ~torch.isin(points.view, torch.tensor(views, dtype=torch.int64))
+        seen = torch.unique(points.point[keep])
+        position = torch.full((len(points),), -1, dtype=torch.int64)
+        position[seen] = torch.arange(len(seen))
+        points = replace(points, xyz=points.xyz[seen], rgb=points.rgb[seen], error=points.error[seen],
+                         view=points.view[keep], point=position[points.point[keep]], pixel=points.pixel[keep])
+        cameras, points = _normalised(self.cameras[rows], points)
+        return replace(self, cameras=cameras, registered=registered, points=points)
+
     @property
     def looks_like_one_scene(self) -> bool:
         """False when SfM found several disconnected models or its largest holds under half the
@@ -88,8 +112,27 @@ class Registration:
         if len(self.model_sizes) > 1:
             line += f"; {len(self.model_sizes)} disconnected models ({', '.join(map(str, self.model_sizes))} views)"
         if not self.looks_like_one_scene:
-            line += "; the photos do not look like one scene"
+            line += "; the photos overlap too little to join, or show more than one scene"
         return line
+
+
+# COLMAP's normalisation of a model (Reconstruction::Normalize, run after its global bundle
+# adjustments): the 10th to 90th percentiles of the camera centres span a box this wide, centred.
+NORMALISED_EXTENT = 10.0
+NORMALISED_PERCENTILES = (0.1, 0.9)
+
+
+def _normalised(cameras: Cameras, points: SparsePoints) -> tuple[Cameras, SparsePoints]:
+    """The cameras and points moved and scaled (one similarity) as COLMAP normalises a model; as
+    they are without a camera."""
+    if len(cameras) == 0:
+        return cameras, points
+    centres = cameras.centers().double()
+    low, high = (torch.quantile(centres, q, dim=0) for q in NORMALISED_PERCENTILES)
+    extent = float((high - low).norm())
+    scale = NORMALISED_EXTENT / extent if math.isfinite(extent) and extent > 0 else 1.0
+    similarity = Similarity(scale, torch.eye(3, dtype=torch.float64), -scale * (low + high) / 2)
+    return transform_cameras(cameras, similarity), replace(points, xyz=similarity.apply(points.xyz))
 
 
 def _group_means(values: torch.Tensor, groups: torch.Tensor, count: int) -> torch.Tensor:

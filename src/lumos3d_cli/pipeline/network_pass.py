@@ -10,7 +10,7 @@ from dataclasses import dataclass, replace
 import torch
 
 from lumos3d_cli.errors import InputError
-from lumos3d_cli.geometry.field_of_view import FALLBACK_FOV_DEGREES, plausible_intrinsics
+from lumos3d_cli.geometry.field_of_view import plausible_intrinsics
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.appearance.exposure_key import bundled_key_model
 from lumos3d_cli.model.appearance.exposure_prior import exposure_prior_stops, prior_strength
@@ -48,12 +48,15 @@ class NetworkPass:
     images (network size, and the map between network and photo pixels), the gain in stops the
     exposure prior added to the predicted operator (None: the model predicts no operator) and
     `replaced_cameras` [S] bool: the views whose predicted field of view no lens has was replaced
-    (`geometry.field_of_view.plausible_intrinsics`; None: none)."""
+    (`geometry.field_of_view.plausible_intrinsics`; None: none), and `replaced_fields_of_view`
+    what was predicted for them, at the photos' own size (for a warning where those cameras are
+    used)."""
 
     prediction: Lumos3DPrediction
     prepared: PreparedImages
     exposure_stops: float | None = None
     replaced_cameras: torch.Tensor | None = None
+    replaced_fields_of_view: str | None = None
 
     @property
     def network_size(self) -> tuple[int, int]:
@@ -127,17 +130,23 @@ def run_network(model: Lumos3D, images: torch.Tensor, preset: RestorePreset, mod
                                      unmetered=[{*black, *saturated}])
         prediction, exposure_stops = replace(prediction, appearance=prediction.appearance.with_gain(stops)), float(stops[0])
     intrinsics, replaced = plausible_intrinsics(prediction.intrinsics[0], prepared.network_size, stretch)
+    described = None
     if bool(replaced.any()):
-        predicted = prediction.intrinsics[0][replaced]
-        width, height = prepared.network_size
-        degrees = [f"{across:.3g}x{down:.3g}" for across, down in zip(
-            torch.rad2deg(2 * torch.atan(width / 2 / predicted[:, 0, 0])).tolist()[:5],
-            torch.rad2deg(2 * torch.atan(height / 2 / predicted[:, 1, 1])).tolist()[:5])]
-        # one photo has no structure-from-motion, and its restored view does not depend on its camera
-        advice = "" if len(replaced) == 1 else " (give --poses or use structure-from-motion for exact cameras)"
-        logger.warning("the network predicted a field of view no lens has (%s degrees across x down) for %d of %d "
-                       "view(s); using square pixels there, at the longer side's field of view where it is plausible, "
-                       "else %g degrees%s", ", ".join(degrees), int(replaced.sum()), len(replaced), FALLBACK_FOV_DEGREES,
-                       advice)
+        described = _predicted_fields_of_view(prediction.intrinsics[0][replaced], prepared.network_size,
+                                              stretch[replaced.cpu()] if stretch is not None else None)
         prediction = replace(prediction, intrinsics=intrinsics[None])
-    return NetworkPass(prediction, prepared, exposure_stops, replaced.cpu())
+    return NetworkPass(prediction, prepared, exposure_stops, replaced.cpu(), described)
+
+
+def _predicted_fields_of_view(intrinsics: torch.Tensor, size: tuple[int, int], stretch: torch.Tensor | None) -> str:
+    """'51.2x43 degrees across x down, pixels 2.6 times as wide as tall' for the first few of the
+    predicted cameras `intrinsics` [R, 3, 3] of network images of `size`: fields of view are the
+    same at the photo's own size; the pixels' shape is given there (`stretch` [R], as
+    `plausible_intrinsics` takes it), since a lens's are square while a plausible field of view
+    across and down can still mean stretched pixels (a portrait photo seen as a landscape one)."""
+    width, height = size
+    fx, fy = intrinsics[:5, 0, 0].double().cpu(), intrinsics[:5, 1, 1].double().cpu()
+    own = torch.ones_like(fx) if stretch is None else stretch[:5].double().cpu()
+    across, down = (torch.rad2deg(2 * torch.atan(side / 2 / focal)) for side, focal in ((width, fx), (height, fy)))
+    return ", ".join(f"{a:.3g}x{d:.3g} degrees across x down, pixels {ratio:.2g} times as wide as tall"
+                     for a, d, ratio in zip(across.tolist(), down.tolist(), (fy / (fx * own)).tolist()))

@@ -31,7 +31,7 @@ from lumos3d_cli.geometry.consistency import depth_consistency
 from lumos3d_cli.geometry.depth_alignment import MIN_POINTS, align_depth
 from lumos3d_cli.geometry.depth_correction import GRID as DEPTH_CORRECTION_GRID
 from lumos3d_cli.geometry.depth_correction import correct_depth
-from lumos3d_cli.geometry.field_of_view import FOCAL_DISAGREEMENT, focal_ratio, implausible_views
+from lumos3d_cli.geometry.field_of_view import FALLBACK_FOV_DEGREES, FOCAL_DISAGREEMENT, focal_ratio, implausible_views
 from lumos3d_cli.geometry.given_poses import centred_if_far, read_given_poses
 from lumos3d_cli.geometry.photo_consistency import sweep_depth
 from lumos3d_cli.geometry.scale_sweep import sweep_depth_scale
@@ -50,7 +50,8 @@ from lumos3d_cli.pipeline.progress import JobProgress
 
 logger = logging.getLogger(__name__)
 
-# "Most views": auto uses structure-from-motion when it registers more than this share.
+# auto uses structure-from-motion when it registers at least this share of the photos (and two):
+# the others are placed with the network's cameras, in its frame.
 AUTO_MIN_REGISTERED_SHARE = 0.5
 # Structure-from-motion's points carried onto given poses that reproject this share of the photos'
 # longer side or more from where the given cameras see them: poses that do not belong to the photos
@@ -106,7 +107,7 @@ def _structure_from_motion(images: torch.Tensor, names: list[str], sizes: list[t
             registration = retry
     progress.advance("structure from motion")
     if not registration.failed and not registration.looks_like_one_scene:
-        logger.warning("the photos may not show one scene: %s", registration.describe())
+        logger.warning("structure-from-motion could not join the photos into one model: %s", registration.describe())
     return registration
 
 
@@ -172,19 +173,27 @@ def register_views(
     registration = _structure_from_motion(images, names, sizes, progress, sfm_long_side, run)
     seconds = {"sfm": time.perf_counter() - started}
     outcome = registration.describe()
-    if registration.registered_count > AUTO_MIN_REGISTERED_SHARE * count:
-        # a model of few features can settle on a focal length no lens has (tens of thousands of
-        # pixels for a photo of hundreds): its scene is a blur, so it counts as a failure
-        odd = implausible_views(registration.cameras.intrinsics, registration.cameras.sizes)
-        if not odd:
-            return ViewRegistration(geometry, sizes, "sfm", registration.registered.clone(), registration.cameras,
-                                    registration, seconds, brightened.method)
-        outcome = (f"gave {len(odd)} view(s) a field of view no lens has "
-                   f"({_fields_of_view(registration.cameras.names, odd)})")
+    # a model of few features can settle on a focal length no lens has (tens of thousands of pixels
+    # for a photo of hundreds): such a view is a blur, and is placed as one that did not register
+    # (one such view of British Museum's 10 sent all 10 to the network's cameras, every view ghosted)
+    odd = implausible_views(registration.cameras.intrinsics, registration.cameras.sizes)
+    if odd:
+        odd_names = _fields_of_view(registration.cameras.names, odd)
+        registration = registration.without_views([registration.registered_indices[row] for row in odd])
+        outcome = f"gave {len(odd)} view(s) a field of view no lens has ({odd_names})"
+    if registration.registered_count >= max(2, AUTO_MIN_REGISTERED_SHARE * count):
+        if odd:
+            logger.warning("structure-from-motion %s: placed as views it did not register", outcome)
+        return ViewRegistration(geometry, sizes, "sfm", registration.registered.clone(), registration.cameras,
+                                registration, seconds, brightened.method)
+    if odd:
+        outcome += f", leaving {registration.registered_count} of {count} registered"
     if geometry == "sfm":
         raise InputError(f"sfm: structure-from-motion {outcome}; use the network's cameras (--geometry network) or give "
                          "--poses", parameter="geometry")
-    logger.warning("structure-from-motion %s; using the network's cameras instead", outcome)
+    logger.warning("structure-from-motion %s; using the network's cameras instead, which place the views at nearly one "
+                   "pose: expect ghosted views. Give --poses, add photos that overlap more, or restore the photos one "
+                   "at a time", outcome)
     return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, registration,
                             seconds, brightened.method)
 
@@ -224,8 +233,23 @@ def _to_network(network: NetworkPass, cameras: Cameras) -> Cameras:
     return network.to_network(cameras.rescaled(*network.prepared.original_size))
 
 
+def _warn_of_replaced_cameras(network: NetworkPass, used: torch.Tensor) -> None:
+    """A warning when the network's cameras are used for views `used` [S] bool whose predicted
+    camera no lens has was replaced (`plausible_intrinsics`): not where structure-from-motion or
+    given poses place those views, which makes the network's cameras irrelevant."""
+    if network.replaced_cameras is None or not bool((network.replaced_cameras & used).any()):
+        return
+    replaced, count = int(network.replaced_cameras.sum()), len(used)
+    # one photo has no structure-from-motion, and its restored view does not depend on its camera
+    advice = "" if count == 1 else " (give --poses or use structure-from-motion for exact cameras)"
+    logger.warning("the network predicted a camera no lens has (%s) for %d of %d view(s); using square pixels there, at "
+                   "the longer side's field of view where it is plausible, else %g degrees%s",
+                   network.replaced_fields_of_view, replaced, count, FALLBACK_FOV_DEGREES, advice)
+
+
 def _network_geometry(registration: ViewRegistration, network: NetworkPass, selected: list[int],
                       names: list[str]) -> SceneGeometry:
+    _warn_of_replaced_cameras(network, torch.ones(len(selected), dtype=torch.bool))
     cameras = _photo_cameras(network, names, [registration.sizes[i] for i in selected])
     prediction = network.prediction
     report = {"requested": registration.requested, "registered_views": 0, "brightening": None, "depth_sweep": None}
@@ -356,8 +380,8 @@ def _warn_of_disagreeing_focal_lengths(network_cameras: Cameras, network: Networ
     if 1 / FOCAL_DISAGREEMENT <= ratio <= FOCAL_DISAGREEMENT:
         return
     logger.warning("structure-from-motion's focal lengths are %.1fx the network's for these photos: one of them is wrong "
-                   "(on few photos structure-from-motion can settle on a wrong one); if the views look stretched or "
-                   "blurred, try the network's cameras (--geometry network), more photos, or --poses", ratio)
+                   "(on few photos structure-from-motion can settle on a wrong one, and the network's cameras are rough); "
+                   "if the views look stretched or blurred, add photos or give --poses", ratio)
 
 
 def place_views(
@@ -391,6 +415,7 @@ def place_views(
             registration.cameras[selected_rows], known_selected,
             _photo_cameras(network, selected_names, [registration.sizes[i] for i in selected]))
         unplaced = [names[view] for view in selected if not bool(known[view])]
+        _warn_of_replaced_cameras(network, ~known_selected.cpu())
         logger.warning("%d view(s) not registered by structure-from-motion were placed with the network's cameras: %s",
                        len(unplaced), ", ".join(unplaced))
     position_of_view = {view: position for position, view in enumerate(selected)}
