@@ -112,3 +112,42 @@ def test_a_one_photo_restore_removes_the_noise_it_amplified(run_cli, shared_data
     assert summaries["--denoise"]["filtered"] and summaries["--denoise"]["noise_level"] > MIN_NOISE_LEVEL
     assert summaries["--no-denoise"] is None
     assert scores["--denoise"] > scores["--no-denoise"] + 0.03  # 0.777 -> 0.825 on this photo
+
+
+def test_photos_structure_from_motion_cannot_place_are_restored_in_2d(run_cli, buu, tmp_path, monkeypatch):
+    """Structure-from-motion failing, `auto` falls back to the network's cameras, which the bundled
+    models put at nearly one pose: every restored view was then a ghosted overlay of all the photos
+    (8 of 33 real scenes in a QA sweep). Each view is its photo restored in 2D instead (the scene
+    stays the network's); the render of the same scene at those cameras is the overlay."""
+    from lumos3d_cli.pipeline import scene_geometry
+
+    real = scene_geometry.register_photos
+
+    def failing(*args, **kwargs):
+        registration = real(*args, **kwargs)
+        return registration.without_views(registration.registered_indices)
+
+    monkeypatch.setattr(scene_geometry, "register_photos", failing)
+    names = ["3.JPG", "6.JPG", "9.JPG", "12.JPG", "15.JPG"]
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for name in names:
+        (photos / name).write_bytes((buu / "low" / name).read_bytes())
+    out = tmp_path / "out" / "scene.ply"
+    result = run_cli("restore", photos, "-o", out, "--preset", "fast", "--json")
+    assert result.code == 0, result.err
+    said = " ".join(result.err.split())
+    assert "using the network's cameras instead" in said and "restored in 2D" in said
+    summary = json.loads(result.out)
+    assert summary["geometry"]["source"] == "network" and summary["restored_views"] == "photo restoration"
+    assert summary["refinement"] is None and summary["photo_denoising"]["views"] == names
+    inputs = load_images([photos / name for name in names]).images
+    restored = load_images([out.parent / "restored" / f"{name[:-4]}.png" for name in names]).images
+    rendered = run_cli("render", out, "--poses", out.parent / "cameras.json", "-o", tmp_path / "renders",
+                       "--fill-unobserved")
+    assert rendered.code == 0, rendered.err
+    renders = load_images(sorted((tmp_path / "renders").glob("*.png"))).images
+    for photo, view, render in zip(inputs, restored, renders):
+        assert _luminance_correlation(photo, view) > 0.95  # the photo's own picture
+        assert _luminance_correlation(photo, render) < _luminance_correlation(photo, view) - 0.1  # the overlay
+        assert float(view.mean()) > 2 * float(photo.mean())  # restored: the dark photo brightened

@@ -77,9 +77,9 @@ class RestoredScene:
     budget: dict | None = None  # the Gaussian budget the scene got (SceneJob.budget)
     exposure: dict | None = None  # the exposure prior's strength and gain (SceneJob.exposure)
     uncovered: dict | None = None  # the views' pixels no Gaussian covered and whether they were filled (None: not rendered)
-    view_source: str = "render"  # "render": the scene at each camera; "photo restoration": one photo restored in 2D
+    view_source: str = "render"  # "render": the scene at each camera; "photo restoration": the photos restored in 2D
     fill_unobserved: bool = True  # how the scene's renders are shown (its views, its video): filled, or over black
-    denoising: dict | None = None  # a one-photo restore's measured noise and whether it was removed (None: not one photo)
+    denoising: dict | None = None  # 2D-restored views' measured noise and whether it was removed (None: rendered views)
     # what the job read, as given (the photos' folder or files, poses, references, checkpoint):
     # write_restored_scene keeps the outputs clear of them, as `lumos3d restore` does
     read_from: list[Path] = field(default_factory=list)
@@ -184,10 +184,11 @@ def restore_scene(
                        "max_views or use structure-from-motion): %s", len(missing), ", ".join(missing))
     progress.start("render views", len(cameras))
     started = time.perf_counter()
-    if built.photo_restoration is not None and len(cameras) == 1:
-        # A one-photo scene is 2D restoration (SceneJob.photo_restoration): nothing to render.
-        views, uncovered, view_source = [built.photo_restoration[0].clamp(0, 1)], None, "photo restoration"
-        progress.advance("render views")
+    if built.photo_restoration is not None:
+        # views restored in 2D (one photo, or photos no geometry placed: scene_stages.photo_restoration)
+        views = [built.photo_restoration[names.index(name)].clamp(0, 1) for name in cameras.names]
+        uncovered, view_source = None, "photo restoration"
+        progress.advance("render views", len(cameras))
     else:
         # the operator's full-resolution restorations are fused and fitted: their memory (0.15 GB
         # a 12-MP photo) goes before the views are rendered at the photos' size
@@ -199,9 +200,9 @@ def restore_scene(
         if bare:  # a flat colour where the view should be: a cap far too low, or cameras that miss the scene
             logger.warning("%d view(s) are mostly uncovered: no Gaussian covers %s of their pixels; raise max_gaussians "
                            "or check the cameras", len(bare), listed(bare, 3))
-        if fuse_views is not None:
-            views = [view if fuse_views[names.index(name)] else batch.photo(names.index(name))
-                     for view, name in zip(views, cameras.names)]
+    if fuse_views is not None:
+        views = [view if fuse_views[names.index(name)] else batch.photo(names.index(name))
+                 for view, name in zip(views, cameras.names)]
     timings = built.timings | {"render": time.perf_counter() - started}
     inputs = [batch.photo(names.index(name)) for name in cameras.names]
     return RestoredScene(

@@ -42,9 +42,10 @@ class SceneJob:
     `grid_size` (the pixel Gaussians' grid per view, width x height), `gaussians` and `counts`,
     `budget` (what `fit_budget` kept, summary.json's gaussians.budget), `refinement` (its summary;
     None: not refined), `restored_photos` [V, 3, H, W] (the operator applied to every photo, CPU;
-    set after the network pass; None for a regression model), `photo_restoration` [1, 3, H, W] (a
-    one-photo scene's 2D restoration) and `denoising` (its measured noise and whether it was
-    removed; None: not one photo), `timings` seconds per stage.
+    set after the network pass; None for a regression model), `photo_restoration` [V, 3, H, W] (the
+    photos restored in 2D where those are the views: one photo, or photos no geometry placed;
+    `scene_stages.photo_restoration`) and `denoising` (their measured noise and whether it was
+    removed; None: views not restored in 2D), `timings` seconds per stage.
     """
 
     photos: torch.Tensor

@@ -272,9 +272,9 @@ def refinement(job: SceneJob) -> SceneJob:
     schedule within its Gaussian cap; skipped at 0 steps."""
     if job.preset.refine_steps <= 0:
         return job
-    if len(job.names) == 1 and job.has_operator:
-        # a one-photo scene's view is the photo restored in 2D (`photo_restoration`), which no
-        # refinement changes: its steps were 3.6 s of a 3.8 s restore
+    if _views_restored_in_2d(job):
+        # the views are the photos restored in 2D (`photo_restoration`), which no refinement
+        # changes: a one-photo restore's steps were 3.6 s of its 3.8 s
         return job
     targets, cameras = refinement_targets(job.network, job.model, job.photos, job.restored_photos, job.selected,
                                           job.names, job.geometry.cameras, job.fuse_views, job.preset.refine_side)
@@ -291,20 +291,43 @@ def refinement(job: SceneJob) -> SceneJob:
     return job
 
 
+def _views_restored_in_2d(job: SceneJob) -> bool:
+    """Whether the views are the photos restored in 2D (`photo_restoration`) rather than renders of
+    the scene: a model with an operator, and one photo, or several that structure-from-motion
+    could not place (`auto` fell back to the network's cameras)."""
+    if not job.has_operator:
+        return False
+    unplaced = job.geometry is not None and job.geometry.source == "network" and "sfm_attempt" in job.geometry.report
+    return len(job.names) == 1 or unplaced
+
+
 def photo_restoration(job: SceneJob) -> SceneJob:
     """One photo has nothing to fuse, and the Gaussians' render only approximates the operator
     applied to the photo's own pixels (what refinement fits them to): a one-photo scene of an
     operator model keeps that 2D restoration as its view. On 8 SICE training pairs the render
     scored 18.80 dB / 0.606 / sharpness 0.55 and the 2D restoration 20.06 / 0.693 / 0.99.
-    Nor has one photo other views to average the noise its restoration amplified: with the
-    preset's `denoise_photo` that noise is measured and removed (`model.appearance.amplified_noise`)."""
-    if len(job.names) != 1 or not job.has_operator:
+    Photos that structure-from-motion could not place are kept the same way: the network's
+    cameras (the bundled models put every view at nearly one pose) make each render a ghosted
+    overlay of all the views, where the 2D restoration is that photo's own (on 8 of 33 real
+    scenes in a QA sweep, every view was such an overlay).
+    Nor has a photo restored in 2D other views to average the noise its restoration amplified:
+    with the preset's `denoise_photo` that noise is measured and removed
+    (`model.appearance.amplified_noise`)."""
+    if not _views_restored_in_2d(job):
         return job
-    job.photo_restoration = job.restored_photos
+    restored = job.restored_photos
+    if len(job.names) > 1:
+        logger.info("the views are the photos restored in 2D: no geometry places them")
     if job.preset.denoise_photo:
-        denoised = denoise_photo(job.restored_photos[0])
-        job.photo_restoration = denoised.image[None]
-        job.denoising = denoised.summary()
+        views = job.selected  # the views with a camera: the network's
+        results = [denoise_photo(restored[view]) for view in views]
+        restored = restored.clone()
+        for view, result in zip(views, results):
+            restored[view] = result.image
+        job.denoising = results[0].summary() if len(job.names) == 1 else {
+            "views": [job.names[view] for view in views], "noise_level": [round(r.noise_level, 5) for r in results],
+            "filtered": [r.filtered for r in results], "strength": results[0].summary()["strength"]}
+    job.photo_restoration = restored
     return job
 
 
