@@ -151,3 +151,41 @@ def test_photos_structure_from_motion_cannot_place_are_restored_in_2d(run_cli, b
         assert _luminance_correlation(photo, view) > 0.95  # the photo's own picture
         assert _luminance_correlation(photo, render) < _luminance_correlation(photo, view) - 0.1  # the overlay
         assert float(view.mean()) > 2 * float(photo.mean())  # restored: the dark photo brightened
+
+
+def test_views_only_the_network_places_are_restored_in_2d_and_left_out_of_the_scene(run_cli, buu, tmp_path,
+                                                                                      monkeypatch):
+    """Structure-from-motion registering most photos but not all: the others were placed with the
+    network's cameras carried into its frame (castle-P19: 4 of 12, 156-179 degrees off), each a
+    ghosted overlay, their Gaussians laid over the registered views. They are shown as their photos
+    restored in 2D and kept out of the scene; the registered views are renders as before."""
+    from lumos3d_cli.pipeline import scene_geometry
+
+    real = scene_geometry.register_photos
+    names = ["3.JPG", "6.JPG", "9.JPG", "12.JPG", "15.JPG"]
+
+    def two_unregistered(*args, **kwargs):
+        return real(*args, **kwargs).without_views([1, 3])  # 6.JPG and 12.JPG
+
+    monkeypatch.setattr(scene_geometry, "register_photos", two_unregistered)
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for name in names:
+        (photos / name).write_bytes((buu / "low" / name).read_bytes())
+    out = tmp_path / "out" / "scene.ply"
+    result = run_cli("restore", photos, "-o", out, "--preset", "fast", "--json")
+    assert result.code == 0, result.err
+    assert "2 view(s) only the network's cameras place are shown as their photos restored in 2D" in " ".join(result.err.split())
+    summary = json.loads(result.out)
+    assert summary["geometry"]["source"] == "sfm" and summary["geometry"]["registered_views"] == 3
+    assert summary["restored_views"] == "render and photo restoration"
+    assert summary["photo_denoising"]["views"] == ["6.JPG", "12.JPG"]
+    assert [fraction is None for fraction in summary["uncovered"]["unobserved_fraction"]] == [False, True, False, True, False]
+    width, height = summary["gaussians"]["budget"]["grid"]
+    assert 2 * width * height < summary["gaussians"]["pixel"] <= 3 * width * height  # the registered views alone
+    inputs = load_images([photos / name for name in names]).images
+    restored = load_images([out.parent / "restored" / f"{name[:-4]}.png" for name in names]).images
+    for index, (photo, view) in enumerate(zip(inputs, restored)):
+        correlation = _luminance_correlation(photo, view)
+        assert correlation > (0.95 if index in (1, 3) else 0.8), (names[index], correlation)
+        assert float(view.mean()) > 2 * float(photo.mean())

@@ -77,7 +77,9 @@ class RestoredScene:
     budget: dict | None = None  # the Gaussian budget the scene got (SceneJob.budget)
     exposure: dict | None = None  # the exposure prior's strength and gain (SceneJob.exposure)
     uncovered: dict | None = None  # the views' pixels no Gaussian covered and whether they were filled (None: not rendered)
-    view_source: str = "render"  # "render": the scene at each camera; "photo restoration": the photos restored in 2D
+    # "render": the scene at each camera; "photo restoration": the photos restored in 2D; "render and
+    # photo restoration": the views no geometry placed restored in 2D, the others rendered
+    view_source: str = "render"
     fill_unobserved: bool = True  # how the scene's renders are shown (its views, its video): filled, or over black
     denoising: dict | None = None  # 2D-restored views' measured noise and whether it was removed (None: rendered views)
     # what the job read, as given (the photos' folder or files, poses, references, checkpoint):
@@ -184,8 +186,9 @@ def restore_scene(
                        "max_views or use structure-from-motion): %s", len(missing), ", ".join(missing))
     progress.start("render views", len(cameras))
     started = time.perf_counter()
-    if built.photo_restoration is not None:
-        # views restored in 2D (one photo, or photos no geometry placed: scene_stages.photo_restoration)
+    in_2d = {names[view] for view in built.views_in_2d}  # one photo, or photos no geometry placed
+    if in_2d >= set(cameras.names):
+        # every view is its photo restored in 2D (scene_stages.photo_restoration): nothing to render
         views = [built.photo_restoration[names.index(name)].clamp(0, 1) for name in cameras.names]
         uncovered, view_source = None, "photo restoration"
         progress.advance("render views", len(cameras))
@@ -194,12 +197,20 @@ def restore_scene(
         # a 12-MP photo) goes before the views are rendered at the photos' size
         built.restored_photos = None
         rendered = render_views(built.gaussians, cameras, preset.sh_degree, progress, fill=preset.fill_unobserved)
-        views, uncovered, view_source = rendered.images, rendered.summary(), "render"
+        views, uncovered = rendered.images, rendered.summary()
+        # a view shown restored in 2D covers its whole photo: no share of it is uncovered
+        uncovered["unobserved_fraction"] = [None if name in in_2d else fraction for name, fraction
+                                            in zip(cameras.names, uncovered["unobserved_fraction"])]
+        view_source = "render and photo restoration" if in_2d else "render"
         bare = [f"{name} ({fraction:.0%})" for name, fraction in zip(cameras.names, rendered.unobserved)
-                if fraction > MOSTLY_UNCOVERED and (fuse_views is None or fuse_views[names.index(name)])]
+                if fraction > MOSTLY_UNCOVERED and name not in in_2d
+                and (fuse_views is None or fuse_views[names.index(name)])]
         if bare:  # a flat colour where the view should be: a cap far too low, or cameras that miss the scene
             logger.warning("%d view(s) are mostly uncovered: no Gaussian covers %s of their pixels; raise max_gaussians "
                            "or check the cameras", len(bare), listed(bare, 3))
+        views = [built.photo_restoration[names.index(name)].clamp(0, 1) if name in in_2d else view
+                 for view, name in zip(views, cameras.names)]
+        built.photo_restoration = None
     if fuse_views is not None:
         views = [view if fuse_views[names.index(name)] else batch.photo(names.index(name))
                  for view, name in zip(views, cameras.names)]

@@ -43,9 +43,9 @@ class SceneJob:
     `budget` (what `fit_budget` kept, summary.json's gaussians.budget), `refinement` (its summary;
     None: not refined), `restored_photos` [V, 3, H, W] (the operator applied to every photo, CPU;
     set after the network pass; None for a regression model), `photo_restoration` [V, 3, H, W] (the
-    photos restored in 2D where those are the views: one photo, or photos no geometry placed;
-    `scene_stages.photo_restoration`) and `denoising` (their measured noise and whether it was
-    removed; None: views not restored in 2D), `timings` seconds per stage.
+    photos restored in 2D, those of `views_in_2d` denoised: the views that are shown so rather
+    than rendered, `scene_stages.photo_restoration`) and `denoising` (their measured noise and
+    whether it was removed; None: none), `timings` seconds per stage.
     """
 
     photos: torch.Tensor
@@ -75,6 +75,7 @@ class SceneJob:
     refinement: dict | None = None
     restored_photos: torch.Tensor | None = None
     photo_restoration: torch.Tensor | None = None
+    views_in_2d: list[int] = field(default_factory=list)
     denoising: dict | None = None
     timings: dict[str, float] = field(default_factory=dict)
 

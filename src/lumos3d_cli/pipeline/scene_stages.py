@@ -25,7 +25,7 @@ from pathlib import Path
 
 import torch
 
-from lumos3d_cli.errors import InputError, NonFiniteError
+from lumos3d_cli.errors import InputError, NonFiniteError, listed
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.appearance.amplified_noise import denoise_photo
 from lumos3d_cli.model.appearance.footprint import footprint_colours
@@ -190,6 +190,12 @@ def fusion(job: SceneJob) -> SceneJob:
     each point's pixel footprint, and the network grid baked into their size (sampling filter).
     The Gaussians stay on the model's device."""
     preset = job.preset
+    unplaced = _views_only_the_network_placed(job)
+    if unplaced:  # shown restored in 2D (`photo_restoration`), and kept out of the scene
+        logger.warning("%d view(s) only the network's cameras place are shown as their photos restored in 2D and left "
+                       "out of the scene: %s", len(unplaced), listed([job.names[view] for view in unplaced], 5))
+        job.fuse_views = [(job.fuse_views is None or bool(job.fuse_views[view])) and view not in unplaced
+                          for view in range(len(job.names))]
     restored = None if job.restored_photos is None else job.restored_photos[job.selected]
     fused = None if job.fuse_views is None else [job.fuse_views[i] for i in job.selected]
     job.geometry = place_views(job.registration, job.network, job.selected, job.names,
@@ -272,7 +278,7 @@ def refinement(job: SceneJob) -> SceneJob:
     schedule within its Gaussian cap; skipped at 0 steps."""
     if job.preset.refine_steps <= 0:
         return job
-    if _views_restored_in_2d(job):
+    if len(_views_restored_in_2d(job)) == len(job.names):
         # the views are the photos restored in 2D (`photo_restoration`), which no refinement
         # changes: a one-photo restore's steps were 3.6 s of its 3.8 s
         return job
@@ -291,14 +297,29 @@ def refinement(job: SceneJob) -> SceneJob:
     return job
 
 
-def _views_restored_in_2d(job: SceneJob) -> bool:
-    """Whether the views are the photos restored in 2D (`photo_restoration`) rather than renders of
-    the scene: a model with an operator, and one photo, or several that structure-from-motion
-    could not place (`auto` fell back to the network's cameras)."""
+def _views_only_the_network_placed(job: SceneJob) -> list[int]:
+    """The views structure-from-motion did not register in a scene it placed, for a model with a
+    restoration operator: the network's cameras, carried into structure-from-motion's frame, are
+    all that places them, and the bundled models' nearly collapse onto one pose (on castle-P19,
+    whose 12 photos SfM registers 8 of, the other 4 were placed 156-179 degrees off, each view a
+    ghosted overlay and their Gaussians laid over the registered views)."""
+    registration = job.registration
+    if not job.has_operator or registration is None or registration.source != "sfm":
+        return []
+    return [view for view in range(len(job.names)) if not bool(registration.known[view])]
+
+
+def _views_restored_in_2d(job: SceneJob) -> list[int]:
+    """The views shown as their photos restored in 2D (`photo_restoration`) rather than as renders
+    of the scene, for a model with a restoration operator: every view of one photo, or of photos
+    structure-from-motion could not place (`auto` fell back to the network's cameras); else the
+    views only the network placed (`_views_only_the_network_placed`)."""
     if not job.has_operator:
-        return False
+        return []
     unplaced = job.geometry is not None and job.geometry.source == "network" and "sfm_attempt" in job.geometry.report
-    return len(job.names) == 1 or unplaced
+    if len(job.names) == 1 or unplaced:
+        return list(range(len(job.names)))
+    return _views_only_the_network_placed(job)
 
 
 def photo_restoration(job: SceneJob) -> SceneJob:
@@ -310,24 +331,26 @@ def photo_restoration(job: SceneJob) -> SceneJob:
     cameras (the bundled models put every view at nearly one pose) make each render a ghosted
     overlay of all the views, where the 2D restoration is that photo's own (on 8 of 33 real
     scenes in a QA sweep, every view was such an overlay).
+    So are the views only the network's cameras place in a scene structure-from-motion placed
+    (`_views_only_the_network_placed`).
     Nor has a photo restored in 2D other views to average the noise its restoration amplified:
     with the preset's `denoise_photo` that noise is measured and removed
     (`model.appearance.amplified_noise`)."""
-    if not _views_restored_in_2d(job):
+    in_2d = [view for view in _views_restored_in_2d(job) if view in job.selected]  # the views with a camera
+    if not in_2d:
         return job
     restored = job.restored_photos
     if len(job.names) > 1:
-        logger.info("the views are the photos restored in 2D: no geometry places them")
+        logger.info("%d view(s) are their photos restored in 2D: no geometry places them", len(in_2d))
     if job.preset.denoise_photo:
-        views = job.selected  # the views with a camera: the network's
-        results = [denoise_photo(restored[view]) for view in views]
+        results = [denoise_photo(restored[view]) for view in in_2d]
         restored = restored.clone()
-        for view, result in zip(views, results):
+        for view, result in zip(in_2d, results):
             restored[view] = result.image
         job.denoising = results[0].summary() if len(job.names) == 1 else {
-            "views": [job.names[view] for view in views], "noise_level": [round(r.noise_level, 5) for r in results],
+            "views": [job.names[view] for view in in_2d], "noise_level": [round(r.noise_level, 5) for r in results],
             "filtered": [r.filtered for r in results], "strength": results[0].summary()["strength"]}
-    job.photo_restoration = restored
+    job.photo_restoration, job.views_in_2d = restored, in_2d
     return job
 
 
