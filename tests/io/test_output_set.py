@@ -990,3 +990,30 @@ def test_a_run_that_begins_writing_inside_a_folder_of_outputs_during_the_commit_
         for holder in holders:
             holder.kill()
             holder.wait()
+
+
+def test_a_rerun_reads_each_manifest_a_few_times_not_once_a_file(tmp_path, monkeypatch):
+    """The ownership check read the folder's manifest again for every file it judged: a render of
+    2,000 frames into the same folder again took 57 s for its checks (1.6 s reading it once)."""
+    out = tmp_path / "out"
+    names = [f"{index:05d}.png" for index in range(300)]
+
+    def render_like():
+        outputs = OutputSet(out, "render", "render")
+        for name in names:
+            outputs.add_file(name)
+        with outputs.staged() as staging:
+            for name in names:
+                (staging.root / name).write_text(name)
+
+    render_like()
+    reads = []
+    original = Manifest.read.__func__
+
+    def counted(cls, folder):
+        reads.append(folder)
+        return original(cls, folder)
+
+    monkeypatch.setattr(Manifest, "read", classmethod(counted))
+    render_like()
+    assert len(reads) < 20, len(reads)

@@ -258,7 +258,9 @@ class OutputSet:
         manifests: dict[Path, Manifest] = {}
 
         def manifest(folder: Path) -> Manifest:
-            return manifests.setdefault(folder, Manifest.read(folder))
+            if folder not in manifests:  # read once: a render of 3,000 frames read it 3,000 times a check
+                manifests[folder] = Manifest.read(folder)
+            return manifests[folder]
 
         for path in [*(self.folder / name for name in self._files), *self._elsewhere]:
             if not (path.exists() or path.is_symlink()):

@@ -23,9 +23,8 @@ def list_photos(photos: Path | str | Sequence[Path | str]) -> list[Path]:
     paths = list_images(photos)
     for folder in dict.fromkeys(path.parent for path in paths):
         warn_if_mid_commit(folder)
-    manifests: dict[Path, Manifest] = {}
-    ours = [path for path in paths if getattr(manifests.setdefault(path.parent, Manifest.read(path.parent)).files.get(
-        path.name), "command", None) == "restore"]
+    manifests = {folder: Manifest.read(folder) for folder in dict.fromkeys(path.parent for path in paths)}
+    ours = [path for path in paths if getattr(manifests[path.parent].files.get(path.name), "command", None) == "restore"]
     if ours:
         logger.info("not photos: %s, written by an earlier restore", ", ".join(str(path) for path in ours))
     kept = [path for path in paths if path not in ours]
