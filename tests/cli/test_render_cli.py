@@ -282,3 +282,47 @@ def test_a_scene_and_cameras_far_from_the_origin_are_rendered_centred():
     expected = render(gaussians, cameras.to(dtype=torch.float32)).images
     got = render(moved_scene, moved_cameras.to(dtype=torch.float32)).images
     assert expected.std() > 0.02 and (expected - got).abs().max() < 1e-3
+
+
+def _panning(cameras, index, turns_degrees):
+    """Cameras at camera `index`'s centre, turned about its y axis by each angle (a pan)."""
+    rotation, centre = cameras.extrinsics[index, :, :3].double(), cameras.centers()[index].double()
+
+    def about_y(angle):
+        c, s = np.cos(np.radians(angle)), np.sin(np.radians(angle))
+        return torch.tensor([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]], dtype=torch.float64)
+
+    turned = [about_y(angle) @ rotation for angle in turns_degrees]
+    extrinsics = torch.stack([torch.cat([r, (-r @ centre)[:, None]], 1) for r in turned])
+    return type(cameras)(extrinsics, cameras.intrinsics[[index] * len(turned)].double(),
+                         [cameras.sizes[index]] * len(turned))
+
+
+def test_cameras_already_in_a_centred_scenes_frame_are_never_moved_by_its_origin(run_cli, tmp_path):
+    """A restore that centred far poses records their origin; cameras in the scene's own frame (a
+    pan from one centre: its spread is rounding, 1e-15) were taken for far poses and moved by it, so
+    `render` refused them as behind the scene. Where the origin brings the cameras nearer the
+    scene's Gaussians they are moved; else not. And an orbit around far cameras beside the scene
+    (a dataset's sparse/0) is made in the scene's frame."""
+    path, gaussians = _scene(tmp_path)
+    cameras = orbit_from_gaussians(gaussians, 3, 48, 32)
+    origin = torch.tensor([4.1e6, -2.5e5, 3.3e6], dtype=torch.float64)
+    (path.parent / "summary.json").write_text(json.dumps({"scene": str(path), "geometry": {"poses_origin": origin.tolist()}}))
+    pan = _panning(cameras, 1, [-4, 0, 4])
+    write_transforms_json(tmp_path / "pan.json", pan)
+    result = run_cli("render", path, "--poses", tmp_path / "pan.json", "-o", tmp_path / "pan")
+    assert result.code == 0, result.err
+    middle = cv2.imread(str(tmp_path / "pan" / "00001.png")).astype(float)
+    expected = render(gaussians, cameras[1]).images[0].permute(1, 2, 0).numpy()[..., ::-1] * 255
+    assert middle.std() > 5 and np.abs(middle - expected).max() <= 1.5
+    # the same pan in the poses' own frame is moved onto the scene
+    write_transforms_json(tmp_path / "far-pan.json", _moved_by(pan, origin))
+    result = run_cli("render", path, "--poses", tmp_path / "far-pan.json", "-o", tmp_path / "far-pan")
+    assert result.code == 0, result.err
+    assert np.abs(cv2.imread(str(tmp_path / "far-pan" / "00001.png")).astype(float) - middle).max() <= 1
+    # an orbit around the dataset's far cameras beside the scene
+    write_transforms_json(path.parent / "transforms.json", _moved_by(cameras, origin))
+    result = run_cli("render", path, "--orbit", 2, "-o", tmp_path / "orbit", "--json")
+    assert result.code == 0, result.err
+    frames = [cv2.imread(str(tmp_path / "orbit" / name)) for name in ("00000.png", "00001.png")]
+    assert all(frame.std() > 5 for frame in frames)

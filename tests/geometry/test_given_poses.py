@@ -131,7 +131,12 @@ def test_cameras_near_their_origin_are_left_as_they_are():
     cameras = plane_cameras(5)
     spread = float((cameras.centers() - cameras.centers().mean(0)).square().sum(1).mean().sqrt())
     within = _moved_by(cameras, torch.tensor([0.9 * FAR_FROM_ORIGIN * spread, 0.0, 0.0], dtype=torch.float64))
-    for kept in (cameras, within, _moved_by(cameras[[2]], torch.tensor([3.0, 1.0, 0.0], dtype=torch.float64))):
+    # a pan: cameras turned about one centre, whose spread is the rounding of -R^T t (1e-16)
+    rotations = cameras.extrinsics[:, :, :3]
+    centre = torch.tensor([3.0, 1.0, 0.2], dtype=torch.float64)
+    pan = Cameras(torch.cat([rotations, (-rotations @ centre)[:, :, None]], 2), cameras.intrinsics, cameras.sizes,
+                  cameras.names)
+    for kept in (cameras, within, _moved_by(cameras[[2]], torch.tensor([3.0, 1.0, 0.0], dtype=torch.float64)), pan):
         same, origin = centred_if_far(kept)
         assert origin is None and same is kept
     beyond = _moved_by(cameras, torch.tensor([1.1 * FAR_FROM_ORIGIN * spread, 0.0, 0.0], dtype=torch.float64))

@@ -111,6 +111,8 @@ def centred_if_far(cameras: Cameras) -> tuple[Cameras, torch.Tensor | None]:
     centres = cameras.centers().double()
     middle = centres.mean(dim=0)
     spread = float((centres - middle).square().sum(dim=1).mean().sqrt())
+    if spread <= 1e-9 * float(middle.norm()):  # one centre, up to the rounding of -R^T t (a pan, a rotation)
+        spread = 0.0
     if float(middle.norm()) <= FAR_FROM_ORIGIN * (spread if spread > 0 else 1.0):
         return cameras, None
     moved = transform_cameras(cameras.to(dtype=torch.float64), Similarity(1.0, torch.eye(3, dtype=torch.float64), -middle))

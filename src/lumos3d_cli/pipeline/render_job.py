@@ -89,7 +89,8 @@ def render_cameras(
     passed_over = 0
     for nearby in camera_sources(scene.parent):  # the first that can be read (a broken one is passed over)
         try:
-            scene_cameras = read_cameras(nearby)
+            # a dataset's own far poses (sparse/0 beside a scene restore centred on them) in its frame
+            scene_cameras = onto_restored_scene(scene, gaussians, read_cameras(nearby))
         except InputError as error:  # a file the user did not name: not a reason to refuse the orbit
             logger.warning("%s; passed over for the orbit", error)
             passed_over += 1
@@ -107,21 +108,33 @@ def render_cameras(
 
 def in_rendering_frame(scene: Path, gaussians: Gaussians, cameras: Cameras) -> tuple[Gaussians, Cameras]:
     """The Gaussians read from `scene` and the cameras to render them from, in a frame the
-    renderer's float32 holds: unchanged unless the cameras lie far from the origin
-    (`centred_if_far`). Then, when the scene is a restore's that centred its far poses (its
-    summary.json beside it records `geometry.poses_origin`), the cameras are moved by that origin
-    onto the scene; otherwise both are moved to the cameras' mean centre (in float64)."""
+    renderer's float32 holds: the cameras first moved onto a restored scene that was centred on its
+    far poses (`onto_restored_scene`), then, where they still lie far from the origin
+    (`centred_if_far`), both moved to the cameras' mean centre (in float64)."""
+    cameras = onto_restored_scene(scene, gaussians, cameras)
     moved, centre = centred_if_far(cameras)
     if centre is None:
         return gaussians, cameras
-    origin = _restore_origin(scene)
-    if origin is not None:
-        logger.info("%s: the scene was centred on its poses by restore; the cameras are moved by the same %s",
-                    scene, origin.tolist())
-        return gaussians, transform_cameras(cameras.to(dtype=torch.float64),
-                                            Similarity(1.0, torch.eye(3, dtype=torch.float64), -origin))
     means = (gaussians.means.double() - centre.to(gaussians.means.device)).to(gaussians.means.dtype)
     return replace(gaussians, means=means), moved
+
+
+def onto_restored_scene(scene: Path, gaussians: Gaussians, cameras: Cameras) -> Cameras:
+    """`cameras` in the frame of the scene `scene` holds: when its restore centred it on far poses
+    (summary.json beside it records `geometry.poses_origin`) and the cameras are in the poses' own
+    frame (moved by that origin they lie nearer the scene's Gaussians, as judged by the median of
+    their means), moved by it; else as they are (already the scene's: its cameras.json, an orbit)."""
+    origin = _restore_origin(scene)
+    if origin is None or len(gaussians) == 0:
+        return cameras
+    middle = gaussians.means.detach().double().cpu().median(dim=0).values
+    centres = cameras.centers().double().cpu()
+    moved = centres - origin
+    if float((moved - middle).norm(dim=1).median()) >= float((centres - middle).norm(dim=1).median()):
+        return cameras
+    logger.info("%s: the scene was centred on its poses by restore; the cameras are moved by the same %s",
+                scene, origin.tolist())
+    return transform_cameras(cameras.to(dtype=torch.float64), Similarity(1.0, torch.eye(3, dtype=torch.float64), -origin))
 
 
 def _restore_origin(scene: Path) -> torch.Tensor | None:
