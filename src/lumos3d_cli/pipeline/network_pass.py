@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -19,8 +18,6 @@ from lumos3d_cli.model.appearance.photo_restoration import frames_without_conten
 from lumos3d_cli.model.lumos3d import Lumos3D, Lumos3DPrediction
 from lumos3d_cli.model.preprocess import PreparedImages, prepare_images
 from lumos3d_cli.pipeline.presets import RestorePreset
-
-logger = logging.getLogger(__name__)
 
 
 def even_subset(count: int, limit: int, required: list[int] = ()) -> list[int]:
