@@ -114,28 +114,39 @@ def test_a_one_photo_restore_removes_the_noise_it_amplified(run_cli, shared_data
     assert scores["--denoise"] > scores["--no-denoise"] + 0.03  # 0.777 -> 0.825 on this photo
 
 
+_BUU_FIVE = ["3.JPG", "6.JPG", "9.JPG", "12.JPG", "15.JPG"]
+
+
+def _restore_with_registration(run_cli, buu, tmp_path, monkeypatch, unregister):
+    """`restore --preset fast --json` of five of buu's dark photos with structure-from-motion's
+    registration less the views `unregister(registration)` names; (result, photos folder, scene path)."""
+    from lumos3d_cli.pipeline import scene_geometry
+
+    real = scene_geometry.register_photos
+
+    def registering_fewer(*args, **kwargs):
+        registration = real(*args, **kwargs)
+        return registration.without_views(unregister(registration))
+
+    monkeypatch.setattr(scene_geometry, "register_photos", registering_fewer)
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for name in _BUU_FIVE:
+        (photos / name).write_bytes((buu / "low" / name).read_bytes())
+    out = tmp_path / "out" / "scene.ply"
+    result = run_cli("restore", photos, "-o", out, "--preset", "fast", "--json")
+    assert result.code == 0, result.err
+    return result, photos, out
+
+
 def test_photos_structure_from_motion_cannot_place_are_restored_in_2d(run_cli, buu, tmp_path, monkeypatch):
     """Structure-from-motion failing, `auto` falls back to the network's cameras, which the bundled
     models put at nearly one pose: every restored view was then a ghosted overlay of all the photos
     (8 of 33 real scenes in a QA sweep). Each view is its photo restored in 2D instead (the scene
     stays the network's); the render of the same scene at those cameras is the overlay."""
-    from lumos3d_cli.pipeline import scene_geometry
-
-    real = scene_geometry.register_photos
-
-    def failing(*args, **kwargs):
-        registration = real(*args, **kwargs)
-        return registration.without_views(registration.registered_indices)
-
-    monkeypatch.setattr(scene_geometry, "register_photos", failing)
-    names = ["3.JPG", "6.JPG", "9.JPG", "12.JPG", "15.JPG"]
-    photos = tmp_path / "photos"
-    photos.mkdir()
-    for name in names:
-        (photos / name).write_bytes((buu / "low" / name).read_bytes())
-    out = tmp_path / "out" / "scene.ply"
-    result = run_cli("restore", photos, "-o", out, "--preset", "fast", "--json")
-    assert result.code == 0, result.err
+    result, photos, out = _restore_with_registration(run_cli, buu, tmp_path, monkeypatch,
+                                                     lambda registration: registration.registered_indices)
+    names = _BUU_FIVE
     said = " ".join(result.err.split())
     assert "using the network's cameras instead" in said and "restored in 2D" in said
     summary = json.loads(result.out)
@@ -159,22 +170,9 @@ def test_views_only_the_network_places_are_restored_in_2d_and_left_out_of_the_sc
     network's cameras carried into its frame (castle-P19: 4 of 12, 156-179 degrees off), each a
     ghosted overlay, their Gaussians laid over the registered views. They are shown as their photos
     restored in 2D and kept out of the scene; the registered views are renders as before."""
-    from lumos3d_cli.pipeline import scene_geometry
-
-    real = scene_geometry.register_photos
-    names = ["3.JPG", "6.JPG", "9.JPG", "12.JPG", "15.JPG"]
-
-    def two_unregistered(*args, **kwargs):
-        return real(*args, **kwargs).without_views([1, 3])  # 6.JPG and 12.JPG
-
-    monkeypatch.setattr(scene_geometry, "register_photos", two_unregistered)
-    photos = tmp_path / "photos"
-    photos.mkdir()
-    for name in names:
-        (photos / name).write_bytes((buu / "low" / name).read_bytes())
-    out = tmp_path / "out" / "scene.ply"
-    result = run_cli("restore", photos, "-o", out, "--preset", "fast", "--json")
-    assert result.code == 0, result.err
+    result, photos, out = _restore_with_registration(run_cli, buu, tmp_path, monkeypatch,
+                                                     lambda registration: [1, 3])  # 6.JPG and 12.JPG
+    names = _BUU_FIVE
     assert "2 view(s) only the network's cameras place are shown as their photos restored in 2D" in " ".join(result.err.split())
     summary = json.loads(result.out)
     assert summary["geometry"]["source"] == "sfm" and summary["geometry"]["registered_views"] == 3
