@@ -200,19 +200,25 @@ def test_a_view_taken_out_of_a_registration_takes_its_observations_and_lone_poin
     xyz = torch.tensor([[0.0, 0.0, 5.0], [1.0, 0.0, 5.0], [0.0, 1.0, 6.0]], dtype=torch.float64)
     view = torch.tensor([0, 2, 2, 3, 0, 3])
     point = torch.tensor([0, 0, 1, 1, 2, 2])
+    # observed 0.5 px from where the cameras project them, but photo 2's 5 px (a camera gone wrong)
+    row = torch.tensor([0, -1, 1, 2])[view]
+    projected = torch.stack([cameras[[int(r)]].project(xyz[[int(p)]])[0][0, 0] for r, p in zip(row, point)])
+    offset = torch.where((view == 2)[:, None], torch.tensor([3.0, 4.0]), torch.tensor([0.3, 0.4])).double()
     points = SparsePoints(xyz, torch.tensor([[1, 1, 1], [2, 2, 2], [3, 3, 3]], dtype=torch.uint8),
-                          torch.tensor([0.1, 0.2, 0.3], dtype=torch.float64), view, point,
-                          torch.arange(12, dtype=torch.float64).reshape(6, 2))
-    registration = Registration(cameras, torch.tensor([True, False, True, True]), points, 0.2, [3], "exhaustive",
+                          torch.tensor([0.1, 0.2, 0.3], dtype=torch.float64), view, point, projected + offset)
+    registration = Registration(cameras, torch.tensor([True, False, True, True]), points, 2.0, [3, 1], "exhaustive",
                                 [(48, 32)] * 4, 1.0)
     both = registration.without_views([2, 3])
     assert both.registered.tolist() == [True, False, False, False] and both.cameras.names == [cameras.names[0]]
     assert both.points.view.tolist() == [0, 0] and both.points.point.tolist() == [0, 1]  # point 1: photos 2, 3 alone
     torch.testing.assert_close(both.points.pixel, points.pixel[[0, 4]])
-    assert both.points.rgb.tolist() == [[1, 1, 1], [3, 3, 3]] and both.points.error.tolist() == [0.1, 0.3]
+    assert both.points.rgb.tolist() == [[1, 1, 1], [3, 3, 3]]
     one = registration.without_views([2])
     assert one.registered_indices == [0, 3] and one.cameras.names == [cameras.names[0], cameras.names[2]]
     assert len(one.points) == 3 and one.points.view.tolist() == [0, 3, 0, 3]
+    # the errors measured again without the dropped camera's observations; its model one view smaller
+    torch.testing.assert_close(one.points.error, torch.full((3,), 0.5, dtype=torch.float64))
+    assert one.reprojection_error == pytest.approx(0.5) and one.model_sizes == [2, 1]
     # the frame normalised again as COLMAP does (the remaining centres' 10-90 % box 10 units
     # across, centred), one similarity: every point projects where it did in every kept camera
     centres = one.cameras.centers()

@@ -3,6 +3,7 @@
 import json
 from pathlib import Path
 
+import cv2
 import pytest
 import torch
 from safetensors import safe_open
@@ -117,9 +118,10 @@ def test_a_one_photo_restore_removes_the_noise_it_amplified(run_cli, shared_data
 _BUU_FIVE = ["3.JPG", "6.JPG", "9.JPG", "12.JPG", "15.JPG"]
 
 
-def _restore_with_registration(run_cli, buu, tmp_path, monkeypatch, unregister):
-    """`restore --preset fast --json` of five of buu's dark photos with structure-from-motion's
-    registration less the views `unregister(registration)` names; (result, photos folder, scene path)."""
+def _restore_with_registration(run_cli, buu, tmp_path, monkeypatch, unregister, portrait=()):
+    """`restore --preset fast --json` of five of buu's dark photos (those named in `portrait`
+    turned upright) with structure-from-motion's registration less the views
+    `unregister(registration)` names; (result, photos folder, scene path)."""
     from lumos3d_cli.pipeline import scene_geometry
 
     real = scene_geometry.register_photos
@@ -132,7 +134,10 @@ def _restore_with_registration(run_cli, buu, tmp_path, monkeypatch, unregister):
     photos = tmp_path / "photos"
     photos.mkdir()
     for name in _BUU_FIVE:
-        (photos / name).write_bytes((buu / "low" / name).read_bytes())
+        if name in portrait:
+            cv2.imwrite(str(photos / name), cv2.rotate(cv2.imread(str(buu / "low" / name)), cv2.ROTATE_90_CLOCKWISE))
+        else:
+            (photos / name).write_bytes((buu / "low" / name).read_bytes())
     out = tmp_path / "out" / "scene.ply"
     result = run_cli("restore", photos, "-o", out, "--preset", "fast", "--json")
     assert result.code == 0, result.err
@@ -170,8 +175,9 @@ def test_views_only_the_network_places_are_restored_in_2d_and_left_out_of_the_sc
     network's cameras carried into its frame (castle-P19: 4 of 12, 156-179 degrees off), each a
     ghosted overlay, their Gaussians laid over the registered views. They are shown as their photos
     restored in 2D and kept out of the scene; the registered views are renders as before."""
+    # 6.JPG upright among landscape photos: stretched into their working tensor, restored at its own size
     result, photos, out = _restore_with_registration(run_cli, buu, tmp_path, monkeypatch,
-                                                     lambda registration: [1, 3])  # 6.JPG and 12.JPG
+                                                     lambda registration: [1, 3], portrait={"6.JPG"})
     names = _BUU_FIVE
     assert "2 view(s) only the network's cameras place are shown as their photos restored in 2D" in " ".join(result.err.split())
     summary = json.loads(result.out)
@@ -183,7 +189,27 @@ def test_views_only_the_network_places_are_restored_in_2d_and_left_out_of_the_sc
     assert 2 * width * height < summary["gaussians"]["pixel"] <= 3 * width * height  # the registered views alone
     inputs = load_images([photos / name for name in names]).images
     restored = load_images([out.parent / "restored" / f"{name[:-4]}.png" for name in names]).images
+    for name in names:  # 6.JPG at its own 375x500, not the working tensor's 500x375
+        assert cv2.imread(str(out.parent / "restored" / f"{name[:-4]}.png")).shape == cv2.imread(str(photos / name)).shape
     for index, (photo, view) in enumerate(zip(inputs, restored)):
         correlation = _luminance_correlation(photo, view)
         assert correlation > (0.95 if index in (1, 3) else 0.8), (names[index], correlation)
         assert float(view.mean()) > 2 * float(photo.mean())
+
+
+def test_evaluation_keeps_every_view_in_the_scene_it_scores(buu, monkeypatch):
+    """`eval` renders the views it scores: without a restore's photos (`photo_at_own_size`), views
+    structure-from-motion did not register stay in the scene and are refined, as before the
+    restore's 2D views (a context-protocol test frame left out scored 15.1 dB instead of 20.3)."""
+    from lumos3d_cli.model.loading import load_model
+    from lumos3d_cli.pipeline import scene_geometry
+    from lumos3d_cli.pipeline.scene_stages import build_scene
+
+    real = scene_geometry.register_photos
+    monkeypatch.setattr(scene_geometry, "register_photos", lambda *a, **k: real(*a, **k).without_views([1, 3]))
+    photos = load_images([buu / "low" / name for name in _BUU_FIVE]).images
+    model = load_model(bundled_weights_path(BUNDLED_MODELS["low-light"])).eval()
+    job = build_scene(photos, list(_BUU_FIVE), model, RESTORE_PRESETS["fast"], "sfm")
+    assert job.geometry.source == "sfm" and int(job.registration.known.sum()) == 3
+    assert job.views_in_2d == [] and job.photo_restoration is None and job.fuse_views is None
+    assert job.refinement is not None

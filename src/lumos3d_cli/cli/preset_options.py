@@ -21,7 +21,7 @@ EXPOSURE_KEY = typer.Option(
     help=f"The brightness the exposure prior aims at: {' or '.join(EXPOSURE_KEYS)} (content, the default: predicted from what the scene shows; fixed: mean sRGB 0.45 for every scene).")
 DENOISE_PHOTO = typer.Option(
     True, "--denoise/--no-denoise",
-    help="A single photo: remove the sensor noise its restoration amplified, in proportion to its measured level.")
+    help="Views restored in 2D (a single photo; photos no geometry places): remove the sensor noise their restoration amplified, in proportion to its measured level.")
 DENSIFY = typer.Option(
     None, "--densify/--no-densify",
     help="Split and clone the Gaussians where the views disagree with the scene during refinement (default: the preset's; best densifies).")

@@ -96,7 +96,13 @@ class Registration:
         points = replace(points, xyz=points.xyz[seen], rgb=points.rgb[seen], error=points.error[seen],
                          view=points.view[keep], point=position[points.point[keep]], pixel=points.pixel[keep])
         cameras, points = _normalised(self.cameras[rows], points)
-        return replace(self, cameras=cameras, registered=registered, points=points)
+        # the errors measured again on the observations left (the cameras are indexed by row)
+        row_of_view = torch.full((len(registered),), -1, dtype=torch.int64)
+        row_of_view[registered] = torch.arange(int(registered.sum()))
+        measured, error = replace(points, view=row_of_view[points.view]).reprojected(cameras)
+        sizes = [self.model_sizes[0] - len(views), *self.model_sizes[1:]] if self.model_sizes else []
+        return replace(self, cameras=cameras, registered=registered, points=replace(measured, view=points.view),
+                       reprojection_error=error, model_sizes=sizes)
 
     @property
     def looks_like_one_scene(self) -> bool:

@@ -141,7 +141,7 @@ class RestorePreset:
     # fill the rendered views' pixels no Gaussian covers (render.hole_filling); refinement then fits
     # the views as filled (RefineSettings.splat_colours)
     fill_unobserved: bool = True
-    denoise_photo: bool = True  # a one-photo restore's amplified noise removed (model.appearance.amplified_noise)
+    denoise_photo: bool = True  # the amplified noise of views restored in 2D removed (model.appearance.amplified_noise)
     densify: DensifySettings | None = None  # refinement's densification schedule (None: the Gaussians it starts from)
     # what structure-from-motion sees: "restoration" (the model's operator: the network runs
     # first) or "tone curve" (the blind curve: structure-from-motion runs beside the network)

@@ -178,7 +178,7 @@ def restore_scene(
     required = [fuse_views.index(True)] if fuse_views is not None else []
     built = build_scene(batch.images, names, model, preset, geometry, poses, max_views, mode, progress,
                         required_views=required, fuse_views=fuse_views, sizes=batch.original_sizes,
-                        early_registration=early_registration, empty_views=sorted(empty))
+                        early_registration=early_registration, empty_views=sorted(empty), photo_at_own_size=batch.photo)
     cameras = built.geometry.cameras
     missing = [name for name in names if name not in cameras.names]
     if missing:
@@ -187,9 +187,10 @@ def restore_scene(
     progress.start("render views", len(cameras))
     started = time.perf_counter()
     in_2d = {names[view] for view in built.views_in_2d}  # one photo, or photos no geometry placed
-    if in_2d >= set(cameras.names):
+    if in_2d | {names[view] for view in empty} >= set(cameras.names):  # (an empty photo is shown as it is, below)
         # every view is its photo restored in 2D (scene_stages.photo_restoration): nothing to render
-        views = [built.photo_restoration[names.index(name)].clamp(0, 1) for name in cameras.names]
+        views = [built.photo_restoration[names.index(name)].clamp(0, 1) if name in in_2d else batch.photo(names.index(name))
+                 for name in cameras.names]
         uncovered, view_source = None, "photo restoration"
         progress.advance("render views", len(cameras))
     else:
@@ -340,7 +341,8 @@ def restore(
     `exposure_prior` the strength of the exposure prior (`model.appearance.exposure_prior`) and
     `exposure_key` the key it pulls towards ("content": `model.appearance.exposure_key`, or "fixed"),
     `fill_unobserved` whether pixels no Gaussian covers are filled (`render.hole_filling`),
-    `denoise_photo` whether a one-photo restore's amplified noise is removed
+    `denoise_photo` whether the amplified noise of views restored in 2D (a one-photo restore's;
+    photos no geometry places) is removed
     (`model.appearance.amplified_noise`), `densify` whether refinement densifies
     (`refine.densification`), `depth_sweep` whether the registered depth is refined by the
 neighbouring photos (`geometry.photo_consistency`). `early_registration`: the photos read and structure-from-motion

@@ -192,8 +192,8 @@ def register_views(
         raise InputError(f"sfm: structure-from-motion {outcome}; use the network's cameras (--geometry network) or give "
                          "--poses", parameter="geometry")
     logger.warning("structure-from-motion %s; using the network's cameras instead, which place the views at nearly one "
-                   "pose: the scene is a ghosted overlay of them (a model with a restoration operator gives each view as "
-                   "its photo restored in 2D). For a 3D scene give --poses or photos that overlap more", outcome)
+                   "pose: the scene is a ghosted overlay of them. For a 3D scene give --poses or photos that overlap more",
+                   outcome)
     return ViewRegistration(geometry, sizes, "network", torch.zeros(count, dtype=torch.bool), None, registration,
                             seconds, brightened.method)
 

@@ -3,7 +3,7 @@ went in, what each stage made, where the tensors live and how long each stage to
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,7 +31,9 @@ class SceneJob:
     whose Gaussians are fused (`fuse_views` [V] bool; None: all), and structure-from-motion's run
     on the blind tone curve when it was started before the job (`early_registration`; None: the
     job runs it), and the photos found all black or saturated at their own size (`empty_views`,
-    which the exposure prior meters without; None: judged on the working tensor). `device` is the
+    which the exposure prior meters without; None: judged on the working tensor), and for a
+    restore, each photo at its own size (`photo_at_own_size`, index -> [3, h, w]; None: not a
+    restore, whose views are all renders but a one-photo scene's). `device` is the
     model's: the
     network pass, the Gaussians, the budget and the refinement stay on it.
 
@@ -42,10 +44,10 @@ class SceneJob:
     `grid_size` (the pixel Gaussians' grid per view, width x height), `gaussians` and `counts`,
     `budget` (what `fit_budget` kept, summary.json's gaussians.budget), `refinement` (its summary;
     None: not refined), `restored_photos` [V, 3, H, W] (the operator applied to every photo, CPU;
-    set after the network pass; None for a regression model), `photo_restoration` [V, 3, H, W] (the
-    photos restored in 2D, those of `views_in_2d` denoised: the views that are shown so rather
-    than rendered, `scene_stages.photo_restoration`) and `denoising` (their measured noise and
-    whether it was removed; None: none), `timings` seconds per stage.
+    set after the network pass; None for a regression model), `photo_restoration` (view index ->
+    [3, h, w] at the photo's own size: the photos restored in 2D and denoised where those, not
+    renders, are the views, `views_in_2d`; `scene_stages.photo_restoration`) and `denoising` (their
+    measured noise and whether it was removed; None: none), `timings` seconds per stage.
     """
 
     photos: torch.Tensor
@@ -62,6 +64,7 @@ class SceneJob:
     sizes: Sequence[tuple[int, int]] | None = None
     early_registration: EarlyRegistration | None = None
     empty_views: Sequence[int] | None = None
+    photo_at_own_size: Callable[[int], torch.Tensor] | None = None
     network: NetworkPass | None = None
     selected: list[int] = field(default_factory=list)
     brightened: Brightened | None = None
@@ -74,7 +77,7 @@ class SceneJob:
     budget: dict | None = None
     refinement: dict | None = None
     restored_photos: torch.Tensor | None = None
-    photo_restoration: torch.Tensor | None = None
+    photo_restoration: dict[int, torch.Tensor] | None = None
     views_in_2d: list[int] = field(default_factory=list)
     denoising: dict | None = None
     timings: dict[str, float] = field(default_factory=dict)

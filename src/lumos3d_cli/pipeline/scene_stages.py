@@ -95,6 +95,16 @@ def _restored_view_by_view(photos: torch.Tensor, views: Sequence[int], operator:
     return restored
 
 
+def _view_operator(network: NetworkPass, selected: Sequence[int], view: int) -> AppearanceOperator:
+    """The operator `operator_restoration` restores photo `view` with: the whole operator (its
+    local grid for that view) where the network saw it, its curve and matrix elsewhere."""
+    operator = network.prediction.appearance.scene(0)
+    if view in selected:
+        position = list(selected).index(view)
+        return operator.views(slice(position, position + 1))
+    return AppearanceOperator(operator.curve_slopes, operator.matrix, None)
+
+
 def operator_restoration(network: NetworkPass, photos: torch.Tensor, selected: Sequence[int]) -> torch.Tensor:
     """All photos [V, 3, H, W] restored as the Gaussians' colours are: the whole operator (with
     its per-view local grid) for the views the network saw, its curve and matrix for the rest
@@ -304,8 +314,8 @@ def _views_only_the_network_placed(job: SceneJob) -> list[int]:
     whose 12 photos SfM registers 8 of, the other 4 were placed 156-179 degrees off, each view a
     ghosted overlay and their Gaussians laid over the registered views)."""
     registration = job.registration
-    if not job.has_operator or registration is None or registration.source != "sfm":
-        return []
+    if job.photo_at_own_size is None or not job.has_operator or registration is None or registration.source != "sfm":
+        return []  # (evaluation renders every view it scores: its scenes keep these views)
     return [view for view in range(len(job.names)) if not bool(registration.known[view])]
 
 
@@ -316,7 +326,8 @@ def _views_restored_in_2d(job: SceneJob) -> list[int]:
     views only the network placed (`_views_only_the_network_placed`)."""
     if not job.has_operator:
         return []
-    unplaced = job.geometry is not None and job.geometry.source == "network" and "sfm_attempt" in job.geometry.report
+    unplaced = (job.photo_at_own_size is not None and job.geometry is not None and job.geometry.source == "network"
+                and "sfm_attempt" in job.geometry.report)
     if len(job.names) == 1 or unplaced:
         return list(range(len(job.names)))
     return _views_only_the_network_placed(job)
@@ -336,20 +347,30 @@ def photo_restoration(job: SceneJob) -> SceneJob:
     Nor has a photo restored in 2D other views to average the noise its restoration amplified:
     with the preset's `denoise_photo` that noise is measured and removed
     (`model.appearance.amplified_noise`)."""
-    in_2d = [view for view in _views_restored_in_2d(job) if view in job.selected]  # the views with a camera
+    empty = set(job.empty_views or ())  # shown as the photo itself (a black or white frame)
+    in_2d = [view for view in _views_restored_in_2d(job) if view in job.selected and view not in empty]
     if not in_2d:
         return job
-    restored = job.restored_photos
     if len(job.names) > 1:
-        logger.info("%d view(s) are their photos restored in 2D: no geometry places them", len(in_2d))
+        logger.warning("%d view(s) are their photos restored in 2D, one at a time: no geometry places them",
+                       len(in_2d))
+    height, width = job.photos.shape[-2:]
+    restored: dict[int, torch.Tensor] = {}
+    for view in in_2d:
+        restored[view] = job.restored_photos[view]
+        if job.photo_at_own_size is not None and job.sizes is not None and tuple(job.sizes[view]) != (width, height):
+            # stretched into the working tensor with the others: restored at its own size instead
+            with torch.no_grad():
+                operator = _view_operator(job.network, job.selected, view)
+                photo = job.photo_at_own_size(view)[None].to(operator.matrix.device)
+                restored[view] = restore_photos(photo, operator)[0].cpu()
     if job.preset.denoise_photo:
-        results = [denoise_photo(restored[view]) for view in in_2d]
-        restored = restored.clone()
-        for view, result in zip(in_2d, results):
-            restored[view] = result.image
-        job.denoising = results[0].summary() if len(job.names) == 1 else {
-            "views": [job.names[view] for view in in_2d], "noise_level": [round(r.noise_level, 5) for r in results],
-            "filtered": [r.filtered for r in results], "strength": results[0].summary()["strength"]}
+        results = {view: denoise_photo(image) for view, image in restored.items()}
+        restored = {view: result.image for view, result in results.items()}
+        job.denoising = results[in_2d[0]].summary() if len(job.names) == 1 else {
+            "views": [job.names[view] for view in in_2d],
+            "noise_level": [round(results[view].noise_level, 5) for view in in_2d],
+            "filtered": [results[view].filtered for view in in_2d], "strength": results[in_2d[0]].summary()["strength"]}
     job.photo_restoration, job.views_in_2d = restored, in_2d
     return job
 
@@ -375,7 +396,7 @@ def build_scene(
     poses: Path | str | None = None, max_views: int | None = None, mode: str = "low-light",
     progress: JobProgress | None = None, required_views: Sequence[int] = (), fuse_views: Sequence[bool] | None = None,
     sizes: Sequence[tuple[int, int]] | None = None, early_registration: EarlyRegistration | None = None,
-    empty_views: Sequence[int] | None = None,
+    empty_views: Sequence[int] | None = None, photo_at_own_size: Callable[[int], torch.Tensor] | None = None,
 ) -> SceneJob:
     """photos [V, 3, H, W] named `names` -> cameras and fused Gaussians, through SCENE_STAGES.
     `sizes`: each photo's own (width, height) when it was stretched into `images`
@@ -391,7 +412,10 @@ def build_scene(
     `early_registration`: structure-from-motion on these photos' blind tone curve, started before
     the job (`pipeline.early_registration`), for the preset's size. `empty_views`: the photos found
     all black or saturated at their own size (the exposure prior meters without them; None: they
-    are judged on `images`).
+    are judged on `images`). `photo_at_own_size` (index -> [3, h, w]; a restore's): the views no
+    geometry places are then shown as their photos restored in 2D at their own size and kept out
+    of the scene (`photo_restoration`); without it (evaluation) every view but a one-photo
+    scene's is a render.
 
     The preset sets the grid of pixel Gaussians (`pipeline.gaussian_grid`), their voxels (a
     multiple of each point's pixel footprint), the budget (`render.gaussian_budget`: what no
@@ -403,7 +427,7 @@ def build_scene(
         raise ValueError("the early registration was started for other photos or another size")
     job = SceneJob(images, list(names), model, preset, geometry, poses, max_views, mode,
                    progress if progress is not None else SilentProgress(), required_views, fuse_views, sizes,
-                   early_registration, empty_views)
+                   early_registration, empty_views, photo_at_own_size)
     for name, stage in SCENE_STAGES:
         started = time.perf_counter()
         job = stage(job)
