@@ -179,7 +179,9 @@ def test_views_only_the_network_places_are_restored_in_2d_and_left_out_of_the_sc
     result, photos, out = _restore_with_registration(run_cli, buu, tmp_path, monkeypatch,
                                                      lambda registration: [1, 3], portrait={"6.JPG"})
     names = _BUU_FIVE
-    assert "2 view(s) only the network's cameras place are shown as their photos restored in 2D" in " ".join(result.err.split())
+    said = " ".join(result.err.split())
+    assert "2 view(s) not registered by structure-from-motion were placed with the network's cameras: 6.JPG, 12.JPG" in said
+    assert "those 2 view(s) are shown as their photos restored in 2D and kept out of the scene" in said
     summary = json.loads(result.out)
     assert summary["geometry"]["source"] == "sfm" and summary["geometry"]["registered_views"] == 3
     assert summary["restored_views"] == "render and photo restoration"

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import torch
 
-from lumos3d_cli.errors import InputError, NonFiniteError, listed
+from lumos3d_cli.errors import InputError, NonFiniteError
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.appearance.amplified_noise import denoise_photo
 from lumos3d_cli.model.appearance.footprint import footprint_colours
@@ -202,14 +202,15 @@ def fusion(job: SceneJob) -> SceneJob:
     preset = job.preset
     unplaced = _views_only_the_network_placed(job)
     if unplaced:  # shown restored in 2D (`photo_restoration`), and kept out of the scene
-        logger.warning("%d view(s) only the network's cameras place are shown as their photos restored in 2D and left "
-                       "out of the scene: %s", len(unplaced), listed([job.names[view] for view in unplaced], 5))
         job.fuse_views = [(job.fuse_views is None or bool(job.fuse_views[view])) and view not in unplaced
                           for view in range(len(job.names))]
     restored = None if job.restored_photos is None else job.restored_photos[job.selected]
     fused = None if job.fuse_views is None else [job.fuse_views[i] for i in job.selected]
     job.geometry = place_views(job.registration, job.network, job.selected, job.names,
                                restored if restored is not None else job.photos[job.selected], preset.depth_sweep, fused)
+    if unplaced:  # (place_views has named them)
+        logger.warning("those %d view(s) are shown as their photos restored in 2D and kept out of the scene",
+                       len(unplaced))
     job.grid_size = dense_grid_size(job.network.network_size, (job.photos.shape[-1], job.photos.shape[-2]),
                                     preset.gaussian_grid)
     prediction, grid_geometry = densify_grid(job.network.prediction, job.geometry, job.grid_size)
