@@ -182,8 +182,10 @@ def restore_scene(
     cameras = built.geometry.cameras
     missing = [name for name in names if name not in cameras.names]
     if missing:
-        logger.warning("%d view(s) have no camera and are not restored (the network did not see them; raise "
-                       "max_views or use structure-from-motion): %s", len(missing), ", ".join(missing))
+        # (after structure-from-motion failed on them, only more views through the network help)
+        advice = "raise max_views" + ("" if "sfm_attempt" in built.geometry.report else " or use structure-from-motion")
+        logger.warning("%d view(s) have no camera and are not restored (the network did not see them; %s): %s",
+                       len(missing), advice, ", ".join(missing))
     progress.start("render views", len(cameras))
     started = time.perf_counter()
     in_2d = {names[view] for view in built.views_in_2d}  # one photo, or photos no geometry placed
