@@ -215,3 +215,13 @@ def test_evaluation_keeps_every_view_in_the_scene_it_scores(buu, monkeypatch):
     assert job.geometry.source == "sfm" and int(job.registration.known.sum()) == 3
     assert job.views_in_2d == [] and job.photo_restoration is None and job.fuse_views is None
     assert job.refinement is not None
+
+
+def test_a_fallback_says_once_why_structure_from_motion_was_not_used(run_cli, buu, tmp_path, monkeypatch):
+    """Two of five photos registered: structure-from-motion's model is not used, and the fallback's
+    warning says why; the "could not join the photos into one model" warning (for a model that is
+    used) said the same line over again."""
+    result, _, _ = _restore_with_registration(run_cli, buu, tmp_path, monkeypatch, lambda registration: [0, 1, 2])
+    said = " ".join(result.err.split())
+    assert "structure-from-motion registered 2 of 5 photos" in said and "using the network's cameras instead" in said
+    assert "could not join the photos into one model" not in said

@@ -106,9 +106,14 @@ def _structure_from_motion(images: torch.Tensor, names: list[str], sizes: list[t
         if retry.registered_count > registration.registered_count:
             registration = retry
     progress.advance("structure from motion")
-    if not registration.failed and not registration.looks_like_one_scene:
-        logger.warning("structure-from-motion could not join the photos into one model: %s", registration.describe())
     return registration
+
+
+def _warn_if_not_one_model(registration: Registration | None) -> None:
+    """A warning where structure-from-motion's model is used although it could not join the photos
+    into one (where it is not used, the fallback's warning says so)."""
+    if registration is not None and not registration.failed and not registration.looks_like_one_scene:
+        logger.warning("structure-from-motion could not join the photos into one model: %s", registration.describe())
 
 
 def _fields_of_view(names: Sequence[str], degrees: dict[int, float]) -> str:
@@ -160,6 +165,7 @@ def register_views(
                            "in another unit than pixels of the photos, the scene will be empty or blurred", poses,
                            len(odd), _fields_of_view(names, odd))
         sfm = _structure_from_motion(images, names, sizes, progress, sfm_long_side) if geometry != "network" and count > 1 else None
+        _warn_if_not_one_model(sfm)
         return ViewRegistration(geometry, sizes, "poses", torch.ones(count, dtype=torch.bool), given, sfm,
                                 {"sfm": time.perf_counter() - started}, brightened.method, origin)
     if geometry == "network":
@@ -182,6 +188,7 @@ def register_views(
         registration = registration.without_views([registration.registered_indices[row] for row in odd])
         outcome = f"gave {len(odd)} view(s) a field of view no lens has ({odd_names})"
     if registration.registered_count >= max(2, AUTO_MIN_REGISTERED_SHARE * count):
+        _warn_if_not_one_model(registration)
         if odd:
             logger.warning("structure-from-motion %s: placed as views it did not register", outcome)
         return ViewRegistration(geometry, sizes, "sfm", registration.registered.clone(), registration.cameras,
