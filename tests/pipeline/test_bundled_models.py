@@ -118,7 +118,7 @@ def test_a_one_photo_restore_removes_the_noise_it_amplified(run_cli, shared_data
 _BUU_FIVE = ["3.JPG", "6.JPG", "9.JPG", "12.JPG", "15.JPG"]
 
 
-def _restore_with_registration(run_cli, buu, tmp_path, monkeypatch, unregister, portrait=()):
+def _restore_with_registration(run_cli, buu, tmp_path, monkeypatch, unregister, portrait=(), options=()):
     """`restore --preset fast --json` of five of buu's dark photos (those named in `portrait`
     turned upright) with structure-from-motion's registration less the views
     `unregister(registration)` names; (result, photos folder, scene path)."""
@@ -139,7 +139,7 @@ def _restore_with_registration(run_cli, buu, tmp_path, monkeypatch, unregister, 
         else:
             (photos / name).write_bytes((buu / "low" / name).read_bytes())
     out = tmp_path / "out" / "scene.ply"
-    result = run_cli("restore", photos, "-o", out, "--preset", "fast", "--json")
+    result = run_cli("restore", photos, "-o", out, "--preset", "fast", "--json", *options)
     assert result.code == 0, result.err
     return result, photos, out
 
@@ -150,8 +150,10 @@ def test_photos_structure_from_motion_cannot_place_are_restored_in_2d(run_cli, b
     (8 of 33 real scenes in a QA sweep). Each view is its photo restored in 2D instead (the scene
     stays the network's); the render of the same scene at those cameras is the overlay."""
     result, photos, out = _restore_with_registration(run_cli, buu, tmp_path, monkeypatch,
-                                                     lambda registration: registration.registered_indices)
+                                                     lambda registration: registration.registered_indices,
+                                                     options=("--video", tmp_path / "orbit.gif"))
     names = _BUU_FIVE
+    assert "orbit.gif: an orbit of the network's scene, a ghosted overlay" in " ".join(result.err.split())
     said = " ".join(result.err.split())
     assert "using the network's cameras instead" in said and "restored in 2D" in said
     summary = json.loads(result.out)

@@ -5,6 +5,7 @@ earlier outputs (io/output_set.py)."""
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -27,6 +28,8 @@ from lumos3d_cli.io.video import probe_video, video_kind
 from lumos3d_cli.pipeline.restore import RestoredScene
 from lumos3d_cli.pipeline.restore_paths import VIEW_FORMATS, check_view_format, restore_outputs
 from lumos3d_cli.pipeline.orbit_video import write_orbit_video
+
+logger = logging.getLogger(__name__)
 
 def write_view(path: Path, image: torch.Tensor, output_format: str) -> None:
     """image [3, H, W] sRGB (any float dtype, any device) -> an 8/16-bit PNG, or a linear half-float EXR."""
@@ -88,6 +91,9 @@ def write_restored_scene(scene: RestoredScene, scene_path: Path | str, output_fo
             image.result()  # raises what the writing raised
         written_video = None
         if video is not None:
+            if scene.view_source == "photo restoration" and len(scene.names) > 1:
+                logger.warning("%s: an orbit of the network's scene, a ghosted overlay of the photos: no geometry "
+                               "placed them (the restored views are the photos restored in 2D)", video)
             # as bright as the restored views: completed as they were (filled renders of the scene)
             filled = scene.fill_unobserved  # a one-photo scene's view is no render, but its orbit is one
             orbit = write_orbit_video(scene.gaussians, scene.cameras, staging.files[Path(video)],
