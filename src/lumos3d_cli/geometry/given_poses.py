@@ -20,7 +20,7 @@ from pathlib import Path
 import torch
 
 from lumos3d_cli.errors import InputError, listed
-from lumos3d_cli.geometry.similarity import Similarity, transform_cameras
+from lumos3d_cli.geometry.similarity import moved_to_origin
 from lumos3d_cli.io.camera_files import read_cameras
 from lumos3d_cli.io.cameras import Cameras
 
@@ -115,5 +115,4 @@ def centred_if_far(cameras: Cameras) -> tuple[Cameras, torch.Tensor | None]:
         spread = 0.0
     if float(middle.norm()) <= FAR_FROM_ORIGIN * (spread if spread > 0 else 1.0):
         return cameras, None
-    moved = transform_cameras(cameras.to(dtype=torch.float64), Similarity(1.0, torch.eye(3, dtype=torch.float64), -middle))
-    return moved, middle
+    return moved_to_origin(cameras, middle), middle

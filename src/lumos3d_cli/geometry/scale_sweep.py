@@ -32,7 +32,7 @@ import torch
 import torch.nn.functional as F
 
 from lumos3d_cli.geometry.photo_consistency import grey_windows, mean_of_best, require_sweep_inputs, window_scores
-from lumos3d_cli.geometry.similarity import Similarity, transform_cameras
+from lumos3d_cli.geometry.similarity import moved_to_origin
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.model.geometry import unproject_depth
 
@@ -93,7 +93,7 @@ def sweep_depth_scale(depth: torch.Tensor, cameras: Cameras, images: torch.Tenso
     if candidates is None:
         return ScaleSweep(None, 0.0, 0.0, 0)
     device = depth.device
-    depth, cameras = _within_budget(depth, _recentred(cameras, taking_part))
+    depth, cameras = _within_budget(depth, moved_to_origin(cameras, cameras.centers().double()[taking_part].mean(0)))
     height, width = depth.shape[-2:]
     cameras = cameras.to(device=device, dtype=torch.float32)
     grey, mean, deviation = grey_windows(images.to(device), height, width, RADIUS)
@@ -147,13 +147,6 @@ def _distinct_distances(cameras: Cameras) -> torch.Tensor:
     distances = torch.cdist(centres, centres)
     same = distances <= 1e-9 * float(distances.max()) if distances.numel() else distances.bool()
     return distances.masked_fill(same, math.inf)
-
-
-def _recentred(cameras: Cameras, views: list[int]) -> Cameras:
-    """The cameras in float64, in a world frame moved to the mean centre of `views`."""
-    cameras = cameras.to(dtype=torch.float64)
-    middle = cameras.centers()[views].mean(dim=0)
-    return transform_cameras(cameras, Similarity(1.0, torch.eye(3, dtype=torch.float64), -middle))
 
 
 def _within_budget(depth: torch.Tensor, cameras: Cameras) -> tuple[torch.Tensor, Cameras]:

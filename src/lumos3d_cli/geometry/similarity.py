@@ -70,6 +70,13 @@ def fit_similarity(source: torch.Tensor, target: torch.Tensor) -> Similarity:
     return Similarity(scale, rotation, target_mean - scale * rotation @ source_mean)
 
 
+def moved_to_origin(cameras: Cameras, origin: torch.Tensor) -> Cameras:
+    """The cameras, in float64, in the world frame moved so that `origin` [3] (a point of theirs)
+    is its origin: exact, where float32 loses a frame millions of units out."""
+    origin = origin.to(torch.float64)
+    return transform_cameras(cameras.to(dtype=torch.float64), Similarity(1.0, torch.eye(3, dtype=torch.float64), -origin))
+
+
 def transform_cameras(cameras: Cameras, similarity: Similarity) -> Cameras:
     """The same cameras in the frame that `similarity` maps their world into. Camera-space
     lengths scale with the world: R' = R S^T, t' = s t - R S^T T for world->camera [R | t]."""

@@ -17,7 +17,7 @@ import torch
 from lumos3d_cli.errors import InputError, listed
 from lumos3d_cli.geometry.field_of_view import MEASURED_FOV_DEGREES, implausible_views
 from lumos3d_cli.geometry.given_poses import centred_if_far
-from lumos3d_cli.geometry.similarity import Similarity, transform_cameras
+from lumos3d_cli.geometry.similarity import moved_to_origin
 from lumos3d_cli.io.camera_files import camera_sources, find_camera_source, read_cameras
 from lumos3d_cli.io.cameras import Cameras
 from lumos3d_cli.io.gaussians import Gaussians
@@ -134,7 +134,7 @@ def onto_restored_scene(scene: Path, gaussians: Gaussians, cameras: Cameras) -> 
         return cameras
     logger.info("%s: the scene was centred on its poses by restore; the cameras are moved by the same %s",
                 scene, origin.tolist())
-    return transform_cameras(cameras.to(dtype=torch.float64), Similarity(1.0, torch.eye(3, dtype=torch.float64), -origin))
+    return moved_to_origin(cameras, origin)
 
 
 def _restore_origin(scene: Path) -> torch.Tensor | None:

@@ -183,7 +183,7 @@ def restore_scene(
     missing = [name for name in names if name not in cameras.names]
     if missing:
         # (after structure-from-motion failed on them, only more views through the network help)
-        advice = "raise max_views" + ("" if "sfm_attempt" in built.geometry.report else " or use structure-from-motion")
+        advice = "raise max_views" + ("" if built.registration.fell_back_to_network else " or use structure-from-motion")
         logger.warning("%d view(s) have no camera and are not restored (the network did not see them; %s): %s",
                        len(missing), advice, ", ".join(missing))
     progress.start("render views", len(cameras))

@@ -82,6 +82,12 @@ class ViewRegistration:
     brightening: str | None = None
     origin: torch.Tensor | None = None
 
+    @property
+    def fell_back_to_network(self) -> bool:
+        """Whether the network's cameras place every view because structure-from-motion, which
+        ran, could not (`auto`'s fallback)."""
+        return self.source == "network" and self.sfm is not None
+
     def views_needing_network(self) -> list[int]:
         """Views the network must see because only it can place them."""
         if self.source == "network":

@@ -327,8 +327,7 @@ def _views_restored_in_2d(job: SceneJob) -> list[int]:
     views only the network placed (`_views_only_the_network_placed`)."""
     if not job.has_operator:
         return []
-    unplaced = (job.photo_at_own_size is not None and job.geometry is not None and job.geometry.source == "network"
-                and "sfm_attempt" in job.geometry.report)
+    unplaced = job.photo_at_own_size is not None and job.registration is not None and job.registration.fell_back_to_network
     if len(job.names) == 1 or unplaced:
         return list(range(len(job.names)))
     return _views_only_the_network_placed(job)
